@@ -1,0 +1,241 @@
+"""The advisor's decision for one explorer (Section IV): window, posterior, KL-vs-kappa, cost.
+
+One step (METHOD.md): the explorer at ``s`` takes ``a`` and reaches ``s'``; the advisor appends
+``(s, a)`` to its window H, then decides for ``s'``::
+
+    log P(H | M)  = sum over H of log P(a_i | s_i, M)            kept in O(1) per event
+    P(M | H)      = P(H | M) P(M) / sum_M' P(H | M') P(M')       eq. (5)
+    P(A | s', H)  = sum_M P(A | s', M) P(M | H)                  eq. (4)
+    advise        iff KL[theta_s' || P(A | s', H)] >= kappa      eq. (6), nats
+
+The window keeps the log-probabilities it added, so subtracting the pair that leaves it is
+exact even if the tables change meanwhile; each time the ring wraps the sums are recomputed
+exactly (``math.fsum``), so floating-point drift never accumulates beyond one window.
+This single-explorer form is plain Python on flat lists (a few microseconds per decision);
+:mod:`app.advice.batch` advances many explorers at once with the same arithmetic.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+import numpy.typing as npt
+
+from app.advice.models import AdviceTables
+from app.domain.grid import N_ACTIONS
+
+DEFAULT_KAPPA = 0.5
+DEFAULT_WINDOW = 300
+
+
+class Decision(NamedTuple):
+    """The advisor's answer for the state an explorer is now in, with its running cost."""
+
+    step: int  # moves observed so far (0 for the start decision)
+    state: int
+    advise: bool
+    advice: tuple[float, float, float, float] | None  # theta_s when advising
+    kl: float  # KL[theta_s || P(A | s, H)] in nats
+    p_normal: float  # P(M1 | H)
+    advice_count: int
+    total_cost: float  # kappa x advice_count
+    benefit: float  # sum of KL at advised states (eq. 3: Delta U(s) ~ KL)
+
+
+def check_kappa_window(kappa: float, window: int) -> None:
+    if not (isinstance(kappa, int | float) and math.isfinite(kappa) and kappa >= 0):
+        raise ValueError(f"kappa must be a finite number >= 0, got {kappa!r}")
+    if isinstance(window, bool) or not isinstance(window, int | np.integer) or window < 1:
+        raise ValueError(f"window must be a whole number >= 1, got {window!r}")
+
+
+def kl_divergence(p: npt.ArrayLike, q: npt.ArrayLike) -> float:
+    """KL[p || q] in nats for two distributions over the same actions (q > 0 where p > 0)."""
+    p_arr = np.asarray(p, dtype=np.float64)
+    q_arr = np.asarray(q, dtype=np.float64)
+    nz = p_arr > 0
+    return float(max(0.0, np.sum(p_arr[nz] * (np.log(p_arr[nz]) - np.log(q_arr[nz])))))
+
+
+class Advisor:
+    """Watches one explorer and decides, step by step, whether advice is worth ``kappa``."""
+
+    __slots__ = (
+        "_loglik",
+        "_pos",
+        "_ring",
+        "advice_count",
+        "benefit",
+        "decisions",
+        "kappa",
+        "steps",
+        "tables",
+        "window",
+    )
+
+    def __init__(
+        self, tables: AdviceTables, kappa: float = DEFAULT_KAPPA, window: int = DEFAULT_WINDOW
+    ):
+        check_kappa_window(kappa, window)
+        self.tables = tables
+        self.kappa = float(kappa)
+        self.window = int(window)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the history and the cost (a new explorer)."""
+        m = self.tables.n_models
+        self._ring = [[0.0] * self.window for _ in range(m)]
+        self._loglik = [0.0] * m
+        self._pos = 0
+        self.steps = 0
+        self.decisions = 0
+        self.advice_count = 0
+        self.benefit = 0.0
+
+    # ---- the window ---------------------------------------------------------------------
+    def _check(self, state: int, action: int | None = None) -> None:
+        if not 0 <= state < self.tables.n_states:
+            raise ValueError(f"state {state} out of range 0..{self.tables.n_states - 1}")
+        if action is not None and not 0 <= action < N_ACTIONS:
+            raise ValueError(f"action {action} out of range 0..3")
+
+    def append(self, state: int, action: int) -> None:
+        """Add (s, a) to H, dropping the oldest pair once the window is full. O(1)."""
+        t = self.tables
+        if not (0 <= state < t.n_states and 0 <= action < N_ACTIONS):
+            self._check(state, action)
+        k = state * N_ACTIONS + action
+        pos = self._pos
+        loglik = self._loglik
+        rings = self._ring
+        for m, table in enumerate(t.log_probs_flat):
+            lp = table[k]
+            ring = rings[m]
+            loglik[m] += lp - ring[pos]  # ring holds 0.0 until the window fills
+            ring[pos] = lp
+        pos += 1
+        if pos == self.window:
+            pos = 0
+            for m, ring in enumerate(rings):
+                loglik[m] = math.fsum(ring)
+        self._pos = pos
+        self.steps += 1
+
+    @property
+    def history_length(self) -> int:
+        return min(self.steps, self.window)
+
+    @property
+    def log_likelihoods(self) -> list[float]:
+        """log P(H | M) for each model, over the current window."""
+        return list(self._loglik)
+
+    def posterior(self) -> list[float]:
+        """P(M | H) for each model (eq. 5); the prior weights when H is empty."""
+        z = [ll + lw for ll, lw in zip(self._loglik, self.tables.log_weight_list, strict=True)]
+        mx = max(z)
+        e = [math.exp(v - mx) for v in z]
+        tot = sum(e)
+        return [v / tot for v in e]
+
+    @property
+    def p_normal(self) -> float:
+        return self.posterior()[0]
+
+    def expected_behaviour(self, state: int) -> list[float]:
+        """P(A | s, H) (eq. 4)."""
+        self._check(state)
+        return self._mixture(self.posterior(), state)
+
+    def _mixture(self, post: list[float], state: int) -> list[float]:
+        base = state * N_ACTIONS
+        probs = self.tables.probs_flat
+        out = []
+        for a in range(N_ACTIONS):
+            mix = post[0] * probs[0][base + a]
+            for m in range(1, len(post)):
+                mix += post[m] * probs[m][base + a]
+            out.append(mix)
+        return out
+
+    # ---- deciding -----------------------------------------------------------------------
+    def divergence(self, state: int) -> tuple[float, float]:
+        """(KL[theta_s || P(A | s, H)], P(M1 | H)) without counting a decision."""
+        self._check(state)
+        t = self.tables
+        post = self.posterior()
+        mix = self._mixture(post, state)
+        th = t.theta_flat
+        base = state * N_ACTIONS
+        cross = th[base] * math.log(mix[0]) + th[base + 1] * math.log(mix[1])
+        cross += th[base + 2] * math.log(mix[2])
+        cross += th[base + 3] * math.log(mix[3])
+        return max(0.0, t.neg_entropy_list[state] - cross), post[0]
+
+    def decide(self, state: int) -> Decision:
+        """Decide for the explorer now at ``state`` and account for the cost.
+
+        The same arithmetic as :meth:`divergence`, inlined: this is the hot path.
+        """
+        t = self.tables
+        if not 0 <= state < t.n_states:
+            raise ValueError(f"state {state} out of range 0..{t.n_states - 1}")
+        # posterior P(M | H), eq. (5), in log space
+        z = [ll + lw for ll, lw in zip(self._loglik, t.log_weight_list, strict=True)]
+        mx = max(z)
+        e = [math.exp(v - mx) for v in z]
+        tot = sum(e)
+        post = [v / tot for v in e]
+        # mixture P(A | s, H), eq. (4), and KL[theta_s || mixture], eq. (6)
+        b = state * N_ACTIONS
+        probs = t.probs_flat
+        p0 = post[0]
+        m0, m1, m2, m3 = (p0 * probs[0][b], p0 * probs[0][b + 1],
+                          p0 * probs[0][b + 2], p0 * probs[0][b + 3])  # fmt: skip
+        for m in range(1, len(post)):
+            pm, pr = post[m], probs[m]
+            m0 += pm * pr[b]
+            m1 += pm * pr[b + 1]
+            m2 += pm * pr[b + 2]
+            m3 += pm * pr[b + 3]
+        th = t.theta_flat
+        t0, t1, t2, t3 = th[b], th[b + 1], th[b + 2], th[b + 3]
+        log = math.log
+        cross = t0 * log(m0) + t1 * log(m1)
+        cross += t2 * log(m2)
+        cross += t3 * log(m3)
+        kl = t.neg_entropy_list[state] - cross
+        if kl < 0.0:
+            kl = 0.0
+        self.decisions += 1
+        advise = kl >= self.kappa
+        advice = None
+        if advise:
+            self.advice_count += 1
+            self.benefit += kl
+            advice = (t0, t1, t2, t3)
+        return Decision(
+            self.steps, state, advise, advice, kl, p0,
+            self.advice_count, self.kappa * self.advice_count, self.benefit,
+        )  # fmt: skip
+
+    def start(self, state: int) -> Decision:
+        """The first decision of a session: the start state, with empty H."""
+        return self.decide(state)
+
+    def observe(self, state: int, action: int, next_state: int) -> Decision:
+        """The explorer at ``state`` took ``action`` and reached ``next_state``."""
+        self.append(state, action)
+        return self.decide(next_state)
+
+    @property
+    def total_cost(self) -> float:
+        return self.kappa * self.advice_count
+
+    @property
+    def advice_per_100(self) -> float:
+        """Advice given per 100 decisions (one decision per step, plus the start)."""
+        return 100.0 * self.advice_count / self.decisions if self.decisions else 0.0

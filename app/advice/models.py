@@ -1,0 +1,118 @@
+"""Behaviour models M: an action distribution P(a | s, M) per state plus a prior weight P(M).
+
+The paper uses two (Section IV-B): M1 normalcy, P(a | s, M1) = theta_s(a), and M2 uniformity,
+P(a | s, M2) = 1/|A|, with P(M1) = P(M2) = 1/2. More can be added: anything that gives a
+strictly positive (states x 4) table. :class:`AdviceTables` precomputes everything the advisor
+needs for a fixed theta and model set, as numpy arrays (batch form) and flat Python lists
+(single form, where list indexing is several times faster than numpy scalar access).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import numpy.typing as npt
+
+from app.domain.grid import N_ACTIONS
+
+FloatArray = npt.NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class BehaviourModel:
+    """P(a | s, M) as a (states, 4) table, and the prior P(M) (normalised across models)."""
+
+    name: str
+    probabilities: FloatArray
+    weight: float = 0.5
+
+
+def normal_model(theta: npt.ArrayLike, weight: float = 0.5) -> BehaviourModel:
+    """M1, normalcy: the action prior itself."""
+    return BehaviourModel("normal", np.asarray(theta, dtype=np.float64), weight)
+
+
+def uniform_model(n_states: int, weight: float = 0.5) -> BehaviourModel:
+    """M2, uniformity: a lost explorer picks any of the four moves."""
+    return BehaviourModel("uniform", np.full((n_states, N_ACTIONS), 1.0 / N_ACTIONS), weight)
+
+
+@dataclass(frozen=True, eq=False)
+class AdviceTables:
+    """Everything the decision rule reads, precomputed for one theta and one model set.
+
+    ``models[0]`` is the normal model; ``p_normal`` is its posterior. An advisor may be handed
+    new tables at any time (the prior was updated): its window keeps the log-probabilities it
+    added, so the O(1) update stays exact.
+    """
+
+    theta: FloatArray
+    models: tuple[BehaviourModel, ...]
+    probs: FloatArray = field(init=False, repr=False)  # (M, S, 4)
+    log_probs: FloatArray = field(init=False, repr=False)  # (M, S, 4)
+    log_weights: FloatArray = field(init=False, repr=False)  # (M,)
+    neg_entropy: FloatArray = field(init=False, repr=False)  # (S,) sum_a theta log theta
+    # flat Python lists for the single-explorer form: index s * 4 + a
+    probs_flat: list[list[float]] = field(init=False, repr=False)
+    log_probs_flat: list[list[float]] = field(init=False, repr=False)
+    theta_flat: list[float] = field(init=False, repr=False)
+    neg_entropy_list: list[float] = field(init=False, repr=False)
+    log_weight_list: list[float] = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        theta = np.ascontiguousarray(self.theta, dtype=np.float64)
+        if theta.ndim != 2 or theta.shape[1] != N_ACTIONS:
+            raise ValueError(f"theta must have shape (states, 4), got {theta.shape}")
+        if not np.all(theta > 0) or not np.allclose(theta.sum(axis=1), 1.0, atol=1e-9):
+            raise ValueError("theta rows must be strictly positive and sum to 1")
+        if not self.models:
+            raise ValueError("at least one behaviour model is needed")
+        probs = np.stack([np.asarray(m.probabilities, dtype=np.float64) for m in self.models])
+        if probs.shape[1:] != theta.shape:
+            raise ValueError(f"model tables must have shape {theta.shape}, got {probs.shape[1:]}")
+        if not np.all(probs > 0):
+            raise ValueError("behaviour models must give every action a positive probability")
+        weights = np.array([m.weight for m in self.models], dtype=np.float64)
+        if not np.all(np.isfinite(weights)) or weights.min() <= 0:
+            raise ValueError("model weights P(M) must be positive")
+        weights = weights / weights.sum()
+        log_probs = np.log(probs)
+        neg_entropy = (theta * np.log(theta)).sum(axis=1)
+        setters = {
+            "theta": theta,
+            "probs": probs,
+            "log_probs": log_probs,
+            "log_weights": np.log(weights),
+            "neg_entropy": neg_entropy,
+            "probs_flat": [p.ravel().tolist() for p in probs],
+            "log_probs_flat": [lp.ravel().tolist() for lp in log_probs],
+            "theta_flat": theta.ravel().tolist(),
+            "neg_entropy_list": neg_entropy.tolist(),
+            "log_weight_list": [math.log(w) for w in weights.tolist()],
+        }
+        for name, value in setters.items():
+            if isinstance(value, np.ndarray):
+                value.setflags(write=False)
+            object.__setattr__(self, name, value)
+
+    @classmethod
+    def paper(cls, theta: npt.ArrayLike) -> AdviceTables:
+        """The paper's two models, normal and uniform, equally likely a priori."""
+        th = np.asarray(theta, dtype=np.float64)
+        return cls(th, (normal_model(th), uniform_model(th.shape[0])))
+
+    @classmethod
+    def with_models(cls, theta: npt.ArrayLike, extra: Sequence[BehaviourModel]) -> AdviceTables:
+        th = np.asarray(theta, dtype=np.float64)
+        return cls(th, (normal_model(th), uniform_model(th.shape[0]), *extra))
+
+    @property
+    def n_states(self) -> int:
+        return int(self.theta.shape[0])
+
+    @property
+    def n_models(self) -> int:
+        return len(self.models)

@@ -1,0 +1,290 @@
+"""Action priors: Dirichlet counts over actions per state, learned from experts (Section III).
+
+``alpha_s(a) = alpha0(a) + |{pi : pi(s, a) > delta}|`` (eq. 2). A trajectory is treated as one
+sampled policy: ``pi_hat(s, a)`` is the fraction of its visits to ``s`` in which it took ``a``, so
+with ``delta = 0`` each *distinct* (s, a) in a trajectory adds 1, however often it recurs.
+A full policy (shape states x actions) counts every state where ``pi(s, a) > delta``.
+
+Counts are kept per agent type ("staff", "visitor", ...) and pooled over all data; asking for a
+type that has no data falls back to the pooled prior. Fitting is vectorised over all
+transitions of all trajectories at once (one sort, one bincount).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from app.domain.grid import N_ACTIONS
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+TrajectoryLike = npt.ArrayLike  # (T, 2) int pairs (state, action)
+
+
+class NotFittedError(RuntimeError):
+    """An :class:`ActionPrior` was used before any data was given to it."""
+
+
+def as_pairs(trajectory: TrajectoryLike, n_states: int) -> IntArray:
+    """A trajectory as an int64 array of shape (T, 2), checked against the domain size."""
+    arr = np.asarray(trajectory)
+    if arr.size == 0:
+        return np.zeros((0, 2), dtype=np.int64)
+    if arr.ndim != 2 or arr.shape[1] != 2:
+        raise ValueError(
+            f"a trajectory is a (T, 2) array of (state, action), got shape {arr.shape}"
+        )
+    if not np.issubdtype(arr.dtype, np.integer):
+        raise ValueError(f"trajectory entries must be integers, got dtype {arr.dtype}")
+    pairs = arr.astype(np.int64, copy=False)
+    s, a = pairs[:, 0], pairs[:, 1]
+    if s.min() < 0 or s.max() >= n_states:
+        raise ValueError(f"trajectory state out of range: states are 0..{n_states - 1}")
+    if a.min() < 0 or a.max() >= N_ACTIONS:
+        raise ValueError(f"trajectory action out of range: actions are 0..{N_ACTIONS - 1}")
+    return pairs
+
+
+def trajectory_counts(
+    trajectories: Sequence[TrajectoryLike], n_states: int, delta: float = 0.0
+) -> FloatArray:
+    """Eq. (1) summed over ``trajectories``: how many of them took ``a`` in ``s`` with
+    ``pi_hat(s, a) > delta``. Shape (n_states, 4)."""
+    pairs = [as_pairs(t, n_states) for t in trajectories]
+    lengths = np.fromiter((len(p) for p in pairs), dtype=np.int64, count=len(pairs))
+    if lengths.sum() == 0:
+        return np.zeros((n_states, N_ACTIONS))
+    flat = np.concatenate(pairs)
+    tid = np.repeat(np.arange(len(pairs), dtype=np.int64), lengths)
+    n_sa = n_states * N_ACTIONS
+    sa = flat[:, 0] * N_ACTIONS + flat[:, 1]
+    keys, visits_sa = np.unique(tid * n_sa + sa, return_counts=True)
+    sa_of_key = keys % n_sa
+    if delta > 0:
+        # pi_hat(s, a) = visits(traj, s, a) / visits(traj, s)
+        ts_keys, visits_s = np.unique(tid * n_states + flat[:, 0], return_counts=True)
+        ts_of_key = (keys // n_sa) * n_states + sa_of_key // N_ACTIONS
+        frac = visits_sa / visits_s[np.searchsorted(ts_keys, ts_of_key)]
+        sa_of_key = sa_of_key[frac > delta]
+    return np.bincount(sa_of_key, minlength=n_sa).reshape(n_states, N_ACTIONS).astype(np.float64)
+
+
+def policy_counts(policies: npt.ArrayLike, delta: float = 0.0) -> FloatArray:
+    """Eq. (2) for full policies, shape (k, n_states, 4) or (n_states, 4)."""
+    pi = np.asarray(policies, dtype=np.float64)
+    if pi.ndim == 2:
+        pi = pi[None]
+    if pi.ndim != 3 or pi.shape[2] != N_ACTIONS:
+        raise ValueError(f"policies must have shape (k, states, 4), got {np.shape(policies)}")
+    if not np.all(np.isfinite(pi)) or pi.min() < 0:
+        raise ValueError("policy probabilities must be finite and non-negative")
+    out: FloatArray = (pi > delta).sum(axis=0).astype(np.float64)
+    return out
+
+
+class ActionPrior:
+    """Dirichlet action priors theta_s(A) for every state of one domain.
+
+    Parameters
+    ----------
+    alpha0 : float or array broadcastable to (n_states, 4)
+        The hyperprior alpha0(a) > 0 (keeps every probability positive, so logs are finite).
+    delta : float in [0, 1)
+        A policy counts for (s, a) when ``pi(s, a) > delta`` (eq. 1).
+
+    Learned attributes (after ``fit``/``partial_fit``): ``n_states_``, ``increments_`` (per
+    agent type), ``pooled_increments_``, ``n_trajectories_`` (per type, and ``"*"`` pooled).
+    """
+
+    POOLED = "*"
+
+    def __init__(self, alpha0: float | npt.ArrayLike = 1.0, delta: float = 0.0):
+        self.alpha0 = alpha0
+        self.delta = delta
+
+    # ---- fitting ------------------------------------------------------------------------
+    def _check_params(self, n_states: int) -> FloatArray:
+        a0 = np.asarray(self.alpha0, dtype=np.float64)
+        try:
+            a0 = np.broadcast_to(a0, (n_states, N_ACTIONS))
+        except ValueError:
+            raise ValueError(
+                f"alpha0 must be a number or broadcast to (states, 4), got shape {a0.shape}"
+            ) from None
+        if not np.all(np.isfinite(a0)) or a0.min() <= 0:
+            raise ValueError("alpha0 must be finite and > 0 (it keeps every theta positive)")
+        if not (0.0 <= float(self.delta) < 1.0):
+            raise ValueError(f"delta must be in [0, 1), got {self.delta}")
+        return a0
+
+    def _reset(self, n_states: int) -> None:
+        if n_states < 1:
+            raise ValueError(f"n_states must be at least 1, got {n_states}")
+        self.alpha0_ = self._check_params(n_states)
+        self.n_states_ = int(n_states)
+        self.increments_: dict[str, FloatArray] = {}
+        self.pooled_increments_ = np.zeros((n_states, N_ACTIONS))
+        self.n_trajectories_: dict[str, int] = {self.POOLED: 0}
+        self._theta_cache: dict[str, FloatArray] = {}
+
+    def _ensure(self, n_states: int | None) -> int:
+        if hasattr(self, "n_states_"):
+            if n_states is not None and n_states != self.n_states_:
+                raise ValueError(f"prior has {self.n_states_} states, data has {n_states}")
+            return self.n_states_
+        if n_states is None:
+            raise ValueError("n_states is needed for the first fit")
+        self._reset(n_states)
+        return n_states
+
+    def _add(self, inc: FloatArray, n_items: int, agent_type: str | None) -> None:
+        self.pooled_increments_ += inc
+        self.n_trajectories_[self.POOLED] += n_items
+        if agent_type is not None:
+            if agent_type == self.POOLED:
+                raise ValueError(f"agent type {self.POOLED!r} is reserved for the pooled prior")
+            if agent_type not in self.increments_:
+                self.increments_[agent_type] = np.zeros_like(inc)
+                self.n_trajectories_[agent_type] = 0
+            self.increments_[agent_type] += inc
+            self.n_trajectories_[agent_type] += n_items
+        self._theta_cache.clear()
+
+    def fit(
+        self, trajectories: Sequence[TrajectoryLike], n_states: int, agent_type: str | None = None
+    ) -> ActionPrior:
+        """Forget all data, then learn from ``trajectories``."""
+        self._reset(n_states)
+        return self.partial_fit(trajectories, agent_type=agent_type)
+
+    def partial_fit(
+        self,
+        trajectories: Sequence[TrajectoryLike],
+        n_states: int | None = None,
+        agent_type: str | None = None,
+    ) -> ActionPrior:
+        """Add trajectories (each a (T, 2) array of (state, action)) to the counts."""
+        n = self._ensure(n_states)
+        trajectories = list(trajectories)
+        self._add(
+            trajectory_counts(trajectories, n, float(self.delta)), len(trajectories), agent_type
+        )
+        return self
+
+    def fit_policies(self, policies: npt.ArrayLike, agent_type: str | None = None) -> ActionPrior:
+        """Forget all data, then learn from full policies of shape (k, states, 4)."""
+        pi = np.asarray(policies)
+        self._reset(int(pi.shape[-2]))
+        return self.partial_fit_policies(pi, agent_type=agent_type)
+
+    def partial_fit_policies(
+        self, policies: npt.ArrayLike, agent_type: str | None = None
+    ) -> ActionPrior:
+        pi = np.asarray(policies, dtype=np.float64)
+        k = 1 if pi.ndim == 2 else int(pi.shape[0])
+        n = self._ensure(int(pi.shape[-2]))
+        inc = policy_counts(pi, float(self.delta))
+        assert inc.shape[0] == n
+        self._add(inc, k, agent_type)
+        return self
+
+    # ---- reading ------------------------------------------------------------------------
+    def _check_fitted(self) -> None:
+        if not hasattr(self, "n_states_"):
+            raise NotFittedError("this ActionPrior has no data yet: call fit or partial_fit")
+
+    @property
+    def agent_types(self) -> list[str]:
+        self._check_fitted()
+        return sorted(self.increments_)
+
+    def resolve_type(self, agent_type: str | None) -> str:
+        """The table that serves ``agent_type``: its own if it has data, else the pooled one."""
+        self._check_fitted()
+        if agent_type is not None and self.n_trajectories_.get(agent_type, 0) > 0:
+            return agent_type
+        return self.POOLED
+
+    def counts(self, agent_type: str | None = None) -> FloatArray:
+        """alpha_s(a) (eq. 2) for ``agent_type`` (pooled if None or without data)."""
+        key = self.resolve_type(agent_type)
+        inc = self.pooled_increments_ if key == self.POOLED else self.increments_[key]
+        out: FloatArray = self.alpha0_ + inc
+        return out
+
+    def theta(
+        self,
+        agent_type: str | None = None,
+        *,
+        sample: bool = False,
+        rng: np.random.Generator | None = None,
+    ) -> FloatArray:
+        """theta_s(A): the Dirichlet mean alpha_s / sum(alpha_s), or with ``sample=True`` one
+        draw theta_s ~ Dir(alpha_s) per state. Shape (n_states, 4); rows sum to 1."""
+        if sample:
+            if rng is None:
+                raise ValueError("sample=True needs an explicit rng (np.random.Generator)")
+            g = rng.standard_gamma(self.counts(agent_type))
+            g = np.maximum(g, np.finfo(np.float64).tiny)  # a tiny alpha can draw an exact 0
+            return g / g.sum(axis=1, keepdims=True)  # type: ignore[no-any-return]
+        key = self.resolve_type(agent_type)
+        if key not in self._theta_cache:
+            alpha = self.counts(key)
+            th = alpha / alpha.sum(axis=1, keepdims=True)
+            th.setflags(write=False)
+            self._theta_cache[key] = th
+        return self._theta_cache[key]
+
+    def summary(self, agent_type: str | None = None) -> dict[str, Any]:
+        key = self.resolve_type(agent_type)
+        inc = self.pooled_increments_ if key == self.POOLED else self.increments_[key]
+        th = self.theta(key)
+        entropy = -(th * np.log(th)).sum(axis=1)
+        return {
+            "table": key,
+            "states": self.n_states_,
+            "trajectories": self.n_trajectories_.get(key, 0),
+            "states_with_data": int((inc.sum(axis=1) > 0).sum()),
+            "mean_entropy_nats": float(entropy.mean()),
+            "mean_max_theta": float(th.max(axis=1).mean()),
+        }
+
+    # ---- persistence --------------------------------------------------------------------
+    def save(self, path: str | Path) -> None:
+        self._check_fitted()
+        types = sorted(self.increments_)
+        np.savez_compressed(
+            Path(path),
+            alpha0=self.alpha0_,
+            delta=np.float64(self.delta),
+            pooled=self.pooled_increments_,
+            types=np.array(types, dtype=str),
+            typed=np.stack([self.increments_[t] for t in types])
+            if types
+            else np.zeros((0, self.n_states_, N_ACTIONS)),
+            n_traj_types=np.array([self.n_trajectories_[t] for t in types], dtype=np.int64),
+            n_traj_pooled=np.int64(self.n_trajectories_[self.POOLED]),
+        )
+
+    @classmethod
+    def load(cls, path: str | Path) -> ActionPrior:
+        with np.load(Path(path), allow_pickle=False) as z:
+            alpha0 = z["alpha0"]
+            prior = cls(alpha0=alpha0, delta=float(z["delta"]))
+            prior._reset(int(alpha0.shape[0]))
+            prior.pooled_increments_ = z["pooled"].astype(np.float64)
+            prior.n_trajectories_[cls.POOLED] = int(z["n_traj_pooled"])
+            for t, inc, n in zip(z["types"].tolist(), z["typed"], z["n_traj_types"], strict=True):
+                prior.increments_[str(t)] = inc.astype(np.float64)
+                prior.n_trajectories_[str(t)] = int(n)
+        return prior
+
+
+def iter_pairs(states: Iterable[int], actions: Iterable[int]) -> IntArray:
+    """Zip parallel state and action sequences into a (T, 2) trajectory array."""
+    return np.column_stack([np.fromiter(states, np.int64), np.fromiter(actions, np.int64)])

@@ -1,0 +1,277 @@
+"""Grid domains from ASCII maps (METHOD.md, "Domain").
+
+A map is a list of equal-length strings, row 0 at the top::
+
+    #  wall        .  free        S  start (exactly one)        G  goal (one or more)
+
+States are the free cells, numbered in row-major order; ``cells[s]`` is ``(row, col)`` and
+``state_of[row, col]`` is the state index (``-1`` for walls). Actions are the four compass
+moves ``N, E, S, W`` (0..3). A move into a wall or off the map leaves the state unchanged, so
+the whole dynamics is one precomputed table ``next_state[s, a]``.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+
+ACTIONS: tuple[str, ...] = ("N", "E", "S", "W")
+N, E, S, W = 0, 1, 2, 3
+N_ACTIONS = 4
+#: (d_row, d_col) of each action, indexed by action.
+MOVES = np.array([[-1, 0], [0, 1], [1, 0], [0, -1]], dtype=np.int64)
+ARROWS = ("^", ">", "v", "<")
+
+WALL, FREE, START, GOAL = "#", ".", "S", "G"
+MAP_CHARACTERS = (WALL, FREE, START, GOAL)
+UNREACHABLE = -1
+
+IntArray = npt.NDArray[np.int64]
+BoolArray = npt.NDArray[np.bool_]
+
+
+class MapError(ValueError):
+    """A map that cannot be a domain; ``line``/``column`` are 1-based when known."""
+
+    def __init__(self, message: str, line: int | None = None, column: int | None = None):
+        where = ""
+        if line is not None:
+            where = f"line {line}" + (f", column {column}" if column is not None else "") + ": "
+        super().__init__(where + message)
+        self.line = line
+        self.column = column
+
+
+def action_index(action: int | str) -> int:
+    """``"N"``/``"n"``/``0`` -> 0 etc.; raises ``ValueError`` naming what is allowed."""
+    if isinstance(action, str):
+        key = action.strip().upper()
+        if key in ACTIONS:
+            return ACTIONS.index(key)
+    elif (
+        isinstance(action, int | np.integer)
+        and not isinstance(action, bool)
+        and 0 <= int(action) < N_ACTIONS
+    ):
+        return int(action)
+    raise ValueError(f"unknown action {action!r}: use one of N, E, S, W or 0-3")
+
+
+def bfs_distances(next_state: IntArray, sources: Iterable[int]) -> IntArray:
+    """Shortest number of moves from every state to the nearest source (``-1`` if none).
+
+    Moves are reversible on a grid (``next_state`` is symmetric up to walls), so BFS outward
+    from the sources over the same table gives distances *to* them.
+    """
+    n = next_state.shape[0]
+    dist = np.full(n, UNREACHABLE, dtype=np.int64)
+    frontier = np.unique(np.fromiter(sources, dtype=np.int64))
+    dist[frontier] = 0
+    d = 0
+    while frontier.size:
+        d += 1
+        nbrs = np.unique(next_state[frontier].ravel())
+        frontier = nbrs[dist[nbrs] == UNREACHABLE]
+        dist[frontier] = d
+    return dist
+
+
+@dataclass(frozen=True, eq=False)
+class GridDomain:
+    """A grid world D = (S, A, T) shared by many tasks; a task only picks the goal.
+
+    Build it with :meth:`from_strings` or :meth:`from_file`; both validate the map.
+    """
+
+    rows_text: tuple[str, ...]
+    name: str = "maze"
+    walls: BoolArray = field(init=False, repr=False)
+    state_of: IntArray = field(init=False, repr=False)
+    cells: IntArray = field(init=False, repr=False)
+    next_state: IntArray = field(init=False, repr=False)
+    start: int = field(init=False)
+    goals: tuple[int, ...] = field(init=False)
+
+    def __post_init__(self) -> None:
+        grid = np.array([list(r) for r in self.rows_text])
+        walls = grid == WALL
+        state_of = np.full(walls.shape, -1, dtype=np.int64)
+        free = np.argwhere(~walls)
+        state_of[free[:, 0], free[:, 1]] = np.arange(len(free))
+        # next_state[s, a]: target cell if on the map and free, else s itself.
+        target = free[:, None, :] + MOVES[None, :, :]
+        rows, cols = walls.shape
+        on_map = (
+            (target[..., 0] >= 0)
+            & (target[..., 0] < rows)
+            & (target[..., 1] >= 0)
+            & (target[..., 1] < cols)
+        )
+        tr = np.clip(target[..., 0], 0, rows - 1)
+        tc = np.clip(target[..., 1], 0, cols - 1)
+        tgt_state = state_of[tr, tc]
+        stay = np.arange(len(free))[:, None].repeat(N_ACTIONS, axis=1)
+        next_state = np.where(on_map & (tgt_state >= 0), tgt_state, stay)
+        for name, value in (
+            ("walls", walls),
+            ("state_of", state_of),
+            ("cells", free.astype(np.int64)),
+            ("next_state", next_state.astype(np.int64)),
+        ):
+            value.setflags(write=False)
+            object.__setattr__(self, name, value)
+        object.__setattr__(self, "start", int(state_of[grid == START][0]))
+        goal_cells = np.argwhere(grid == GOAL)
+        object.__setattr__(self, "goals", tuple(int(state_of[r, c]) for r, c in goal_cells))
+
+    # ---- construction -------------------------------------------------------------------
+    @classmethod
+    def from_strings(cls, rows: Sequence[str], name: str = "maze") -> GridDomain:
+        """Validate ``rows`` (see :func:`validate_map`) and build the domain."""
+        cleaned = validate_map(rows)
+        return cls(tuple(cleaned), name=name)
+
+    @classmethod
+    def from_file(cls, path: str | Path, name: str | None = None) -> GridDomain:
+        p = Path(path)
+        try:
+            text = p.read_text(encoding="utf-8")
+        except OSError as exc:
+            raise MapError(f"cannot read map file {p}: {exc.strerror or exc}") from exc
+        return cls.from_strings(text.splitlines(), name=name or p.stem)
+
+    # ---- shape --------------------------------------------------------------------------
+    @property
+    def shape(self) -> tuple[int, int]:
+        return (len(self.rows_text), len(self.rows_text[0]))
+
+    @property
+    def n_states(self) -> int:
+        return int(self.cells.shape[0])
+
+    def state(self, row: int, col: int) -> int:
+        """State index of a free cell; ``ValueError`` for walls or cells off the map."""
+        rows, cols = self.shape
+        if not (0 <= row < rows and 0 <= col < cols):
+            raise ValueError(f"cell [{row}, {col}] is off the {rows}x{cols} map")
+        s = int(self.state_of[row, col])
+        if s < 0:
+            raise ValueError(f"cell [{row}, {col}] is a wall")
+        return s
+
+    def cell(self, state: int) -> tuple[int, int]:
+        r, c = self.cells[state]
+        return (int(r), int(c))
+
+    def step(self, state: int, action: int) -> int:
+        return int(self.next_state[state, action])
+
+    def move_between(self, state: int, next_state: int) -> int | None:
+        """The action that takes ``state`` to a *different* ``next_state``, else ``None``."""
+        if state == next_state:
+            return None
+        hits = np.flatnonzero(self.next_state[state] == next_state)
+        return int(hits[0]) if hits.size else None
+
+    # ---- structure ----------------------------------------------------------------------
+    def distances_to(self, target: int | Iterable[int]) -> IntArray:
+        """BFS distance from every state to ``target`` (a state or several)."""
+        sources = [target] if isinstance(target, int | np.integer) else list(target)
+        return bfs_distances(self.next_state, sources)
+
+    @cached_property
+    def goal_distances(self) -> IntArray:
+        """``goal_distances[g, s]``: moves from state ``s`` to goal number ``g``."""
+        return np.stack([self.distances_to(g) for g in self.goals])
+
+    @cached_property
+    def open_moves(self) -> BoolArray:
+        """``open_moves[s, a]``: action ``a`` leaves ``s`` (does not hit a wall or the edge)."""
+        out: BoolArray = self.next_state != np.arange(self.n_states)[:, None]
+        return out
+
+    @cached_property
+    def dead_ends(self) -> IntArray:
+        """States with exactly one open neighbour (corridor ends)."""
+        return np.flatnonzero(self.open_moves.sum(axis=1) == 1)
+
+    def render(self, marks: dict[int, str] | None = None) -> str:
+        """The map as text, with ``marks`` (state -> one character) drawn over free cells."""
+        grid = [list(r) for r in self.rows_text]
+        for s, ch in (marks or {}).items():
+            r, c = self.cell(s)
+            grid[r][c] = ch
+        return "\n".join("".join(r) for r in grid)
+
+    def __str__(self) -> str:
+        return "\n".join(self.rows_text)
+
+
+def validate_map(rows: Sequence[str]) -> list[str]:
+    """Check an ASCII map and return its rows; raise :class:`MapError` naming the problem.
+
+    Trailing whitespace (and ``\\r``) is ignored; blank trailing lines are dropped.
+    """
+    if isinstance(rows, str):
+        raise MapError("a map is a list of row strings, not one string (split it into lines)")
+    cleaned = [str(r).rstrip() for r in rows]
+    while cleaned and not cleaned[-1]:
+        cleaned.pop()
+    if not cleaned:
+        raise MapError("the map is empty")
+    width = len(cleaned[0])
+    if width == 0:
+        raise MapError("the first row is empty", line=1)
+    for i, row in enumerate(cleaned, start=1):
+        if len(row) != width:
+            raise MapError(
+                f"ragged row: {len(row)} characters where row 1 has {width} "
+                "(every row must have the same length)",
+                line=i,
+            )
+        for j, ch in enumerate(row, start=1):
+            if ch not in MAP_CHARACTERS:
+                raise MapError(
+                    f"unknown character {ch!r}: use '#' wall, '.' free, 'S' start, 'G' goal",
+                    line=i,
+                    column=j,
+                )
+    starts = [(i, j) for i, row in enumerate(cleaned) for j, ch in enumerate(row) if ch == START]
+    if not starts:
+        raise MapError("no start: mark exactly one cell with 'S'")
+    if len(starts) > 1:
+        where = ", ".join(f"line {i + 1} column {j + 1}" for i, j in starts)
+        raise MapError(f"{len(starts)} starts ({where}): mark exactly one cell with 'S'")
+    if not any(GOAL in row for row in cleaned):
+        raise MapError("no goal: mark at least one cell with 'G'")
+    _check_reachable(cleaned, starts[0])
+    return cleaned
+
+
+def _check_reachable(rows: list[str], start: tuple[int, int]) -> None:
+    height, width = len(rows), len(rows[0])
+    seen = {start}
+    queue = deque([start])
+    while queue:
+        r, c = queue.popleft()
+        for dr, dc in MOVES.tolist():
+            nr, nc = r + dr, c + dc
+            inside = 0 <= nr < height and 0 <= nc < width
+            if inside and rows[nr][nc] != WALL and (nr, nc) not in seen:
+                seen.add((nr, nc))
+                queue.append((nr, nc))
+    for i, row in enumerate(rows):
+        for j, ch in enumerate(row):
+            if ch != WALL and (i, j) not in seen:
+                what = "goal" if ch == GOAL else "free cell"
+                raise MapError(
+                    f"{what} unreachable from the start (every free cell must be connected to 'S')",
+                    line=i + 1,
+                    column=j + 1,
+                )
