@@ -223,7 +223,8 @@ class Advisor:
         )  # fmt: skip
 
     def start(self, state: int) -> Decision:
-        """The first decision of a session: the start state, with empty H."""
+        """The first decision of a session: forget H and the cost, decide for ``state``."""
+        self.reset()
         return self.decide(state)
 
     def observe(self, state: int, action: int, next_state: int) -> Decision:

@@ -68,7 +68,19 @@ class BatchAdvisor:
         self.benefit = np.zeros(n_explorers)
         self._all = np.arange(n_explorers, dtype=np.int64)
         self._base = self._all * window
-        self._lp_flat = tables.log_probs.reshape(m, -1)  # (M, S*4), index s*4+a
+        # scratch space, so a step allocates (almost) nothing: large temporaries per step cost
+        # more in page faults than in arithmetic (measured: see docs/PERFORMANCE.md)
+        self._mats = np.empty((2, N_ACTIONS * n_explorers))
+        self._vecs = np.empty((4, n_explorers))
+        self._post = np.empty(m * n_explorers)
+
+    def _mat(self, j: int, k: int) -> FloatArray:
+        out: FloatArray = self._mats[j, : N_ACTIONS * k].reshape(N_ACTIONS, k)
+        return out
+
+    def _vec(self, j: int, k: int) -> FloatArray:
+        out: FloatArray = self._vecs[j, :k]
+        return out
 
     def _sel(self, idx: npt.ArrayLike | None) -> tuple[IntArray, slice | IntArray]:
         """(explicit indices, the cheapest selector for them: a slice when all explorers)."""
@@ -108,13 +120,18 @@ class BatchAdvisor:
         s = np.asarray(states, dtype=np.int64)
         a = np.asarray(actions, dtype=np.int64)
         self._check(s, a)
+        k = s.size
         pos = self._pos[sel]
         slot = self._base[sel] + pos
-        k = s * N_ACTIONS + a
+        key = s * N_ACTIONS + a
+        lp, delta = self._vec(0, k), self._vec(1, k)
+        log_probs = self.tables.log_probs.reshape(self._ring.shape[0], -1)  # (M, S*4) view
         for m in range(self._ring.shape[0]):
-            lp = self._lp_flat[m].take(k)
             ring = self._ring[m]
-            self._loglik[m, sel] += lp - ring.take(slot)
+            np.take(log_probs[m], key, out=lp, mode="clip")  # indices checked above
+            np.take(ring, slot, out=delta, mode="clip")
+            np.subtract(lp, delta, out=delta)
+            self._loglik[m, sel] += delta  # same order as the single form: L + (lp - old)
             ring.put(slot, lp)
         pos += 1
         wrapped = pos == self.window
@@ -129,43 +146,58 @@ class BatchAdvisor:
 
     def posterior(self, idx: npt.ArrayLike | None = None) -> FloatArray:
         """P(M | H), shape (n, M)."""
-        return np.stack(self._posterior(self._sel(idx)[1]), axis=1)
+        i, sel = self._sel(idx)
+        return self._posterior(sel, i.size).T.copy()
 
-    def _posterior(self, sel: slice | IntArray) -> list[FloatArray]:
+    def _posterior(self, sel: slice | IntArray, k: int) -> FloatArray:
+        """P(M | H) for the selected explorers as an (M, k) view of scratch space (eq. 5)."""
         lw = self.tables.log_weights
-        z = [self._loglik[m, sel] + lw[m] for m in range(len(lw))]
-        mx = z[0]
-        for zm in z[1:]:
-            mx = np.maximum(mx, zm)
-        e = [np.exp(zm - mx) for zm in z]
-        tot = e[0].copy()
-        for em in e[1:]:
-            tot += em
-        return [em / tot for em in e]
+        post: FloatArray = self._post[: len(lw) * k].reshape(len(lw), k)
+        for m in range(len(lw)):
+            np.add(self._loglik[m, sel], lw[m], out=post[m])
+        mx = self._vec(2, k)
+        np.max(post, axis=0, out=mx)
+        np.subtract(post, mx, out=post)
+        np.exp(post, out=post)
+        tot = self._vec(3, k)
+        tot[:] = post[0]
+        for m in range(1, len(lw)):
+            tot += post[m]
+        np.divide(post, tot, out=post)
+        return post
 
     def decide(self, states: npt.ArrayLike, idx: npt.ArrayLike | None = None) -> BatchDecision:
         i, sel = self._sel(idx)
         s = np.asarray(states, dtype=np.int64)
         self._check(s)
+        k = s.size
         t = self.tables
-        post = self._posterior(sel)
-        probs = t.probs
-        mix = post[0][:, None] * probs[0].take(s, axis=0)
+        post = self._posterior(sel, k)
+        probs = t.probs_t  # (M, 4, S): rows per action, so every array below is (4, k)
+        mix, tmp = self._mat(0, k), self._mat(1, k)
+        np.take(probs[0], s, axis=1, out=mix, mode="clip")  # eq. (4)
+        mix *= post[0]
         for m in range(1, len(post)):
-            mix += post[m][:, None] * probs[m].take(s, axis=0)
-        terms = t.theta.take(s, axis=0) * np.log(mix)
-        cross = terms[:, 0] + terms[:, 1]
+            np.take(probs[m], s, axis=1, out=tmp, mode="clip")
+            tmp *= post[m]
+            mix += tmp
+        np.log(mix, out=mix)
+        np.take(t.theta_t, s, axis=1, out=tmp, mode="clip")
+        tmp *= mix  # theta_s(a) log P(a | s, H)
+        cross = self._vec(0, k)
+        np.add(tmp[0], tmp[1], out=cross)
         for a in range(2, N_ACTIONS):
-            cross += terms[:, a]
-        kl = np.maximum(t.neg_entropy.take(s) - cross, 0.0)
+            cross += tmp[a]
+        kl = t.neg_entropy.take(s) - cross  # eq. (6): KL[theta_s || P(A | s, H)]
+        np.maximum(kl, 0.0, out=kl)
         kappa = self.kappa[sel]
         advise = kl >= kappa
         self.decisions[sel] += 1
         self.advice_count[sel] += advise
         self.benefit[sel] += np.where(advise, kl, 0.0)
-        count = self.advice_count[sel].copy()  # a copy: a slice would alias the live counters
+        count = self.advice_count[sel].copy()  # copies: views would alias live counters/scratch
         return BatchDecision(
-            i, s, advise, kl, post[0], count, kappa * count, self.benefit[sel].copy()
+            i, s, advise, kl, post[0].copy(), count, kappa * count, self.benefit[sel].copy()
         )
 
     def start(self, states: npt.ArrayLike, idx: npt.ArrayLike | None = None) -> BatchDecision:

@@ -55,6 +55,9 @@ class AdviceTables:
     log_probs: FloatArray = field(init=False, repr=False)  # (M, S, 4)
     log_weights: FloatArray = field(init=False, repr=False)  # (M,)
     neg_entropy: FloatArray = field(init=False, repr=False)  # (S,) sum_a theta log theta
+    # action-major copies for the batch form: gathers give (4, n) rows with long inner loops
+    probs_t: FloatArray = field(init=False, repr=False)  # (M, 4, S)
+    theta_t: FloatArray = field(init=False, repr=False)  # (4, S)
     # flat Python lists for the single-explorer form: index s * 4 + a
     probs_flat: list[list[float]] = field(init=False, repr=False)
     log_probs_flat: list[list[float]] = field(init=False, repr=False)
@@ -87,6 +90,8 @@ class AdviceTables:
             "log_probs": log_probs,
             "log_weights": np.log(weights),
             "neg_entropy": neg_entropy,
+            "probs_t": np.ascontiguousarray(probs.transpose(0, 2, 1)),
+            "theta_t": np.ascontiguousarray(theta.T),
             "probs_flat": [p.ravel().tolist() for p in probs],
             "log_probs_flat": [lp.ravel().tolist() for lp in log_probs],
             "theta_flat": theta.ravel().tolist(),

@@ -1,0 +1,132 @@
+"""Core speed: one explorer's decision, the batch form over many explorers, prior fitting.
+
+Targets (issue 2): single decision <= 5 us median; batch >= 5 million decisions/s over 10,000
+explorers; fitting >= 5 million transitions/s. Each figure is the median over ``--repeats`` runs.
+
+    .venv/bin/python benchmarks/bench_core.py [--repeats 7] [--write docs/PERFORMANCE.md]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from app.advice.advisor import Advisor
+from app.advice.batch import BatchAdvisor
+from app.advice.models import AdviceTables
+from app.advice.priors import ActionPrior
+from app.agents.experts import train_prior
+from app.domain.grid import GridDomain
+from app.domain.maps import DEFAULT_MAP
+from benchmarks._report import command_line, machine, median_of, write_section
+
+
+def random_walk(domain: GridDomain, rng: np.random.Generator, n: int) -> tuple[list[int], ...]:
+    a = rng.integers(0, 4, n)
+    s = np.empty(n + 1, dtype=np.int64)
+    s[0] = domain.start
+    nxt = domain.next_state
+    for i in range(n):
+        s[i + 1] = nxt[s[i], a[i]]
+    return s[:-1].tolist(), a.tolist(), s[1:].tolist()
+
+
+def bench_single(tables: AdviceTables, domain: GridDomain, repeats: int) -> tuple[float, float]:
+    """(median us per observe+decide over whole runs, median of per-call times in us)."""
+    s, a, s2 = random_walk(domain, np.random.default_rng(1), 50_000)
+
+    def run() -> float:
+        adv = Advisor(tables)
+        adv.start(domain.start)
+        obs = adv.observe
+        t0 = time.perf_counter()
+        for x, y, z in zip(s, a, s2, strict=True):
+            obs(x, y, z)
+        return (time.perf_counter() - t0) / len(s) * 1e6
+
+    per_run, _ = median_of(run, repeats)
+    adv = Advisor(tables)
+    adv.start(domain.start)
+    clock = time.perf_counter_ns
+    calls = []
+    for x, y, z in zip(s[:20_000], a, s2, strict=False):
+        t0 = clock()
+        adv.observe(x, y, z)
+        calls.append(clock() - t0)
+    return per_run, float(np.median(calls)) / 1000
+
+
+def bench_batch(tables: AdviceTables, domain: GridDomain, repeats: int, n: int = 10_000,
+                steps: int = 600) -> float:  # fmt: skip
+    rng = np.random.default_rng(2)
+    states = rng.integers(0, domain.n_states, (steps + 1, n))
+    actions = rng.integers(0, 4, (steps, n))
+    nxt = domain.next_state[states[:-1], actions]
+
+    def run() -> float:
+        b = BatchAdvisor(tables, n)
+        b.start(states[0])
+        t0 = time.perf_counter()
+        for k in range(steps):  # 600 steps: every window of 300 wraps twice
+            b.observe(states[k], actions[k], nxt[k])
+        return steps * n / (time.perf_counter() - t0)
+
+    return median_of(run, repeats)[0]
+
+
+def bench_fit(domain: GridDomain, repeats: int, n_traj: int = 5_000, length: int = 1_000) -> float:
+    rng = np.random.default_rng(3)
+    trajs = [
+        np.column_stack(random_walk(domain, rng, length)[:2]).astype(np.int64)
+        for _ in range(n_traj)
+    ]
+
+    def run() -> float:
+        t0 = time.perf_counter()
+        ActionPrior().fit(trajs, domain.n_states)
+        return n_traj * length / (time.perf_counter() - t0)
+
+    return median_of(run, repeats)[0]
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    ap.add_argument("--repeats", type=int, default=7)
+    ap.add_argument("--write", type=Path, help="rewrite this markdown file's core section")
+    args = ap.parse_args()
+    domain = GridDomain.from_file(DEFAULT_MAP)
+    prior = train_prior(domain, np.random.default_rng(0), "anywhere", per_goal=10)
+    tables = AdviceTables.paper(prior.theta())
+    single_run, single_call = bench_single(tables, domain, args.repeats)
+    batch = bench_batch(tables, domain, args.repeats)
+    fit = bench_fit(domain, args.repeats)
+    rows = [
+        ("single explorer, observe + decide (mean per call, median of runs)",
+         f"{single_run:.2f} us", "<= 5 us"),
+        ("single explorer, observe + decide (median of 20k timed calls)",
+         f"{single_call:.2f} us", "<= 5 us"),
+        ("batch, 10,000 explorers, window 300, 600 steps",
+         f"{batch / 1e6:.2f} M decisions/s", ">= 5 M/s"),
+        ("fit from 5,000 trajectories x 1,000 steps",
+         f"{fit / 1e6:.2f} M transitions/s", ">= 5 M/s"),
+    ]  # fmt: skip
+    table = "| measurement | result | target |\n|---|---|---|\n" + "\n".join(
+        f"| {a} | {b} | {c} |" for a, b, c in rows
+    )
+    body = (
+        f"## Core library\n\nCommand: `{command_line()}` (median of {args.repeats} runs each)\n\n"
+        f"Machine: {machine()}\n\n{table}\n"
+    )
+    print(body)
+    if args.write:
+        write_section(args.write, "bench_core", body)
+
+
+if __name__ == "__main__":
+    main()
