@@ -222,6 +222,20 @@ class Advisor:
             self.advice_count, self.kappa * self.advice_count, self.benefit,
         )  # fmt: skip
 
+    def record(
+        self, state: int, advise: bool, advice: tuple[float, float, float, float] | None,
+        kl: float, p_normal: float,
+    ) -> Decision:  # fmt: skip
+        """Account for a decision taken by another rule (see :mod:`app.advice.strategies`)."""
+        self.decisions += 1
+        if advise:
+            self.advice_count += 1
+            self.benefit += kl
+        return Decision(
+            self.steps, state, advise, advice if advise else None, kl, p_normal,
+            self.advice_count, self.kappa * self.advice_count, self.benefit,
+        )  # fmt: skip
+
     def start(self, state: int) -> Decision:
         """The first decision of a session: forget H and the cost, decide for ``state``."""
         self.reset()
