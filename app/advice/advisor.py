@@ -9,8 +9,9 @@ One step (METHOD.md): the explorer at ``s`` takes ``a`` and reaches ``s'``; the 
     advise        iff KL[theta_s' || P(A | s', H)] >= kappa      eq. (6), nats
 
 The window keeps the log-probabilities it added, so subtracting the pair that leaves it is
-exact even if the tables change meanwhile; each time the ring wraps the sums are recomputed
-exactly (``math.fsum``), so floating-point drift never accumulates beyond one window.
+exact even if the tables change meanwhile; when the ring wraps (at most once per
+:data:`RESYNC_PAIRS` pairs) the sums are recomputed exactly (``math.fsum``), so floating-point
+drift never accumulates.
 This single-explorer form is plain Python on flat lists (a few microseconds per decision);
 :mod:`app.advice.batch` advances many explorers at once with the same arithmetic.
 """
@@ -28,6 +29,14 @@ from app.domain.grid import N_ACTIONS
 
 DEFAULT_KAPPA = 0.5
 DEFAULT_WINDOW = 300
+#: The window sums are recomputed exactly when the ring wraps, at most once per this many pairs
+#: (a short window would otherwise pay an O(W) re-sum every W steps for nothing).
+RESYNC_PAIRS = 1024
+
+
+def resync_period(window: int) -> int:
+    """Pairs between exact re-sums: the first multiple of ``window`` >= RESYNC_PAIRS."""
+    return window * -(-RESYNC_PAIRS // window)
 
 
 class Decision(NamedTuple):
@@ -117,12 +126,13 @@ class Advisor:
             loglik[m] += lp - ring[pos]  # ring holds 0.0 until the window fills
             ring[pos] = lp
         pos += 1
+        self.steps += 1
         if pos == self.window:
             pos = 0
-            for m, ring in enumerate(rings):
-                loglik[m] = math.fsum(ring)
+            if self.steps % resync_period(self.window) == 0:
+                for m, ring in enumerate(rings):
+                    loglik[m] = math.fsum(ring)
         self._pos = pos
-        self.steps += 1
 
     @property
     def history_length(self) -> int:

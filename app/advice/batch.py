@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from app.advice.advisor import DEFAULT_KAPPA, DEFAULT_WINDOW, check_kappa_window
+from app.advice.advisor import DEFAULT_KAPPA, DEFAULT_WINDOW, check_kappa_window, resync_period
 from app.advice.models import AdviceTables
 from app.domain.grid import N_ACTIONS
 
@@ -134,15 +134,16 @@ class BatchAdvisor:
             self._loglik[m, sel] += delta  # same order as the single form: L + (lp - old)
             ring.put(slot, lp)
         pos += 1
+        self.steps[sel] += 1
         wrapped = pos == self.window
         if wrapped.any():
             pos[wrapped] = 0
             w = self.window
-            for e in i[wrapped].tolist():
+            due = wrapped & (self.steps[sel] % resync_period(w) == 0)
+            for e in i[due].tolist():
                 for m in range(self._ring.shape[0]):
                     self._loglik[m, e] = math.fsum(self._ring[m, e * w : (e + 1) * w].tolist())
         self._pos[sel] = pos
-        self.steps[sel] += 1
 
     def posterior(self, idx: npt.ArrayLike | None = None) -> FloatArray:
         """P(M | H), shape (n, M)."""

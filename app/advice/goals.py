@@ -18,7 +18,7 @@ from collections.abc import Sequence
 import numpy as np
 import numpy.typing as npt
 
-from app.advice.advisor import DEFAULT_KAPPA, DEFAULT_WINDOW, Advisor, Decision
+from app.advice.advisor import DEFAULT_KAPPA, DEFAULT_WINDOW, Advisor, Decision, resync_period
 from app.advice.models import AdviceTables
 from app.advice.priors import TrajectoryLike, trajectory_counts
 from app.domain.grid import N_ACTIONS
@@ -140,7 +140,8 @@ class GoalAwareAdvisor(Advisor):
         self._goal_pos += 1
         if self._goal_pos == self.window:
             self._goal_pos = 0
-            self._goal_ll = [math.fsum(col) for col in zip(*self._goal_ring, strict=True)]
+            if self.steps % resync_period(self.window) == 0:
+                self._goal_ll = [math.fsum(col) for col in zip(*self._goal_ring, strict=True)]
 
     def goal_posterior(self) -> list[float]:
         """w_g: P(goal g | H); uniform over all goals if every goal has been ruled out."""
