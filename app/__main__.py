@@ -154,6 +154,11 @@ def train(
     typer.echo(direction_map(domain, prior.theta()))
 
 
+from app.experiments.cli import experiment  # noqa: E402  (its heavy imports are deferred)
+
+cli.command()(experiment)
+
+
 def main() -> None:
     cli()
 
