@@ -158,6 +158,12 @@ from app.experiments.cli import experiment  # noqa: E402  (its heavy imports are
 
 cli.command()(experiment)
 
+from app.service.cli import serve  # noqa: E402  (uvicorn and the app are imported on use)
+from app.service.simulate import simulate  # noqa: E402
+
+cli.command()(serve)
+cli.command()(simulate)
+
 
 def main() -> None:
     cli()

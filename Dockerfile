@@ -1,0 +1,37 @@
+# The advice service: `docker build -t advisor . && docker run -p 127.0.0.1:8000:8000 \
+#   -p 127.0.0.1:8080:8080 -v advisor-data:/data advisor`  (API on 8000, viser viewer on 8080)
+FROM python:3.11-slim
+
+ENV PYTHONDONTWRITEBYTECODE=1 \
+    PYTHONUNBUFFERED=1 \
+    PIP_NO_CACHE_DIR=1 \
+    PIP_DISABLE_PIP_VERSION_CHECK=1 \
+    ADVISOR_HOST=0.0.0.0 \
+    ADVISOR_DATA_DIR=/data \
+    ADVISOR_STATIC_DIR=/app/static \
+    NUMBA_CACHE_DIR=/home/advisor/.cache/numba \
+    MPLCONFIGDIR=/home/advisor/.cache/matplotlib
+
+WORKDIR /app
+
+# dependencies first (a layer that survives code changes), then the package itself
+COPY pyproject.toml README.md ./
+RUN python -c "import tomllib; print('\n'.join(tomllib.load(open('pyproject.toml', 'rb'))['project']['dependencies']))" > /tmp/requirements.txt \
+    && pip install -r /tmp/requirements.txt \
+    && rm /tmp/requirements.txt
+COPY app ./app
+COPY static ./static
+RUN pip install --no-deps . \
+    && useradd --create-home --uid 10001 advisor \
+    && mkdir -p /data \
+    && chown advisor:advisor /data
+
+USER advisor
+# compile the service's numba loop once, into the image (startup then only loads it)
+RUN python -c "from app.service.stream_advisor import warm_up; warm_up()"
+
+VOLUME ["/data"]
+EXPOSE 8000 8080
+HEALTHCHECK --interval=30s --timeout=5s --start-period=60s --retries=3 \
+    CMD ["python", "-c", "import sys, urllib.request; sys.exit(urllib.request.urlopen('http://127.0.0.1:8000/health', timeout=4).status != 200)"]
+CMD ["python", "-m", "app", "serve", "--host", "0.0.0.0", "--port", "8000"]

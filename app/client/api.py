@@ -1,0 +1,146 @@
+"""Each API call as data (method, path, body, auth), shared by the sync and async clients."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+from urllib.parse import quote, urlencode, urlsplit, urlunsplit
+
+from app.client.types import Cell, Decision, EventLike
+
+
+class AdvisorError(Exception):
+    """The service refused a request: ``status`` (HTTP, or 4xxx websocket close code mapped to
+    4xx) and its ``detail``."""
+
+    def __init__(self, status: int, detail: str):
+        super().__init__(f"{status}: {detail}")
+        self.status = status
+        self.detail = detail
+
+
+@dataclass(frozen=True)
+class Session:
+    """A live session: its id, its token (needed by every session call) and first decision."""
+
+    session_id: str
+    token: str
+    domain: str
+    kappa: float
+    window: int
+    decision: Decision
+    prior_table: str = "*"
+
+    @classmethod
+    def of(cls, body: dict[str, Any]) -> Session:
+        return cls(
+            body["session_id"], body["token"], body["domain"], body["kappa"], body["window"],
+            body["decision"], body.get("prior_table", "*"),
+        )  # fmt: skip
+
+    @property
+    def auth(self) -> dict[str, str]:
+        return {"Authorization": f"Bearer {self.token}"}
+
+
+@dataclass(frozen=True)
+class Call:
+    method: str
+    path: str
+    json: Any = None
+    params: dict[str, Any] = field(default_factory=dict)
+    headers: dict[str, str] = field(default_factory=dict)
+    admin: bool = False
+
+
+def _name(name: str) -> str:
+    return quote(name, safe="")
+
+
+def health() -> Call:
+    return Call("GET", "/health")
+
+
+def domains() -> Call:
+    return Call("GET", "/domains")
+
+
+def domain(name: str) -> Call:
+    return Call("GET", f"/domains/{_name(name)}")
+
+
+def put_domain(name: str, rows: Sequence[str], alpha0: float = 1.0) -> Call:
+    return Call("PUT", f"/domains/{_name(name)}", {"map": list(rows), "alpha0": alpha0}, admin=True)
+
+
+def delete_domain(name: str) -> Call:
+    return Call("DELETE", f"/domains/{_name(name)}", admin=True)
+
+
+def add_trajectories(name: str, trajectories: Sequence[EventLike]) -> Call:
+    body = {"trajectories": list(trajectories)}
+    return Call("POST", f"/domains/{_name(name)}/trajectories", body, admin=True)
+
+
+def prior(name: str, agent_type: str | None = None) -> Call:
+    params = {"agent_type": agent_type} if agent_type else {}
+    return Call("GET", f"/domains/{_name(name)}/prior", params=params)
+
+
+def create_session(
+    name: str,
+    kappa: float | None = None,
+    window: int | None = None,
+    agent_type: str | None = None,
+    start: Cell | None = None,
+) -> Call:
+    body: dict[str, Any] = {"kappa": kappa, "window": window, "agent_type": agent_type}
+    if start is not None:
+        body["start"] = [int(start[0]), int(start[1])]
+    clean = {k: v for k, v in body.items() if v is not None}
+    return Call("POST", f"/domains/{_name(name)}/sessions", clean)
+
+
+def events(session: Session, batch: EventLike | Sequence[EventLike]) -> Call:
+    body = dict(batch) if isinstance(batch, Mapping) else [dict(e) for e in batch]
+    return Call("POST", f"/sessions/{session.session_id}/events", body, headers=session.auth)
+
+
+def read_session(session: Session) -> Call:
+    return Call("GET", f"/sessions/{session.session_id}", headers=session.auth)
+
+
+def end_session(session: Session) -> Call:
+    return Call("DELETE", f"/sessions/{session.session_id}", headers=session.auth)
+
+
+def sessions(limit: int = 100) -> Call:
+    return Call("GET", "/sessions", params={"limit": limit}, admin=True)
+
+
+def overview(limit: int = 100) -> Call:
+    return Call("GET", "/overview", params={"limit": limit})
+
+
+def stream_url(base_url: str, session: Session) -> str:
+    """``ws(s)://.../sessions/{id}/stream?token=...`` for an ``http(s)://`` base URL."""
+    parts = urlsplit(base_url)
+    scheme = "wss" if parts.scheme == "https" else "ws"
+    path = parts.path.rstrip("/") + f"/sessions/{session.session_id}/stream"
+    return urlunsplit((scheme, parts.netloc, path, urlencode({"token": session.token}), ""))
+
+
+def result(status: int, body: Any, text: str) -> Any:
+    """The answer's body, or :class:`AdvisorError` with the service's detail."""
+    if status >= 400:
+        detail = body.get("detail") if isinstance(body, dict) else None
+        raise AdvisorError(status, str(detail) if detail is not None else text[:500])
+    return body
+
+
+def frame_result(body: Any) -> Any:
+    """A websocket answer: decisions, or :class:`AdvisorError` for an error frame."""
+    if isinstance(body, dict) and "detail" in body:
+        raise AdvisorError(int(body.get("status", 422)), str(body["detail"]))
+    return body

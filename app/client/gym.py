@@ -1,0 +1,176 @@
+"""Gymnasium: report every step of an environment to the advice service.
+
+:class:`AdvisedEnv` wraps any environment whose observations name a grid cell. At ``reset`` it
+opens a session at the start cell; at each ``step`` it sends (cell, action, next cell) over the
+session's websocket and puts the service's decision in ``info["decision"]``. With
+``follow_advice=True`` an advised step replaces the agent's action with one sampled from the
+advice (as the paper's advised explorers do), drawn from the environment's ``np_random``.
+
+:class:`MazeEnv` is a small grid world built from a map the service serves
+(``GET /domains/{name}``), so the wrapper can be used without any server code:
+
+>>> env = AdvisedEnv(MazeEnv(client.domain("default")["map"]), client, "default")
+>>> obs, info = env.reset(seed=0)
+>>> obs, reward, terminated, truncated, info = env.step(1)   # info["decision"]["advise"]
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import Any, SupportsFloat
+
+import gymnasium as gym
+import numpy as np
+import numpy.typing as npt
+from gymnasium import spaces
+
+from app.client.api import AdvisorError, Session
+from app.client.client import AdvisorClient, Stream
+from app.client.types import Decision
+
+ACTIONS = ("N", "E", "S", "W")
+MOVES = ((-1, 0), (0, 1), (1, 0), (0, -1))
+GOAL_REWARD = 1000.0
+Obs = npt.NDArray[np.int64]
+
+
+class MazeEnv(gym.Env[Obs, int]):
+    """An ASCII maze ('#' wall, '.' free, 'S' start, 'G' goals) with a hidden goal.
+
+    * Observation: ``[row, col]`` of the agent (``MultiDiscrete([rows, cols])``).
+    * Actions: ``Discrete(4)``: 0 N, 1 E, 2 S, 3 W. A move into a wall or off the map stays.
+    * Goal: one of the map's goals, drawn at ``reset`` (or ``options={"goal": [r, c]}``);
+      reaching it gives reward 1000 and ends the episode; every other step gives 0.
+    * Truncation after ``max_steps`` steps.
+    """
+
+    metadata = {"render_modes": ["ansi"]}  # noqa: RUF012  (Gymnasium's own convention)
+
+    def __init__(self, rows: Sequence[str], max_steps: int = 5000, render_mode: str | None = None):
+        self.rows = [r.rstrip() for r in rows]
+        self.shape = (len(self.rows), len(self.rows[0]))
+        self.start = next(
+            (r, c) for r, row in enumerate(self.rows) for c, ch in enumerate(row) if ch == "S"
+        )
+        self.goals = [
+            (r, c) for r, row in enumerate(self.rows) for c, ch in enumerate(row) if ch == "G"
+        ]
+        self.max_steps = max_steps
+        self.render_mode = render_mode
+        self.observation_space = spaces.MultiDiscrete(list(self.shape))
+        self.action_space: spaces.Space[int] = spaces.Discrete(4)  # type: ignore[assignment]
+        self.cell, self.goal, self.steps = self.start, self.goals[0], 0
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[Obs, dict[str, Any]]:
+        super().reset(seed=seed)
+        goal = (options or {}).get("goal")
+        if goal is None:
+            goal = self.goals[int(self.np_random.integers(len(self.goals)))]
+        self.goal, self.cell, self.steps = (int(goal[0]), int(goal[1])), self.start, 0
+        return np.array(self.cell), {"goal": self.goal}
+
+    def step(self, action: int) -> tuple[Obs, SupportsFloat, bool, bool, dict[str, Any]]:
+        dr, dc = MOVES[int(action)]
+        r, c = self.cell[0] + dr, self.cell[1] + dc
+        if 0 <= r < self.shape[0] and 0 <= c < self.shape[1] and self.rows[r][c] != "#":
+            self.cell = (r, c)
+        self.steps += 1
+        done = self.cell == self.goal
+        return (
+            np.array(self.cell), GOAL_REWARD if done else 0.0, done,
+            self.steps >= self.max_steps and not done, {"goal": self.goal},
+        )  # fmt: skip
+
+    def render(self) -> str:
+        grid = [list(r) for r in self.rows]
+        grid[self.cell[0]][self.cell[1]] = "@"
+        return "\n".join("".join(r) for r in grid)
+
+
+def _row_col(obs: Any) -> tuple[int, int]:
+    return int(obs[0]), int(obs[1])
+
+
+class AdvisedEnv(gym.Wrapper[Any, Any, Any, Any]):
+    """Reports each step to the advice service; the decision goes in ``info["decision"]``.
+
+    ``cell_of`` maps an observation to ``(row, col)`` (default: the first two entries);
+    ``action_names`` names the wrapped environment's actions as compass moves (e.g.
+    FrozenLake's ``("W", "S", "E", "N")``). ``info["followed_advice"]`` says whether the step
+    took an action sampled from the advice instead of the agent's.
+    """
+
+    def __init__(
+        self,
+        env: gym.Env[Any, Any],
+        client: AdvisorClient,
+        domain: str = "default",
+        *,
+        kappa: float | None = None,
+        window: int | None = None,
+        agent_type: str | None = None,
+        follow_advice: bool = False,
+        cell_of: Callable[[Any], tuple[int, int]] = _row_col,
+        action_names: Sequence[str] = ACTIONS,
+    ):
+        super().__init__(env)
+        self.client = client
+        self.domain = domain
+        self.options = {"kappa": kappa, "window": window, "agent_type": agent_type}
+        self.follow_advice = follow_advice
+        self.cell_of = cell_of
+        self.action_names = tuple(action_names)
+        self.session: Session | None = None
+        self.stream: Stream | None = None
+        self.decision: Decision | None = None
+        self.cell = (0, 0)
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[Any, dict[str, Any]]:
+        obs, info = self.env.reset(seed=seed, options=options)
+        self._end_session()
+        self.cell = self.cell_of(obs)
+        self.session = self.client.create_session(self.domain, start=self.cell, **self.options)  # type: ignore[arg-type]
+        self.stream = self.client.stream(self.session)
+        self.decision = self.session.decision
+        return obs, {**info, "decision": self.decision, "session_id": self.session.session_id}
+
+    def advised_action(self) -> int | None:
+        """An action sampled from the current advice, if the last decision advised."""
+        if self.decision is None or not self.decision["advise"] or not self.decision["advice"]:
+            return None
+        advice = self.decision["advice"]
+        weights = np.array([advice[name] for name in self.action_names])  # type: ignore[literal-required]
+        return int(self.np_random.choice(len(weights), p=weights / weights.sum()))
+
+    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
+        if self.stream is None:
+            raise gym.error.ResetNeeded("call reset() before step()")
+        advised = self.advised_action() if self.follow_advice else None
+        if advised is not None:
+            action = advised
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        cell = self.cell_of(obs)
+        event = {"state": self.cell, "action": self.action_names[int(action)], "next_state": cell}
+        self.decision = self.stream.send(event)
+        self.cell = cell
+        info = {**info, "decision": self.decision, "followed_advice": advised is not None}
+        return obs, reward, terminated, truncated, info
+
+    def _end_session(self) -> None:
+        if self.stream is not None:
+            self.stream.close()
+        if self.session is not None:
+            try:
+                self.client.end_session(self.session)
+            except AdvisorError as exc:
+                if exc.status != 404:  # already ended or expired: nothing to do
+                    raise
+        self.session = self.stream = None
+
+    def close(self) -> None:
+        self._end_session()
+        super().close()

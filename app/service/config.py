@@ -1,0 +1,58 @@
+"""Service settings: one pydantic-settings class; every field can be set as ``ADVISOR_<NAME>``."""
+
+from __future__ import annotations
+
+from importlib.metadata import PackageNotFoundError, version
+from pathlib import Path
+from typing import Literal
+
+from pydantic import Field, SecretStr
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+REPO_ROOT = Path(__file__).resolve().parents[2]
+try:
+    VERSION = version("hidden-goal-advisor")
+except PackageNotFoundError:  # running from a source tree that was not installed
+    VERSION = "0+unknown"
+MiB = 1024 * 1024
+
+
+class Settings(BaseSettings):
+    """How the advice service runs. Defaults suit one machine; override with ``ADVISOR_*``."""
+
+    model_config = SettingsConfigDict(env_prefix="ADVISOR_", extra="ignore")
+
+    host: str = Field("127.0.0.1", description="Interface to listen on.")
+    port: int = Field(8000, ge=0, le=65535, description="HTTP port of the API.")
+    data_dir: Path = Field(Path("data"), description="SQLite file and admin key live here.")
+    database_url: str | None = Field(
+        None, description="SQLAlchemy URL; default: SQLite file <data_dir>/advisor.db (WAL)."
+    )
+    admin_key: SecretStr | None = Field(
+        None, description="X-API-Key for admin routes; generated and stored if not given."
+    )
+    session_idle_seconds: float = Field(1800.0, gt=0, description="Idle sessions expire.")
+    sweep_seconds: float = Field(15.0, gt=0, description="How often expired sessions go.")
+    max_sessions: int = Field(20_000, ge=1, description="Live sessions at most (then 503).")
+    max_body_bytes: int = Field(2 * MiB, ge=1024, description="Request/message size limit.")
+    max_batch_events: int = Field(5_000, ge=1, description="Events per request or message.")
+    max_trajectory_steps: int = Field(200_000, ge=1, description="Steps per ingest request.")
+    max_window: int = Field(10_000, ge=1, description="Largest history window W a session may ask.")
+    max_map_cells: int = Field(250_000, ge=4, description="Largest map (rows x cols).")
+    recent_path: int = Field(100, ge=1, description="Cells of recent path kept per session.")
+    recent_p_normal: int = Field(200, ge=1, description="p_normal values kept per session.")
+    viewer_enabled: bool = Field(True, description="Start the viser viewer with the service.")
+    viewer_port: int = Field(8080, ge=0, le=65535, description="Port of the viser viewer.")
+    static_dir: Path = Field(REPO_ROOT / "static", description="Pages served at / and /static.")
+    bootstrap_experts: Literal["start", "anywhere"] = Field(
+        "start", description="Where the simulated experts of the default domain start."
+    )
+    bootstrap_per_goal: int = Field(10, ge=1, description="Expert trajectories per goal.")
+    bootstrap_seed: int = Field(0, description="Seed of the default domain's experts.")
+    bootstrap_alpha0: float = Field(1.0, gt=0, description="alpha0 of the default domain.")
+
+    @property
+    def db_url(self) -> str:
+        if self.database_url:
+            return self.database_url
+        return f"sqlite:///{(self.data_dir / 'advisor.db').resolve()}"

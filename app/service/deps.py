@@ -1,0 +1,95 @@
+"""Typed dependencies: route signatures read as plain typed parameters.
+
+They only look things up in memory, so they are ``async``: FastAPI runs sync dependencies in
+its threadpool, and the thread hops cost more than the lookups."""
+
+from __future__ import annotations
+
+from typing import Annotated, Any
+
+from fastapi import Depends, Path
+from fastapi.security import APIKeyHeader, HTTPAuthorizationCredentials, HTTPBearer
+from starlette.requests import HTTPConnection
+
+from app.service.domains import DomainState
+from app.service.registry import LiveSession
+from app.service.schemas import NAME_PATTERN
+from app.service.security import AuthError, check_admin, check_session_token
+from app.service.state import ServiceState
+
+SESSION_ID_PATTERN = r"^[A-Za-z0-9_-]{1,64}$"
+#: ``openapi_extra`` for routes that check the bearer token through :func:`get_session`.
+BEARER: dict[str, Any] = {"security": [{"HTTPBearer": []}]}
+
+api_key_header = APIKeyHeader(name="X-API-Key", auto_error=False, description="The admin key.")
+bearer = HTTPBearer(auto_error=False, description="The session's token.")
+
+
+def service_of(conn: HTTPConnection) -> ServiceState:
+    state: ServiceState = conn.app.state.service
+    return state
+
+
+async def get_state(conn: HTTPConnection) -> ServiceState:
+    return service_of(conn)
+
+
+StateDep = Annotated[ServiceState, Depends(get_state)]
+DomainName = Annotated[str, Path(pattern=NAME_PATTERN, description="Domain name.")]
+SessionId = Annotated[str, Path(pattern=SESSION_ID_PATTERN, description="Session id.")]
+
+
+async def require_admin(
+    state: StateDep, key: Annotated[str | None, Depends(api_key_header)] = None
+) -> None:
+    check_admin(key, state.admin_key)
+
+
+async def get_domain(name: DomainName, state: StateDep) -> DomainState:
+    return state.catalog.get(name)
+
+
+def bearer_token(conn: HTTPConnection) -> str | None:
+    """The token of an ``Authorization: Bearer <token>`` header, if there is one."""
+    scheme, _, token = conn.headers.get("authorization", "").partition(" ")
+    if scheme.lower() != "bearer":
+        return None
+    return token.strip() or None
+
+
+async def get_session(conn: HTTPConnection, session_id: SessionId) -> LiveSession:
+    """The session, if the bearer token is its own (401 without one, 403 for another's).
+
+    This runs on every event request, so it reads the header itself rather than through
+    sub-dependencies (each costs FastAPI a resolution step); routes using it declare the
+    bearer scheme in OpenAPI with :data:`BEARER`."""
+    state = service_of(conn)
+    token = bearer_token(conn)
+    if not token:
+        check_session_token(None, "", session_id)  # raises 401
+    session = state.registry.get(session_id)
+    check_session_token(token, session.token, session_id)
+    state.registry.touch(session)
+    return session
+
+
+async def get_session_or_admin(
+    conn: HTTPConnection,
+    session_id: SessionId,
+    state: StateDep,
+    credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(bearer)] = None,
+    key: Annotated[str | None, Depends(api_key_header)] = None,
+) -> LiveSession:
+    """As :func:`get_session`, or any session for the admin key (to read or end it)."""
+    if key and not credentials:
+        check_admin(key, state.admin_key)
+        return state.registry.get(session_id)
+    return await get_session(conn, session_id)
+
+
+AdminDep = Depends(require_admin)
+DomainDep = Annotated[DomainState, Depends(get_domain)]
+SessionDep = Annotated[LiveSession, Depends(get_session)]
+SessionOrAdminDep = Annotated[LiveSession, Depends(get_session_or_admin)]
+
+__all__ = ["AdminDep", "AuthError", "DomainDep", "SessionDep", "SessionOrAdminDep", "StateDep"]

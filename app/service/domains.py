@@ -1,0 +1,177 @@
+"""Domains in memory: each map with its action prior and the advice tables sessions read.
+
+The store is the source of truth; this catalog mirrors it. Writers (put, delete, new
+trajectories) run in worker threads, hold the domain's lock, commit to the store first and only
+then change memory, so memory never holds data the database does not. Readers on the event loop
+take :attr:`DomainState.view`, an immutable snapshot replaced in one assignment.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Mapping, Sequence
+from contextlib import nullcontext
+from dataclasses import dataclass, field
+from datetime import datetime
+
+import numpy as np
+
+from app.advice.models import AdviceTables
+from app.advice.priors import ActionPrior
+from app.domain.grid import GridDomain, MapError
+from app.service.store import POOLED, DomainRecord, Store, TableCounts, Trajectory
+
+
+class DomainNotFound(KeyError):
+    """No domain of that name."""
+
+
+@dataclass(frozen=True)
+class PriorView:
+    """What sessions and readers use of a prior: its tables (pooled ``"*"`` plus every agent
+    type with data) and trajectory counts. Replaced whole, never changed."""
+
+    alpha0: float
+    tables: Mapping[str, AdviceTables]
+    trajectories: Mapping[str, int]
+
+    def resolve(self, agent_type: str | None) -> str:
+        """The table serving ``agent_type``: its own if it has data, else the pooled one."""
+        return agent_type if agent_type is not None and agent_type in self.tables else POOLED
+
+
+def restore_prior(alpha0: float, n_states: int, tables: Mapping[str, TableCounts]) -> ActionPrior:
+    """An :class:`ActionPrior` holding stored counts (its learned ``*_`` attributes, set right
+    after an empty fit, exactly as :meth:`ActionPrior.load` restores a saved one)."""
+    prior = ActionPrior(alpha0=alpha0).fit([], n_states)
+    for key, stored in tables.items():
+        inc = stored.counts.astype(float)
+        if key == POOLED:
+            prior.pooled_increments_ = inc
+        else:
+            prior.increments_[key] = inc
+        prior.n_trajectories_[key] = stored.n_trajectories
+    return prior
+
+
+def prior_tables(prior: ActionPrior) -> dict[str, TableCounts]:
+    """The counts a prior holds, per table, in the store's form (inverse of restore_prior)."""
+    return {
+        key: TableCounts(
+            n,
+            (prior.pooled_increments_ if key == POOLED else prior.increments_[key]).astype(
+                np.int64
+            ),
+        )
+        for key, n in prior.n_trajectories_.items()
+    }
+
+
+def _view(prior: ActionPrior, old: PriorView | None, changed: set[str]) -> PriorView:
+    """A new view: tables of ``changed`` (and new) keys rebuilt, the others reused."""
+    tables: dict[str, AdviceTables] = {}
+    for key in [POOLED, *(t for t in prior.agent_types if prior.n_trajectories_.get(t, 0) > 0)]:
+        reuse = old is not None and key in old.tables and key not in changed
+        tables[key] = old.tables[key] if old and reuse else AdviceTables.paper(prior.theta(key))
+    return PriorView(float(prior.alpha0), tables, dict(prior.n_trajectories_))  # type: ignore[arg-type]
+
+
+@dataclass(eq=False)
+class DomainState:
+    """One live domain: the grid, its prior, the current :class:`PriorView`."""
+
+    name: str
+    domain: GridDomain
+    prior: ActionPrior
+    created_at: datetime
+    updated_at: datetime
+    lock: threading.Lock = field(default_factory=threading.Lock)
+    view: PriorView = field(init=False)
+    cell_json: list[str] = field(init=False)  # "[r,c]" per state, for the decision encoder
+
+    def __post_init__(self) -> None:
+        self.view = _view(self.prior, None, set())
+        self.cell_json = [f"[{r},{c}]" for r, c in self.domain.cells.tolist()]
+
+    @property
+    def map_text(self) -> str:
+        return "\n".join(self.domain.rows_text)
+
+
+class DomainCatalog:
+    """Every domain by name, kept equal to what the store holds."""
+
+    def __init__(self, store: Store, max_cells: int):
+        self.store = store
+        self.max_cells = max_cells
+        self._domains: dict[str, DomainState] = {}
+        self._lock = threading.Lock()
+
+    def load(self) -> None:
+        """Read every domain and its counts from the store (at start)."""
+        for rec in self.store.domains():
+            domain = GridDomain.from_strings(rec.map_text.splitlines(), name=rec.name)
+            prior = restore_prior(rec.alpha0, domain.n_states, self.store.counts(rec.name))
+            self._domains[rec.name] = DomainState(
+                rec.name, domain, prior, rec.created_at, rec.updated_at
+            )
+
+    def states(self) -> list[DomainState]:
+        """Every domain, by name."""
+        return [d for _, d in sorted(self._domains.items())]
+
+    def __len__(self) -> int:
+        return len(self._domains)
+
+    def get(self, name: str) -> DomainState:
+        try:
+            return self._domains[name]
+        except KeyError:
+            raise DomainNotFound(name) from None
+
+    def parse_map(self, rows: Sequence[str], name: str) -> GridDomain:
+        """A validated grid; :class:`MapError` names the problem (line and column)."""
+        if len(rows) * max((len(r) for r in rows), default=0) > self.max_cells:
+            raise MapError(f"the map is larger than {self.max_cells} cells")
+        return GridDomain.from_strings(rows, name=name)
+
+    def put(self, name: str, domain: GridDomain, alpha0: float) -> tuple[DomainState, bool, bool]:
+        """Create or replace ``name`` (store first); returns (state, created, kept_data): the
+        same map keeps its trajectories and counts, a new map starts with none."""
+        with self._lock:
+            old = self._domains.get(name)
+            with old.lock if old else nullcontext():
+                rec, created, kept = self.store.put_domain(
+                    name, "\n".join(domain.rows_text), alpha0
+                )
+                state = self._state(rec, domain, old.prior if old and kept else None)
+                self._domains[name] = state
+        return state, created, kept
+
+    @staticmethod
+    def _state(rec: DomainRecord, domain: GridDomain, keep: ActionPrior | None) -> DomainState:
+        tables = prior_tables(keep) if keep is not None else {}
+        prior = restore_prior(rec.alpha0, domain.n_states, tables)
+        return DomainState(rec.name, domain, prior, rec.created_at, rec.updated_at)
+
+    def delete(self, name: str) -> None:
+        with self._lock:
+            state = self.get(name)
+            with state.lock:
+                self.store.delete_domain(name)
+                del self._domains[name]
+
+    def add_trajectories(self, state: DomainState, items: Sequence[Trajectory]) -> None:
+        """Store ``items`` (checked against ``state``'s map) durably, then add them to the
+        prior and publish a new view."""
+        with state.lock:
+            if self._domains.get(state.name) is not state:  # replaced or deleted meanwhile
+                raise DomainNotFound(state.name)
+            self.store.add_trajectories(state.name, items, state.domain.n_states)
+            groups: dict[str | None, list[Trajectory]] = {}
+            for t in items:
+                groups.setdefault(t.agent_type, []).append(t)
+            for agent_type, group in groups.items():
+                state.prior.partial_fit([t.pairs for t in group], agent_type=agent_type)
+            changed = {POOLED, *(t for t in groups if t is not None)}
+            state.view = _view(state.prior, state.view, changed)

@@ -1,0 +1,145 @@
+"""Every client error as a 4xx JSON body ``{"detail": "..."}`` that says what was wrong.
+
+* request validation: 422, ``detail`` one readable line (``where: what``), ``errors`` the list;
+* our own checks (:class:`BadInput`), unknown domains/sessions, credentials: their status;
+* bodies over the limit: 413 from :class:`BodyLimit` before the app reads them;
+* JSON nested too deeply for the parser: 400 (instead of the RecursionError's 500).
+"""
+
+from __future__ import annotations
+
+import re
+from typing import Any
+
+from fastapi import FastAPI, Request, Response
+from fastapi.exception_handlers import http_exception_handler
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
+
+from app.service.domains import DomainNotFound
+from app.service.events import BadInput, describe_errors
+from app.service.registry import SessionNotFound
+from app.service.security import AuthError
+
+
+def _json(
+    status: int, detail: str, headers: dict[str, str] | None = None, **extra: Any
+) -> JSONResponse:
+    if status == 401:
+        headers = (headers or {}) | {"WWW-Authenticate": "Bearer"}
+    return JSONResponse({"detail": detail, **extra}, status_code=status, headers=headers)
+
+
+def allowed_methods(app: FastAPI, path: str) -> list[str]:
+    """Every documented method of the path (Starlette's own 405 names only the methods of
+    the first route that matched the path)."""
+    patterns: list[tuple[re.Pattern[str], list[str]]] | None = getattr(app.state, "allow", None)
+    if patterns is None:
+        patterns = [
+            (re.compile("^" + re.sub(r"\{[^/]+\}", "[^/]+", template) + "$"), sorted(ops))
+            for template, ops in app.openapi()["paths"].items()
+        ]
+        app.state.allow = patterns
+    return [m.upper() for pattern, ops in patterns if pattern.match(path) for m in ops]
+
+
+async def _http_error(request: Request, exc: Exception) -> Response:
+    assert isinstance(exc, StarletteHTTPException)
+    if exc.status_code == 405:
+        allowed = allowed_methods(request.app, request.url.path)
+        if allowed:
+            detail = f"{request.method} is not allowed here: use {', '.join(allowed)}"
+            return _json(405, detail, headers={"Allow": ", ".join(allowed)})
+    return await http_exception_handler(request, exc)
+
+
+async def _validation(_: Request, exc: Exception) -> JSONResponse:
+    assert isinstance(exc, RequestValidationError)
+    errors = list(exc.errors())
+    listed = [{"loc": list(e["loc"]), "msg": e["msg"], "type": e["type"]} for e in errors[:20]]
+    return _json(422, describe_errors(errors), errors=listed)
+
+
+async def _bad_input(_: Request, exc: Exception) -> JSONResponse:
+    assert isinstance(exc, BadInput)
+    return _json(exc.status, exc.detail)
+
+
+async def _auth(_: Request, exc: Exception) -> JSONResponse:
+    assert isinstance(exc, AuthError)
+    return _json(exc.status, exc.detail)
+
+
+async def _no_domain(_: Request, exc: Exception) -> JSONResponse:
+    return _json(404, f"no domain named {exc.args[0]!r} (GET /domains lists them)")
+
+
+async def _no_session(_: Request, exc: Exception) -> JSONResponse:
+    return _json(404, f"no live session {exc.args[0]!r} (it never existed, ended or expired)")
+
+
+async def _too_deep(_: Request, exc: Exception) -> JSONResponse:
+    return _json(400, "the JSON body is nested too deeply to parse")
+
+
+def install_error_handlers(app: FastAPI) -> None:
+    app.add_exception_handler(StarletteHTTPException, _http_error)
+    app.add_exception_handler(RequestValidationError, _validation)
+    app.add_exception_handler(BadInput, _bad_input)
+    app.add_exception_handler(AuthError, _auth)
+    app.add_exception_handler(DomainNotFound, _no_domain)
+    app.add_exception_handler(SessionNotFound, _no_session)
+    app.add_exception_handler(RecursionError, _too_deep)
+
+
+class _TooLarge(Exception):
+    pass
+
+
+class BodyLimit:
+    """Refuse request bodies over ``max_bytes`` with 413, by Content-Length when given and by
+    counting otherwise (chunked uploads)."""
+
+    def __init__(self, app: ASGIApp, max_bytes: int):
+        self.app = app
+        self.max_bytes = max_bytes
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        length = dict(scope["headers"]).get(b"content-length")
+        if length is not None and (not length.isdigit() or int(length) > self.max_bytes):
+            await self._refuse(scope, receive, send, length.isdigit())
+            return
+        seen = 0
+        started = False
+
+        async def counted() -> Message:
+            nonlocal seen
+            message = await receive()
+            seen += len(message.get("body", b""))
+            if seen > self.max_bytes:
+                raise _TooLarge
+            return message
+
+        async def tracked(message: Message) -> None:
+            nonlocal started
+            started = started or message["type"] == "http.response.start"
+            await send(message)
+
+        try:
+            await self.app(scope, counted, tracked)
+        except _TooLarge:
+            if started:
+                raise
+            await self._refuse(scope, receive, send, True)
+
+    async def _refuse(self, scope: Scope, receive: Receive, send: Send, too_large: bool) -> None:
+        if too_large:
+            response = _json(413, f"the request body is larger than {self.max_bytes} bytes")
+        else:
+            response = _json(400, "the Content-Length header is not a number")
+        await response(scope, receive, send)

@@ -1,0 +1,80 @@
+"""The advice service: ``create_app`` wires settings, routes, errors and the lifespan."""
+
+from __future__ import annotations
+
+import asyncio
+import gc
+import sys
+from collections.abc import AsyncIterator, Awaitable, Callable
+from contextlib import asynccontextmanager
+
+from fastapi import FastAPI
+from fastapi.staticfiles import StaticFiles
+from starlette.concurrency import run_in_threadpool
+
+from app.service import viewer_feed
+from app.service.config import VERSION, Settings
+from app.service.errors import BodyLimit, install_error_handlers
+from app.service.openapi import install_openapi
+from app.service.routes import ROUTERS
+from app.service.state import ServiceState, open_state
+from app.service.stream_advisor import warm_up
+
+Stop = Callable[[], Awaitable[None]]
+
+
+async def start_background(app: FastAPI, settings: Settings) -> list[Stop]:
+    """The one hook for services that run beside the API (the viser viewer when
+    ``settings.viewer_enabled``); returns their stop functions, called at shutdown."""
+    if not settings.viewer_enabled:
+        return []
+    return [await viewer_feed.start_viewer(app, settings)]
+
+
+async def _expire_idle(state: ServiceState) -> None:
+    while True:
+        await asyncio.sleep(state.settings.sweep_seconds)
+        state.registry.expire()
+
+
+@asynccontextmanager
+async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+    settings: Settings = app.state.settings
+    state, messages = await run_in_threadpool(open_state, settings)
+    for message in messages:
+        print(message, file=sys.stderr, flush=True)
+    await run_in_threadpool(warm_up)
+    app.state.service = state
+    # Everything alive now (modules, tables, priors) lives as long as the process: keep it out
+    # of the collector, whose full passes over it would otherwise pause requests for ~100 ms.
+    gc.collect()
+    gc.freeze()
+    sweeper = asyncio.create_task(_expire_idle(state))
+    stops = await start_background(app, settings)
+    try:
+        yield
+    finally:
+        for stop in reversed(stops):
+            await stop()
+        sweeper.cancel()
+        await run_in_threadpool(state.close)
+
+
+def create_app(settings: Settings | None = None) -> FastAPI:
+    settings = settings or Settings()
+    app = FastAPI(
+        title="Hidden-goal advisor",
+        version=VERSION,
+        description="Advice for explorers with hidden goals (Rosman & Ramamoorthy, ICRA 2014).",
+        lifespan=lifespan,
+    )
+    app.state.settings = settings
+    install_error_handlers(app)
+    app.add_middleware(BodyLimit, max_bytes=settings.max_body_bytes)
+    for router in ROUTERS:
+        app.include_router(router)
+    app.include_router(viewer_feed.router)
+    if settings.static_dir.is_dir():
+        app.mount("/static", StaticFiles(directory=settings.static_dir), "static")
+    install_openapi(app)
+    return app

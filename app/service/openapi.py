@@ -1,0 +1,57 @@
+"""OpenAPI for bodies the routes parse themselves (for speed, or off the event loop).
+
+The events and trajectories routes read the raw bytes and validate them with pydantic-core in
+one call; FastAPI does not see their body type, so it is declared here: ``body(name)`` for the
+route's ``openapi_extra`` and :func:`install_openapi` to add the schemas to the components.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from fastapi import FastAPI
+from fastapi.openapi.utils import get_openapi
+from pydantic import TypeAdapter
+
+from app.service.schemas import ErrorPublic, EventIn, TrajectoriesCreate
+
+REF = "#/components/schemas/{model}"
+BODIES: dict[str, TypeAdapter[Any]] = {
+    "Events": TypeAdapter(EventIn | list[EventIn]),
+    "TrajectoriesCreate": TypeAdapter(TrajectoriesCreate),
+}
+EXAMPLES: dict[str, Any] = {
+    "Events": [{"state": [28, 0], "action": "E"}, {"state": [28, 1], "next_state": [27, 1]}],
+    "TrajectoriesCreate": {
+        "trajectories": [{"agent_type": "visitor", "steps": [{"state": [28, 0], "action": "E"}]}]
+    },
+}
+
+
+def body(name: str) -> dict[str, Any]:
+    """``openapi_extra`` declaring a JSON request body of schema ``name``."""
+    schema = {"$ref": REF.format(model=name)}
+    content = {"application/json": {"schema": schema, "example": EXAMPLES[name]}}
+    return {"requestBody": {"required": True, "content": content}}
+
+
+def install_openapi(app: FastAPI) -> None:
+    def openapi() -> dict[str, Any]:
+        if app.openapi_schema is None:
+            schema = get_openapi(
+                title=app.title,
+                version=app.version,
+                description=app.description,
+                routes=app.routes,
+            )
+            components = schema.setdefault("components", {}).setdefault("schemas", {})
+            for name, adapter in BODIES.items():
+                js = adapter.json_schema(ref_template=REF)
+                components.update(js.pop("$defs", {}))
+                components[name] = js
+            # validation errors are answered as {"detail": "where: what", "errors": [...]}
+            components["HTTPValidationError"] = ErrorPublic.model_json_schema(ref_template=REF)
+            app.openapi_schema = schema
+        return app.openapi_schema
+
+    app.openapi = openapi  # type: ignore[method-assign]

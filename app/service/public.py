@@ -1,0 +1,98 @@
+"""Internal state shaped into the public response models (no tokens ever leave here)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from app.advice.advisor import Decision
+from app.domain.grid import ACTIONS, GridDomain
+from app.service.domains import DomainState
+from app.service.encode import decision_dict
+from app.service.registry import LiveSession, SessionSnapshot
+from app.service.schemas import (
+    AdviceGiven,
+    AdvicePublic,
+    DecisionPublic,
+    DomainPublic,
+    OverviewDomain,
+    OverviewSession,
+    PriorPublic,
+    SessionCreated,
+    SessionPublic,
+)
+from app.service.store import POOLED
+
+
+def _cell(domain: GridDomain, state: int) -> tuple[int, int]:
+    return domain.cell(state)
+
+
+def domain_public(d: DomainState) -> DomainPublic:
+    g = d.domain
+    rows, cols = g.shape
+    return DomainPublic(
+        name=d.name, rows=rows, cols=cols, map=list(g.rows_text), start=_cell(g, g.start),
+        goals=[_cell(g, s) for s in g.goals], actions=list(ACTIONS),
+        alpha0=d.view.alpha0, n_states=g.n_states,
+        trajectories=d.view.trajectories.get(POOLED, 0),
+        agent_types=sorted(k for k in d.view.tables if k != POOLED),
+        created_at=d.created_at, updated_at=d.updated_at,
+    )  # fmt: skip
+
+
+def prior_public(d: DomainState, agent_type: str | None) -> PriorPublic:
+    view = d.view
+    key = view.resolve(agent_type)
+    g = d.domain
+    rows, cols = g.shape
+    grid = np.full((rows, cols, 4), np.nan)
+    grid[g.cells[:, 0], g.cells[:, 1]] = view.tables[key].theta
+    theta = [[None if v[0] != v[0] else v for v in row] for row in grid.tolist()]  # NaN: wall
+    return PriorPublic(
+        domain=d.name, agent_type=agent_type, table=key, actions=list(ACTIONS),
+        alpha0=view.alpha0, trajectories=view.trajectories.get(key, 0), theta=theta,
+    )  # fmt: skip
+
+
+def decision_public(d: Decision, domain: GridDomain) -> DecisionPublic:
+    return DecisionPublic.model_validate(decision_dict(d, domain))
+
+
+def session_created(s: LiveSession, decision: Decision) -> SessionCreated:
+    return SessionCreated(
+        session_id=s.id, token=s.token, domain=s.domain.name, agent_type=s.agent_type,
+        prior_table=s.table_key, kappa=s.advisor.kappa, window=s.advisor.window,
+        decision=decision_public(decision, s.domain.domain),
+    )  # fmt: skip
+
+
+def session_public(s: SessionSnapshot) -> SessionPublic:
+    return SessionPublic(
+        session_id=s.id, domain=s.domain, agent_type=s.agent_type, prior_table=s.table_key,
+        kappa=s.kappa, window=s.window, steps=s.steps, position=s.position, p_normal=s.p_normal,
+        advice_count=s.advice_count, total_cost=s.total_cost, benefit=s.benefit,
+        advice_per_100=s.advice_per_100, idle_seconds=s.idle_seconds, created_at=s.created_at,
+    )  # fmt: skip
+
+
+def overview_session(s: SessionSnapshot) -> OverviewSession:
+    last = None
+    if s.advice:
+        step, cell, advice = s.advice[-1]
+        last = AdviceGiven(
+            step=step, state=cell, advice=AdvicePublic(**dict(zip("NESW", advice, strict=True)))
+        )
+    return OverviewSession(
+        session_id=s.id, domain=s.domain, agent_type=s.agent_type, kappa=s.kappa, steps=s.steps,
+        position=s.position, p_normal=s.p_normal, advice_count=s.advice_count,
+        total_cost=s.total_cost, advice_per_100=s.advice_per_100, last_advice=last,
+        path=s.path, p_normal_history=s.p_history,
+    )  # fmt: skip
+
+
+def overview_domain(d: DomainState, sessions: int) -> OverviewDomain:
+    rows, cols = d.domain.shape
+    return OverviewDomain(
+        name=d.name, rows=rows, cols=cols, n_states=d.domain.n_states,
+        trajectories=d.view.trajectories.get(POOLED, 0), sessions=sessions,
+    )  # fmt: skip

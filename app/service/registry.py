@@ -1,0 +1,277 @@
+"""Live sessions: one :class:`StreamAdvisor` per explorer, with bounded recent history.
+
+Sessions live in memory only (they are watchers, not data: an explorer that loses its session
+opens a new one). The registry bounds them: at most ``max_sessions`` live at once, and a session
+idle for ``idle_seconds`` is dropped. Each keeps its recent path, recent P(M1 | H) and recent
+advice in bounded deques, so :meth:`SessionRegistry.snapshot` (for ``/overview`` and the viewer)
+is cheap and safe to call from another thread: every change and every snapshot holds one lock.
+"""
+
+from __future__ import annotations
+
+import secrets
+import threading
+import time
+from collections import Counter, deque
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from app.advice.advisor import Decision
+from app.advice.models import AdviceTables
+from app.service.domains import DomainState
+from app.service.stream_advisor import DecisionColumns, StreamAdvisor
+
+IntArray = npt.NDArray[np.int64]
+Advice = tuple[float, float, float, float]
+RECENT_ADVICE = 50
+
+
+class SessionNotFound(KeyError):
+    """No live session with that id (never created, ended, or expired)."""
+
+
+class TooManySessions(RuntimeError):
+    """The registry holds ``max_sessions`` live sessions already."""
+
+
+class Recent:
+    """The last ``size`` numbers pushed, oldest first, in one numpy ring (8 bytes or less a
+    number, where a deque of Python numbers costs about 32)."""
+
+    __slots__ = ("_buf", "_count")
+
+    def __init__(self, size: int, dtype: type[np.generic], first: float):
+        self._buf = np.empty(size, dtype=dtype)
+        self._buf[0] = first
+        self._count = 1
+
+    def extend(self, values: list[int] | list[float]) -> None:
+        size, k = self._buf.shape[0], len(values)
+        m = min(k, size)
+        self._buf[np.arange(self._count + k - m, self._count + k) % size] = values[k - m :]
+        self._count += k
+
+    def tolist(self) -> list[Any]:
+        m = min(self._count, self._buf.shape[0])
+        out: list[Any] = self._buf[
+            np.arange(self._count - m, self._count) % self._buf.shape[0]
+        ].tolist()
+        return out
+
+
+@dataclass(eq=False, slots=True)
+class LiveSession:
+    """One explorer watched by the advisor."""
+
+    id: str
+    token: str
+    domain: DomainState
+    agent_type: str | None
+    table_key: str
+    advisor: StreamAdvisor
+    position: int
+    p_normal: float
+    created_at: datetime
+    last_seen: float  # time.monotonic()
+    sizes: tuple[int, int]  # how many recent cells and p_normal values to keep
+    # recent cells and P(M1 | H), created at the first batch (until then: the start alone)
+    path: Recent | None = None
+    p_history: Recent | None = None
+    # (step, state, the tables that advised): theta_s is read at snapshot time, so an entry
+    # costs a few pointers; created at the first advice
+    advice_log: deque[tuple[int, int, AdviceTables]] | None = None
+    closed: bool = False
+
+    def record(self, cols: DecisionColumns) -> None:
+        """Remember a batch of decisions (recent path, posterior, advice given)."""
+        if not cols.step:
+            return
+        if self.path is None or self.p_history is None:
+            self.path = Recent(self.sizes[0], np.int32, self.position)
+            self.p_history = Recent(self.sizes[1], np.float64, self.p_normal)
+        self.position = cols.state[-1]
+        self.p_normal = cols.p_normal[-1]
+        self.path.extend(cols.state)
+        self.p_history.extend(cols.p_normal)
+        if cols.advice_count[-1] != cols.advice_count[0] or cols.advise[0]:
+            self.log_advice(cols.step, cols.state, cols.advise)
+
+    def log_advice(self, steps: list[int], states: list[int], advise: list[bool]) -> None:
+        if self.advice_log is None:
+            self.advice_log = deque(maxlen=RECENT_ADVICE)
+        tables = self.advisor.tables
+        advised = [i for i, a in enumerate(advise) if a][-RECENT_ADVICE:]
+        self.advice_log.extend((steps[i], states[i], tables) for i in advised)
+
+
+@dataclass(frozen=True, slots=True)
+class SessionSnapshot:
+    """A copy of one session's figures in plain data (cells as (row, col))."""
+
+    id: str
+    domain: str
+    agent_type: str | None
+    table_key: str
+    kappa: float
+    window: int
+    steps: int
+    position: tuple[int, int]
+    p_normal: float
+    advice_count: int
+    total_cost: float
+    benefit: float
+    advice_per_100: float
+    created_at: datetime
+    idle_seconds: float
+    path: list[tuple[int, int]]
+    p_history: list[float]
+    advice: list[tuple[int, tuple[int, int], Advice]]  # (step, cell, theta_s), oldest first
+
+
+class SessionRegistry:
+    """Every live session by id, bounded in number and idle time."""
+
+    def __init__(
+        self, max_sessions: int, idle_seconds: float, recent_path: int = 100, recent_p: int = 200
+    ):
+        self.max_sessions = max_sessions
+        self.idle_seconds = idle_seconds
+        self.history_sizes = (recent_path, recent_p)
+        self.lock = threading.Lock()
+        self._sessions: dict[str, LiveSession] = {}
+
+    def __len__(self) -> int:
+        return len(self._sessions)
+
+    def create(
+        self, domain: DomainState, kappa: float, window: int, agent_type: str | None, start: int
+    ) -> tuple[LiveSession, Decision]:
+        """A new session and the decision for its start state (empty history)."""
+        view = domain.view
+        key = view.resolve(agent_type)
+        advisor = StreamAdvisor(view.tables[key], kappa=kappa, window=window)
+        decision = advisor.start(start)
+        now = time.monotonic()
+        with self.lock:
+            if len(self._sessions) >= self.max_sessions:
+                self._expire(now)
+            if len(self._sessions) >= self.max_sessions:
+                raise TooManySessions(self.max_sessions)
+            sid = secrets.token_hex(8)
+            session = LiveSession(
+                sid, secrets.token_urlsafe(24), domain, agent_type, key, advisor, start,
+                decision.p_normal, datetime.now(UTC), now,
+                self.history_sizes,
+            )  # fmt: skip
+            if decision.advise:
+                session.log_advice([0], [start], [True])
+            self._sessions[sid] = session
+        return session, decision
+
+    def get(self, session_id: str) -> LiveSession:
+        session = self._sessions.get(session_id)
+        if session is None or session.closed:
+            raise SessionNotFound(session_id)
+        return session
+
+    def observe(
+        self, session: LiveSession, moves: tuple[IntArray, IntArray, IntArray]
+    ) -> DecisionColumns:
+        """Advance ``session`` by checked (s, a, s') arrays; its decisions in columns."""
+        with self.lock:
+            if session.closed:
+                raise SessionNotFound(session.id)
+            cols = session.advisor.observe_many(*moves)
+            session.record(cols)
+            session.last_seen = time.monotonic()
+        return cols
+
+    def touch(self, session: LiveSession) -> None:
+        session.last_seen = time.monotonic()
+
+    def end(self, session_id: str) -> LiveSession:
+        with self.lock:
+            session = self._sessions.pop(session_id, None)
+            if session is None or session.closed:
+                raise SessionNotFound(session_id)
+            session.closed = True
+        return session
+
+    def end_domain(self, name: str) -> int:
+        """End every session of domain ``name`` (it was deleted or its map replaced)."""
+        with self.lock:
+            gone = [s for s in self._sessions.values() if s.domain.name == name]
+            for s in gone:
+                s.closed = True
+                del self._sessions[s.id]
+        return len(gone)
+
+    def retable(self, domain: DomainState) -> None:
+        """Point the sessions of ``domain`` at its current prior view (new tables after new
+        trajectories); each advisor's window stays exact (the core keeps what it added)."""
+        view = domain.view
+        with self.lock:
+            for s in self._sessions.values():
+                if s.domain.name == domain.name:
+                    s.domain = domain
+                    s.table_key = view.resolve(s.agent_type)
+                    s.advisor.tables = view.tables[s.table_key]
+
+    def expire(self) -> int:
+        with self.lock:
+            return self._expire(time.monotonic())
+
+    def _expire(self, now: float) -> int:
+        idle = [s for s in self._sessions.values() if now - s.last_seen > self.idle_seconds]
+        for s in idle:
+            s.closed = True
+            del self._sessions[s.id]
+        return len(idle)
+
+    def sessions(self) -> list[LiveSession]:
+        with self.lock:
+            return list(self._sessions.values())
+
+    def count_by_domain(self) -> dict[str, int]:
+        with self.lock:
+            return dict(Counter(s.domain.name for s in self._sessions.values()))
+
+    def describe(self, session: LiveSession) -> SessionSnapshot:
+        with self.lock:
+            return _snap(session, time.monotonic())
+
+    def snapshot(
+        self, limit: int | None = None, domain: str | None = None
+    ) -> list[SessionSnapshot]:
+        """Copies of the most recently active sessions (all if ``limit`` is None)."""
+        now = time.monotonic()
+        with self.lock:
+            live = [s for s in self._sessions.values() if domain is None or s.domain.name == domain]
+            live.sort(key=lambda s: s.last_seen, reverse=True)
+            return [_snap(s, now) for s in live[:limit]]
+
+
+def _snap(s: LiveSession, now: float) -> SessionSnapshot:
+    cells = s.domain.domain.cells
+    adv = s.advisor
+    return SessionSnapshot(
+        s.id, s.domain.name, s.agent_type, s.table_key, adv.kappa, adv.window, adv.steps,
+        (int(cells[s.position, 0]), int(cells[s.position, 1])), s.p_normal,
+        adv.advice_count, adv.total_cost, adv.benefit, adv.advice_per_100, s.created_at,
+        now - s.last_seen,
+        [(r, c) for r, c in cells[s.path.tolist() if s.path else [s.position]].tolist()],
+        s.p_history.tolist() if s.p_history else [s.p_normal],
+        [
+            (step, (int(cells[st, 0]), int(cells[st, 1])), _advice(tables, st))
+            for step, st, tables in s.advice_log or ()
+        ],
+    )  # fmt: skip
+
+
+def _advice(tables: AdviceTables, state: int) -> Advice:
+    n, e, s, w = tables.theta[state].tolist()
+    return (n, e, s, w)

@@ -1,0 +1,90 @@
+from __future__ import annotations
+
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Query, Request, Response
+from starlette.concurrency import run_in_threadpool
+
+from app.service import ops
+from app.service.deps import AdminDep, DomainDep, DomainName, StateDep
+from app.service.openapi import body
+from app.service.public import domain_public, prior_public
+from app.service.schemas import (
+    AgentType,
+    DomainPublic,
+    DomainPut,
+    ErrorPublic,
+    PriorPublic,
+    TrajectoriesAccepted,
+)
+
+router = APIRouter(tags=["domains"])
+NOT_FOUND: dict[int | str, dict[str, Any]] = {404: {"model": ErrorPublic}}
+ADMIN: dict[int | str, dict[str, Any]] = {401: {"model": ErrorPublic}, 403: {"model": ErrorPublic}}
+INVALID: dict[int | str, dict[str, Any]] = {422: {"model": ErrorPublic}}
+BODY: dict[int | str, dict[str, Any]] = {  # unreadable or oversize bodies
+    400: {"model": ErrorPublic}, 413: {"model": ErrorPublic},
+}  # fmt: skip
+
+
+@router.get("/domains")
+async def list_domains(state: StateDep) -> list[DomainPublic]:
+    """Every domain: its map, start, goals and prior size."""
+    return [domain_public(d) for d in state.catalog.states()]
+
+
+@router.get("/domains/{name}", responses=NOT_FOUND | INVALID)
+async def read_domain(domain: DomainDep) -> DomainPublic:
+    return domain_public(domain)
+
+
+@router.put(
+    "/domains/{name}",
+    dependencies=[AdminDep],
+    responses={201: {"model": DomainPublic, "description": "Created"}} | ADMIN | INVALID | BODY,
+)
+async def put_domain(
+    name: DomainName, body: DomainPut, state: StateDep, response: Response
+) -> DomainPublic:
+    """Create (201) or replace (200) a domain. The same map keeps its trajectories and its
+    live sessions; a new map starts with an empty prior and ends the old map's sessions."""
+    domain, created, kept = await run_in_threadpool(ops.put_domain, state, name, body)
+    ops.after_put(state, domain, kept)
+    response.status_code = 201 if created else 200
+    return domain_public(domain)
+
+
+@router.delete(
+    "/domains/{name}", dependencies=[AdminDep], status_code=204, responses=NOT_FOUND | ADMIN
+)
+async def delete_domain(name: DomainName, state: StateDep) -> None:
+    """Delete a domain with its trajectories and counts; its live sessions end."""
+    await run_in_threadpool(state.catalog.delete, name)
+    state.registry.end_domain(name)
+
+
+@router.post(
+    "/domains/{name}/trajectories",
+    dependencies=[AdminDep],
+    status_code=201,
+    openapi_extra=body("TrajectoriesCreate"),
+    responses=NOT_FOUND | ADMIN | INVALID | {413: {"model": ErrorPublic}},
+)
+async def add_trajectories(
+    request: Request, domain: DomainDep, state: StateDep
+) -> TrajectoriesAccepted:
+    """Store expert trajectories durably (before answering) and update the prior at once;
+    live sessions of the domain are advised from the new prior from their next event."""
+    accepted = await run_in_threadpool(ops.ingest, state, domain, await request.body())
+    state.registry.retable(domain)
+    return accepted
+
+
+@router.get("/domains/{name}/prior", responses=NOT_FOUND | INVALID)
+async def read_prior(
+    domain: DomainDep,
+    agent_type: Annotated[AgentType | None, Query(description="Omit for the pooled prior.")] = None,
+) -> PriorPublic:
+    """theta_s(a) for every cell (null for walls). An agent type without data of its own is
+    served the pooled prior, as its sessions are; ``table`` says which one answered."""
+    return prior_public(domain, agent_type)

@@ -1,0 +1,88 @@
+from __future__ import annotations
+
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Body, Query, Request, Response
+
+from app.service import ops
+from app.service.deps import (
+    BEARER,
+    AdminDep,
+    DomainDep,
+    SessionDep,
+    SessionOrAdminDep,
+    StateDep,
+    service_of,
+)
+from app.service.openapi import body
+from app.service.public import session_created, session_public
+from app.service.schemas import (
+    DecisionPublic,
+    ErrorPublic,
+    SessionCreate,
+    SessionCreated,
+    SessionList,
+    SessionPublic,
+)
+
+router = APIRouter(tags=["sessions"])
+ERRORS: dict[int | str, dict[str, Any]] = {
+    code: {"model": ErrorPublic} for code in (401, 403, 404, 422)
+}
+
+
+@router.post(
+    "/domains/{name}/sessions",
+    status_code=201,
+    responses={code: {"model": ErrorPublic} for code in (400, 404, 413, 422, 503)},
+)
+async def create_session(
+    domain: DomainDep,
+    state: StateDep,
+    body: Annotated[SessionCreate | None, Body()] = None,
+) -> SessionCreated:
+    """Start watching an explorer: returns its id, its token (keep it: every session route
+    needs it) and the decision for its start cell."""
+    session, decision = ops.create_session(state, domain, body or SessionCreate())
+    return session_created(session, decision)
+
+
+@router.post(
+    "/sessions/{session_id}/events",
+    response_model=DecisionPublic | list[DecisionPublic],
+    openapi_extra=body("Events") | BEARER,
+    responses=ERRORS | {413: {"model": ErrorPublic}},
+)
+async def post_events(request: Request, session: SessionDep) -> Response:
+    """One event, or a list: the decision for each, in order (one object for one event). A
+    batch with a bad event is refused whole and changes nothing."""
+    text = ops.apply_events(service_of(request), session, await request.body())
+    return Response(text, media_type="application/json")
+
+
+@router.get("/sessions/{session_id}", responses=ERRORS)
+async def read_session(session: SessionOrAdminDep, state: StateDep) -> SessionPublic:
+    """The session's figures (its token, or the admin key)."""
+    return session_public(state.registry.describe(session))
+
+
+@router.delete("/sessions/{session_id}", responses=ERRORS)
+async def end_session(session: SessionOrAdminDep, state: StateDep) -> SessionPublic:
+    """End the session; returns its final figures."""
+    final = state.registry.describe(session)
+    state.registry.end(session.id)
+    return session_public(final)
+
+
+@router.get("/sessions", dependencies=[AdminDep], responses=ERRORS)
+async def list_sessions(
+    state: StateDep,
+    limit: Annotated[int, Query(ge=1, le=10_000)] = 100,
+    domain: Annotated[str | None, Query(max_length=64)] = None,
+) -> SessionList:
+    """Live sessions, most recently active first (admin)."""
+    reg = state.registry
+    total = len(reg) if domain is None else reg.count_by_domain().get(domain, 0)
+    return SessionList(
+        total=total, sessions=[session_public(s) for s in reg.snapshot(limit, domain)]
+    )

@@ -1,0 +1,82 @@
+"""``WS /sessions/{id}/stream``: events in (one or a list per text frame), decisions out.
+
+Credentials: ``?token=<session token>`` (browsers cannot set headers on a websocket) or an
+``Authorization: Bearer`` header. The connection is accepted first, so that a refusal can say
+why: it is closed with code 4401 (no token), 4403 (another session's token) or 4404 (no such
+session), and the reason in the close frame.
+
+Each text frame gets exactly one answer frame, in order: the decisions (an object for one event,
+a list for a list), or for a bad frame an error ``{"detail": "...", "status": 422}`` (413 for
+too many events or bytes); a refused frame changes nothing and the connection stays usable. If
+the session ends or expires while connected, the next frame closes the connection with 4404.
+"""
+
+from __future__ import annotations
+
+import json
+
+from fastapi import APIRouter, WebSocket
+from starlette.websockets import WebSocketState
+
+from app.service import ops
+from app.service.deps import service_of
+from app.service.events import BadInput
+from app.service.registry import LiveSession, SessionNotFound
+from app.service.security import AuthError, check_session_token
+from app.service.state import ServiceState
+
+router = APIRouter(tags=["sessions"])
+CLOSE_REASONS = {  # a close reason holds at most 123 bytes
+    4401: "no token: connect with ?token=<session token>",
+    4403: "this token does not belong to this session",
+    4404: "no live session with this id (never created, ended or expired)",
+}
+
+
+def _authorize(state: ServiceState, session_id: str, ws: WebSocket) -> LiveSession:
+    token = ws.query_params.get("token")
+    header = ws.headers.get("authorization", "")
+    if not token and header.lower().startswith("bearer "):
+        token = header[7:].strip()
+    if not token:
+        check_session_token(None, "", session_id)
+    session = state.registry.get(session_id)
+    check_session_token(token, session.token, session_id)
+    return session
+
+
+def _error(status: int, detail: str) -> str:
+    return json.dumps({"detail": detail, "status": status})
+
+
+@router.websocket("/sessions/{session_id}/stream")
+async def stream(websocket: WebSocket, session_id: str) -> None:
+    state = service_of(websocket)
+    await websocket.accept()
+    try:
+        session = _authorize(state, session_id, websocket)
+    except (AuthError, SessionNotFound) as exc:
+        code = 4400 + exc.status % 100 if isinstance(exc, AuthError) else 4404
+        await websocket.close(code, CLOSE_REASONS[code])
+        return
+    limit = state.settings.max_body_bytes
+    while True:
+        message = await websocket.receive()
+        if message["type"] == "websocket.disconnect":
+            return
+        text = message.get("text")
+        if text is None:
+            await websocket.send_text(_error(422, "send events as JSON text frames, not binary"))
+            continue
+        if len(text) > limit:
+            await websocket.send_text(_error(413, f"the message is larger than {limit} bytes"))
+            continue
+        try:
+            out = ops.apply_events(state, session, text)
+        except BadInput as exc:
+            out = _error(exc.status, exc.detail)
+        except SessionNotFound:
+            if websocket.client_state == WebSocketState.CONNECTED:
+                await websocket.close(4404, CLOSE_REASONS[4404])
+            return
+        await websocket.send_text(out)

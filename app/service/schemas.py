@@ -1,0 +1,250 @@
+"""Request and response bodies, in families (``XCreate`` in, ``XPublic`` out).
+
+States are ``[row, col]`` cells; actions ``"N" | "E" | "S" | "W"`` (or 0-3 on input). The hot
+inputs (events, trajectory steps) are TypedDicts: pydantic-core validates them straight from
+the JSON bytes without building model objects.
+"""
+
+from __future__ import annotations
+
+from datetime import datetime
+from typing import Annotated, Literal, NotRequired
+
+from pydantic import BaseModel, ConfigDict, Field, StringConstraints, with_config
+from typing_extensions import TypedDict
+
+NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
+NAME_RULE = "1-64 characters: letters, digits, '_', '.', '-' (starting with a letter or digit)"
+
+Coordinate = Annotated[int, Field(strict=True, ge=0, lt=2**31)]
+Cell = Annotated[
+    list[Coordinate],
+    Field(
+        min_length=2, max_length=2, examples=[[28, 1]],
+        description="A cell as [row, col]; row 0 is the top row.",
+    ),
+]  # fmt: skip
+ActionName = Literal["N", "E", "S", "W"]
+ActionIn = Annotated[
+    ActionName
+    | Annotated[int, Field(strict=True, ge=0, le=3)],  # strict: true and 1.0 are not moves
+    Field(description='A move: "N", "E", "S", "W" (or 0-3 in that order).'),
+]
+ACTION_BRANCHES = frozenset({"literal['N','E','S','W']", "constrained-int"})
+ACTION_RULE = "an action is 'N', 'E', 'S', 'W' or an integer 0-3"
+Name = Annotated[str, StringConstraints(pattern=NAME_PATTERN), Field(examples=["default"])]
+AgentType = Annotated[
+    str,
+    StringConstraints(pattern=NAME_PATTERN),
+    Field(description=f"A kind of agent ({NAME_RULE}).", examples=["visitor"]),
+]
+Kappa = Annotated[
+    float,
+    Field(
+        strict=True, ge=0.0, allow_inf_nan=False,
+        description="Cost of one piece of advice (nats); 0 always advises.",
+    ),
+]  # fmt: skip
+Window = Annotated[int, Field(strict=True, ge=1, description="History window W (pairs).")]
+
+
+class Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+# ---- errors and health ----------------------------------------------------------------------
+class ErrorPublic(BaseModel):
+    detail: str = Field(description="What was wrong, in words.")
+    errors: list[dict[str, object]] | None = Field(None, description="Each validation problem.")
+
+
+class HealthPublic(BaseModel):
+    status: Literal["ok"]
+    version: str
+    database: str
+    domains: int
+    sessions: int
+    uptime_seconds: float
+
+
+# ---- domains ---------------------------------------------------------------------------------
+class DomainBase(Strict):
+    map: list[str] = Field(
+        description="ASCII map, one string per row: '#' wall, '.' free, 'S' start, 'G' goal.",
+        examples=[["#####", "#S.G#", "#####"]],
+        min_length=1,
+    )
+    alpha0: float = Field(
+        1.0, gt=0.0, allow_inf_nan=False, description="Dirichlet hyperprior alpha0 (> 0)."
+    )
+
+
+class DomainPut(DomainBase):
+    """Create or replace a domain. A new map drops the old map's trajectories; the same map
+    keeps them (only ``alpha0`` changes)."""
+
+
+class DomainPublic(BaseModel):
+    name: str
+    rows: int
+    cols: int
+    map: list[str]
+    start: Cell
+    goals: list[Cell]
+    actions: list[ActionName]
+    alpha0: float
+    n_states: int
+    trajectories: int = Field(description="Expert trajectories in the pooled prior.")
+    agent_types: list[str] = Field(description="Agent types with their own prior.")
+    created_at: datetime
+    updated_at: datetime
+
+
+# ---- trajectories and priors -----------------------------------------------------------------
+@with_config(ConfigDict(extra="forbid"))
+class StepIn(TypedDict):
+    state: Cell
+    action: ActionIn
+
+
+class TrajectoryIn(Strict):
+    agent_type: AgentType | None = None
+    steps: list[StepIn] = Field(
+        min_length=1, description="Each step's state is where the last led."
+    )
+    goal: Cell | None = Field(None, description="The goal or end cell, if known.")
+
+
+class TrajectoriesCreate(Strict):
+    trajectories: list[TrajectoryIn] = Field(min_length=1)
+
+
+class TrajectoriesAccepted(BaseModel):
+    accepted: int = Field(description="Trajectories stored.")
+    pairs: int = Field(description="(state, action) pairs in them.")
+
+
+class PriorPublic(BaseModel):
+    domain: str
+    agent_type: str | None = Field(description="The agent type asked for.")
+    table: str = Field(description="The table that serves it ('*' = pooled over all types).")
+    actions: list[ActionName]
+    alpha0: float
+    trajectories: int
+    theta: list[list[list[float] | None]] = Field(
+        description="theta_s(a) as rows x cols x 4 (N, E, S, W); null for walls."
+    )
+
+
+# ---- sessions, events and decisions ----------------------------------------------------------
+class SessionCreate(Strict):
+    kappa: Kappa = 0.5
+    window: Window = 300
+    agent_type: AgentType | None = None
+    start: Cell | None = Field(None, description="Start cell (default: the domain's start).")
+
+
+class CostPublic(BaseModel):
+    advice_count: int
+    total: float = Field(description="kappa x advice_count.")
+    benefit: float = Field(description="Sum of KL at advised states (eq. 3).")
+
+
+class AdvicePublic(BaseModel):
+    N: float
+    E: float
+    S: float
+    W: float
+
+
+class DecisionPublic(BaseModel):
+    """The advisor's answer for the cell the explorer is now in."""
+
+    step: int = Field(description="Moves observed so far (0 for the start).")
+    state: Cell
+    advise: bool
+    advice: AdvicePublic | None = Field(description="theta_s when advising, else null.")
+    kl: float = Field(description="KL[theta_s || P(A | s, H)] in nats.")
+    p_normal: float = Field(description="P(M1 | H), the posterior of the normal model.")
+    cost: CostPublic
+
+
+@with_config(ConfigDict(extra="forbid"))
+class EventIn(TypedDict):
+    """The explorer at ``state`` took ``action`` and reached ``next_state``."""
+
+    state: Cell
+    action: NotRequired[ActionIn | None]
+    next_state: NotRequired[Cell | None]
+
+
+class SessionCreated(BaseModel):
+    session_id: str
+    token: str = Field(description="Send as 'Authorization: Bearer <token>' or ?token=.")
+    domain: str
+    agent_type: str | None
+    prior_table: str
+    kappa: float
+    window: int
+    decision: DecisionPublic
+
+
+class SessionPublic(BaseModel):
+    session_id: str
+    domain: str
+    agent_type: str | None
+    prior_table: str = Field(description="The prior table advising it ('*' = pooled).")
+    kappa: float
+    window: int
+    steps: int
+    position: Cell
+    p_normal: float
+    advice_count: int
+    total_cost: float
+    benefit: float
+    advice_per_100: float
+    idle_seconds: float
+    created_at: datetime
+
+
+class SessionList(BaseModel):
+    total: int
+    sessions: list[SessionPublic]
+
+
+# ---- overview (public) -----------------------------------------------------------------------
+class AdviceGiven(BaseModel):
+    step: int
+    state: Cell
+    advice: AdvicePublic
+
+
+class OverviewDomain(BaseModel):
+    name: str
+    rows: int
+    cols: int
+    n_states: int
+    trajectories: int
+    sessions: int
+
+
+class OverviewSession(BaseModel):
+    session_id: str
+    domain: str
+    agent_type: str | None
+    kappa: float
+    steps: int
+    position: Cell
+    p_normal: float
+    advice_count: int
+    total_cost: float
+    advice_per_100: float
+    last_advice: AdviceGiven | None
+    path: list[Cell] = Field(description="Recent cells, oldest first.")
+    p_normal_history: list[float] = Field(description="Recent P(M1 | H), oldest first.")
+
+
+class Overview(BaseModel):
+    domains: list[OverviewDomain]
+    total_sessions: int
+    sessions: list[OverviewSession] = Field(description="Most recently active first.")

@@ -1,0 +1,166 @@
+"""``python -m app simulate``: simulated explorers walk a domain through the live service.
+
+Each explorer (:mod:`app.agents.explorers`) gets a random hidden goal per episode, opens a
+session, and reports every move over the session's websocket with :mod:`app.client`. With
+``--advice on`` an advised explorer samples its next action from the advice (the paper's
+protocol); with ``off`` the service still watches and decides, but the explorer ignores it.
+The map comes from the server (``GET /domains/{name}``); nothing here touches service internals.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from dataclasses import dataclass
+from typing import Annotated
+
+import httpx
+import numpy as np
+import numpy.typing as npt
+import typer
+
+from app.agents.explorers import FIXED_EXPLORERS, make_explorer
+from app.client import AdvisorError, AsyncAdvisorClient
+from app.client.types import Decision
+from app.domain.grid import ACTIONS, GridDomain
+
+
+@dataclass(frozen=True)
+class Outcome:
+    explorer: int
+    episode: int
+    goal: tuple[int, int]
+    success: bool
+    steps: int
+    advice_count: int
+    p_normal: float
+
+
+@dataclass(frozen=True)
+class Plan:
+    domain: str
+    explorer: str
+    advice: bool
+    episodes: int
+    explorers: int
+    steps: int
+    kappa: float
+    window: int
+    delay: float
+    keep: bool
+
+
+def _advice(decision: Decision) -> npt.NDArray[np.float64] | None:
+    given = decision["advice"]
+    if given is None:
+        return None
+    return np.array([given["N"], given["E"], given["S"], given["W"]])
+
+
+async def episode(
+    client: AsyncAdvisorClient,
+    grid: GridDomain,
+    plan: Plan,
+    k: int,
+    e: int,
+    rng: np.random.Generator,
+) -> Outcome:
+    """One task: a random goal, walked until reached or ``plan.steps`` moves."""
+    goal = grid.goals[int(rng.integers(len(grid.goals)))]
+    explorer = make_explorer(plan.explorer, grid)
+    explorer.reset(goal, rng)
+    s = grid.start
+    session = await client.create_session(
+        plan.domain, kappa=plan.kappa, window=plan.window, start=grid.cell(s)
+    )
+    decision = session.decision
+    steps = 0
+    async with await client.stream(session) as stream:
+        while steps < plan.steps and s != goal:
+            advice = _advice(decision) if plan.advice and decision["advise"] else None
+            a = explorer.act(s, rng, advice)
+            s2 = int(grid.next_state[s, a])
+            explorer.observe(s, a, s2)
+            event = {"state": grid.cell(s), "action": ACTIONS[a], "next_state": grid.cell(s2)}
+            decision = await stream.send(event)
+            s, steps = s2, steps + 1
+            if plan.delay:
+                await asyncio.sleep(plan.delay)
+    if not plan.keep:
+        await client.end_session(session)
+    cost = decision["cost"]
+    return Outcome(
+        k, e, grid.cell(goal), s == goal, steps, cost["advice_count"], decision["p_normal"]
+    )
+
+
+async def run(server: str, plan: Plan, seed: int) -> list[Outcome]:
+    """All episodes, ``plan.explorers`` at a time (explorer k runs episodes k, k+K, ...)."""
+    async with AsyncAdvisorClient(server) as client:
+        info = await client.domain(plan.domain)
+        grid = GridDomain.from_strings(info["map"], name=plan.domain)
+        rngs = np.random.default_rng(seed).spawn(plan.explorers)
+
+        async def worker(k: int) -> list[Outcome]:
+            out = []
+            for e in range(k, plan.episodes, plan.explorers):
+                result = await episode(client, grid, plan, k, e, rngs[k])
+                typer.echo(
+                    f"explorer {k} episode {e}: goal {list(result.goal)} "
+                    f"{'reached' if result.success else 'not reached'} in {result.steps} steps, "
+                    f"{result.advice_count} advice, p_normal {result.p_normal:.3f}"
+                )
+                out.append(result)
+            return out
+
+        done = await asyncio.gather(*(worker(k) for k in range(plan.explorers)))
+    return sorted((o for batch in done for o in batch), key=lambda o: o.episode)
+
+
+def summary(outcomes: list[Outcome], plan: Plan) -> str:
+    n = len(outcomes)
+    wins = sum(o.success for o in outcomes)
+    steps = sum(o.steps for o in outcomes)
+    advice = sum(o.advice_count for o in outcomes)
+    per100 = 100.0 * advice / max(1, steps + n)  # one decision per step, plus each start
+    return (
+        f"{plan.explorer}, advice {'on' if plan.advice else 'off'}, kappa {plan.kappa}: "
+        f"{wins}/{n} reached their goal (mean reward {1000.0 * wins / max(1, n):.0f}); "
+        f"mean steps {steps / max(1, n):.1f}; advice per 100 decisions {per100:.1f}"
+    )
+
+
+def simulate(
+    server: Annotated[str, typer.Option(help="Service URL.")] = "http://127.0.0.1:8000",
+    explorer: Annotated[str, typer.Option(help=" | ".join(FIXED_EXPLORERS))] = "random",
+    advice: Annotated[
+        str, typer.Option(help="on: advised explorers follow it; off: ignore.")
+    ] = "on",
+    episodes: Annotated[int, typer.Option(min=1, help="Episodes (tasks) in all.")] = 10,
+    explorers: Annotated[int, typer.Option(min=1, help="Explorers walking at once.")] = 1,
+    steps: Annotated[int, typer.Option(min=1, help="Moves per episode at most.")] = 5000,
+    kappa: Annotated[float, typer.Option(min=0.0, help="Cost of one piece of advice.")] = 0.5,
+    window: Annotated[int, typer.Option(min=1, help="History window W.")] = 300,
+    seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
+    domain: Annotated[str, typer.Option(help="Domain to walk.")] = "default",
+    delay: Annotated[float, typer.Option(min=0.0, help="Seconds between moves (to watch).")] = 0.0,
+    keep: Annotated[bool, typer.Option(help="Leave sessions open after each episode.")] = False,
+) -> None:
+    """Drive simulated explorers through the live service and print their outcomes."""
+    if explorer not in FIXED_EXPLORERS:
+        typer.echo(f"error: --explorer must be one of {', '.join(FIXED_EXPLORERS)}", err=True)
+        raise typer.Exit(code=2)
+    if advice not in ("on", "off"):
+        typer.echo("error: --advice must be 'on' or 'off'", err=True)
+        raise typer.Exit(code=2)
+    plan = Plan(
+        domain, explorer, advice == "on", episodes, explorers, steps, kappa, window, delay, keep
+    )
+    try:
+        outcomes = asyncio.run(run(server, plan, seed))
+    except AdvisorError as exc:
+        typer.echo(f"error: the service refused: {exc}", err=True)
+        raise typer.Exit(code=2) from None
+    except (httpx.HTTPError, OSError) as exc:
+        typer.echo(f"error: cannot reach {server}: {exc}", err=True)
+        raise typer.Exit(code=2) from None
+    typer.echo(summary(outcomes, plan))

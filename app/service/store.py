@@ -1,0 +1,320 @@
+"""Durable state through SQLAlchemy 2: domains, expert trajectories and the prior's counts.
+
+Tables (the same on every database; only the engine's connect options differ):
+
+* ``domains``: name, map text, alpha0, created/updated times;
+* ``trajectories``: domain, agent type, steps as a compact blob of little-endian int32
+  (state, action) pairs, optional goal state;
+* ``prior_counts``: per (domain, table) the eq. (1)-(2) increments as an int32 (states x 4) blob
+  and the number of trajectories; table ``"*"`` is pooled over all agent types.
+
+A trajectory and the counts it adds are written in one transaction, so the counts always equal
+a recount of the stored trajectories (:meth:`Store.recount`), whatever happens to the process.
+Every method is synchronous and short; the service calls them from a worker thread.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+from sqlalchemy import (
+    DateTime,
+    Float,
+    ForeignKey,
+    Integer,
+    LargeBinary,
+    String,
+    Text,
+    create_engine,
+    delete,
+    event,
+    insert,
+    select,
+    text,
+    update,
+)
+from sqlalchemy.engine import Connection, Engine
+from sqlalchemy.exc import IntegrityError
+from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
+
+from app.advice.priors import ActionPrior, trajectory_counts
+
+IntArray = npt.NDArray[np.int64]
+POOLED = ActionPrior.POOLED
+RETRIES = 5
+
+
+class Base(DeclarativeBase):
+    pass
+
+
+class DomainRow(Base):
+    __tablename__ = "domains"
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    name: Mapped[str] = mapped_column(String(64), unique=True)
+    map_text: Mapped[str] = mapped_column(Text)
+    alpha0: Mapped[float] = mapped_column(Float)
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))
+    updated_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))
+
+
+class TrajectoryRow(Base):
+    __tablename__ = "trajectories"
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    domain_id: Mapped[int] = mapped_column(ForeignKey("domains.id"), index=True)
+    agent_type: Mapped[str | None] = mapped_column(String(64))
+    n_steps: Mapped[int] = mapped_column(Integer)
+    steps: Mapped[bytes] = mapped_column(LargeBinary)
+    goal: Mapped[int | None] = mapped_column(Integer)
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))
+
+
+class CountsRow(Base):
+    __tablename__ = "prior_counts"
+    domain_id: Mapped[int] = mapped_column(ForeignKey("domains.id"), primary_key=True)
+    agent_type: Mapped[str] = mapped_column(String(64), primary_key=True)
+    n_trajectories: Mapped[int] = mapped_column(Integer)
+    counts: Mapped[bytes] = mapped_column(LargeBinary)
+
+
+class MetaRow(Base):
+    __tablename__ = "service_meta"
+    key: Mapped[str] = mapped_column(String(64), primary_key=True)
+    value: Mapped[str] = mapped_column(Text)
+
+
+@dataclass(frozen=True)
+class DomainRecord:
+    name: str
+    map_text: str
+    alpha0: float
+    created_at: datetime
+    updated_at: datetime
+
+
+@dataclass(frozen=True)
+class TableCounts:
+    """One prior table: how many trajectories, and their eq. (1) increments (states x 4)."""
+
+    n_trajectories: int
+    counts: IntArray
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """(state, action) pairs (T x 2) of one expert, its agent type and goal state if known."""
+
+    agent_type: str | None
+    pairs: IntArray
+    goal: int | None = None
+
+
+def _pack(a: npt.ArrayLike) -> bytes:
+    return np.ascontiguousarray(a, dtype="<i4").tobytes()
+
+
+def _unpack(blob: bytes, width: int = 2) -> IntArray:
+    return np.frombuffer(blob, dtype="<i4").reshape(-1, width).astype(np.int64)
+
+
+def _utc(t: datetime) -> datetime:
+    return t if t.tzinfo is not None else t.replace(tzinfo=UTC)
+
+
+def _record(row: Any) -> DomainRecord:
+    return DomainRecord(
+        row.name, row.map_text, row.alpha0, _utc(row.created_at), _utc(row.updated_at)
+    )
+
+
+def table_increments(items: Sequence[Trajectory], n_states: int) -> dict[str, TableCounts]:
+    """What ``items`` add to each table: every trajectory to ``"*"``, typed ones to their type
+    (eq. (1) with delta = 0, as :class:`ActionPrior` counts them)."""
+    groups: dict[str, list[IntArray]] = {POOLED: [t.pairs for t in items]}
+    for t in items:
+        if t.agent_type is not None:
+            groups.setdefault(t.agent_type, []).append(t.pairs)
+    return {
+        key: TableCounts(len(trajs), trajectory_counts(trajs, n_states).astype(np.int64))
+        for key, trajs in groups.items()
+    }
+
+
+class Store:
+    """The repository: every read and write of durable state goes through here."""
+
+    def __init__(self, url: str):
+        connect_args = {"timeout": 30} if url.startswith("sqlite") else {}
+        self.engine: Engine = create_engine(url, connect_args=connect_args, pool_pre_ping=True)
+        if self.engine.dialect.name == "sqlite":
+            event.listen(self.engine, "connect", _sqlite_pragmas)
+
+    @property
+    def dialect(self) -> str:
+        return self.engine.dialect.name
+
+    def create_schema(self) -> None:
+        Base.metadata.create_all(self.engine)
+
+    def close(self) -> None:
+        self.engine.dispose()
+
+    def ping(self) -> None:
+        with self.engine.connect() as conn:
+            conn.execute(text("SELECT 1"))
+
+    # ---- meta ---------------------------------------------------------------------------------
+    def get_meta(self, key: str) -> str | None:
+        with self.engine.connect() as conn:
+            return conn.execute(select(MetaRow.value).where(MetaRow.key == key)).scalar()
+
+    def set_meta(self, key: str, value: str) -> None:
+        with self.engine.begin() as conn:
+            conn.execute(delete(MetaRow).where(MetaRow.key == key))
+            conn.execute(insert(MetaRow).values(key=key, value=value))
+
+    # ---- domains ------------------------------------------------------------------------------
+    def domains(self) -> list[DomainRecord]:
+        with self.engine.connect() as conn:
+            rows = conn.execute(select(DomainRow).order_by(DomainRow.name)).all()
+        return [_record(r) for r in rows]
+
+    def put_domain(
+        self, name: str, map_text: str, alpha0: float
+    ) -> tuple[DomainRecord, bool, bool]:
+        """Create or replace; returns (record, created, kept_data). A changed map deletes the
+        old trajectories and counts (their states belong to the old map)."""
+        now = datetime.now(UTC)
+        with self.engine.begin() as conn:
+            old = conn.execute(
+                select(DomainRow).where(DomainRow.name == name).with_for_update()
+            ).one_or_none()
+            if old is None:
+                conn.execute(
+                    insert(DomainRow).values(
+                        name=name, map_text=map_text, alpha0=alpha0, created_at=now, updated_at=now
+                    )
+                )
+                return DomainRecord(name, map_text, alpha0, now, now), True, False
+            kept = old.map_text == map_text
+            if not kept:
+                self._delete_data(conn, old.id)
+            conn.execute(
+                update(DomainRow)
+                .where(DomainRow.id == old.id)
+                .values(map_text=map_text, alpha0=alpha0, updated_at=now)
+            )
+            return DomainRecord(name, map_text, alpha0, _utc(old.created_at), now), False, kept
+
+    def delete_domain(self, name: str) -> bool:
+        with self.engine.begin() as conn:
+            dom = self._domain_id(conn, name)
+            if dom is None:
+                return False
+            self._delete_data(conn, dom)
+            conn.execute(delete(DomainRow).where(DomainRow.id == dom))
+        return True
+
+    @staticmethod
+    def _delete_data(conn: Connection, domain_id: int) -> None:
+        conn.execute(delete(TrajectoryRow).where(TrajectoryRow.domain_id == domain_id))
+        conn.execute(delete(CountsRow).where(CountsRow.domain_id == domain_id))
+
+    @staticmethod
+    def _domain_id(conn: Connection, name: str) -> int | None:
+        return conn.execute(select(DomainRow.id).where(DomainRow.name == name)).scalar()
+
+    # ---- trajectories and counts --------------------------------------------------------------
+    def add_trajectories(self, name: str, items: Sequence[Trajectory], n_states: int) -> None:
+        """Store ``items`` and add their counts, in one transaction. KeyError: no such domain.
+
+        Two writers may both create a table's counts row; the loser's transaction is rolled
+        back whole and retried, and then finds the row and adds to it."""
+        increments = table_increments(items, n_states)
+        for attempt in range(RETRIES):
+            try:
+                self._add_trajectories(name, items, n_states, increments)
+                return
+            except IntegrityError:
+                if attempt == RETRIES - 1:
+                    raise
+
+    def _add_trajectories(
+        self,
+        name: str,
+        items: Sequence[Trajectory],
+        n_states: int,
+        increments: dict[str, TableCounts],
+    ) -> None:
+        now = datetime.now(UTC)
+        with self.engine.begin() as conn:
+            dom = self._domain_id(conn, name)
+            if dom is None:
+                raise KeyError(name)
+            conn.execute(  # writes first: the transaction holds the write lock from here on
+                insert(TrajectoryRow),
+                [
+                    {"domain_id": dom, "agent_type": t.agent_type, "n_steps": len(t.pairs),
+                     "steps": _pack(t.pairs), "goal": t.goal, "created_at": now}
+                    for t in items
+                ],
+            )  # fmt: skip
+            for key, inc in increments.items():
+                self._add_counts(conn, dom, key, inc, n_states)
+
+    @staticmethod
+    def _add_counts(conn: Connection, dom: int, key: str, inc: TableCounts, n_states: int) -> None:
+        where = (CountsRow.domain_id == dom) & (CountsRow.agent_type == key)
+        row = conn.execute(
+            select(CountsRow.n_trajectories, CountsRow.counts).where(where).with_for_update()
+        ).one_or_none()
+        if row is None:
+            values = {"domain_id": dom, "agent_type": key, "n_trajectories": inc.n_trajectories,
+                      "counts": _pack(inc.counts)}  # fmt: skip
+            conn.execute(insert(CountsRow).values(**values))
+            return
+        total = _unpack(row.counts, 4) + inc.counts
+        conn.execute(
+            update(CountsRow)
+            .where(where)
+            .values(n_trajectories=row.n_trajectories + inc.n_trajectories, counts=_pack(total))
+        )
+
+    def counts(self, name: str) -> dict[str, TableCounts]:
+        """The stored counts of every table of a domain (empty if it has none)."""
+        with self.engine.connect() as conn:
+            dom = self._domain_id(conn, name)
+            rows = conn.execute(
+                select(CountsRow.agent_type, CountsRow.n_trajectories, CountsRow.counts).where(
+                    CountsRow.domain_id == dom
+                )
+            ).all()
+        return {r.agent_type: TableCounts(r.n_trajectories, _unpack(r.counts, 4)) for r in rows}
+
+    def trajectories(self, name: str) -> list[Trajectory]:
+        with self.engine.connect() as conn:
+            dom = self._domain_id(conn, name)
+            rows = conn.execute(
+                select(TrajectoryRow.agent_type, TrajectoryRow.steps, TrajectoryRow.goal)
+                .where(TrajectoryRow.domain_id == dom)
+                .order_by(TrajectoryRow.id)
+            ).all()
+        return [Trajectory(r.agent_type, _unpack(r.steps), r.goal) for r in rows]
+
+    def recount(self, name: str, n_states: int) -> dict[str, TableCounts]:
+        """The counts recomputed from the stored trajectories (to check :meth:`counts`)."""
+        items = self.trajectories(name)
+        return table_increments(items, n_states) if items else {}
+
+
+def _sqlite_pragmas(dbapi_conn: Any, _record: Any) -> None:
+    """WAL (readers never block the writer) and fsync at every commit (acknowledged = on disk)."""
+    cur = dbapi_conn.cursor()
+    for pragma in ("journal_mode=WAL", "synchronous=FULL", "foreign_keys=ON", "busy_timeout=30000"):
+        cur.execute(f"PRAGMA {pragma}")
+    cur.close()

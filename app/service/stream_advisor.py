@@ -1,0 +1,279 @@
+"""One explorer's batch of events in one call: the core :class:`Advisor`, compiled over time.
+
+A websocket message may carry hundreds of one explorer's moves. Calling
+:meth:`Advisor.observe` per move costs microseconds each in Python;
+:meth:`StreamAdvisor.observe_many` runs the same steps in one numba loop over the batch:
+
+* the window update ``loglik[m] += lp - ring[m, pos]`` and the decision (eqs. 4-6) are the
+  core's arithmetic in the core's order; exp and log are libm's, as :mod:`math` uses;
+* where the core re-sums the window exactly (``math.fsum`` when the ring wraps at a multiple
+  of :func:`resync_period`), the exact sums are computed beforehand with ``math.fsum`` itself
+  and handed to the loop.
+
+The advisor is left in exactly the state the sequential calls leave it in (ring, sums,
+position, counters), so single events (the core's own :meth:`observe`) and batches mix freely,
+and every decision equals the core's bit for bit (``tests/service/test_stream_advisor.py``).
+"""
+
+from __future__ import annotations
+
+import math
+import weakref
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+from numba import njit
+
+from app.advice.advisor import Advisor, Decision, resync_period
+from app.advice.models import AdviceTables
+from app.domain.grid import N_ACTIONS
+
+IntArray = npt.NDArray[np.int64]
+FloatArray = npt.NDArray[np.float64]
+BoolArray = npt.NDArray[np.bool_]
+
+#: Below this many events a plain loop over :meth:`Advisor.observe` is cheaper.
+SMALL_BATCH = 8
+
+
+@dataclass(frozen=True, slots=True)
+class DecisionColumns:
+    """Decisions for a batch, one list per field of :class:`Decision` (the advice is
+    ``tables.theta[state]`` where ``advise`` is true)."""
+
+    step: list[int]
+    state: list[int]
+    advise: list[bool]
+    kl: list[float]
+    p_normal: list[float]
+    advice_count: list[int]
+    total_cost: list[float]
+    benefit: list[float]
+
+    @classmethod
+    def of(cls, decisions: list[Decision]) -> DecisionColumns:
+        if not decisions:
+            return cls([], [], [], [], [], [], [], [])
+        c = list(zip(*decisions, strict=True))
+        return cls(
+            list(c[0]), list(c[1]), list(c[2]), list(c[4]), list(c[5]), list(c[6]),
+            list(c[7]), list(c[8]),
+        )  # fmt: skip
+
+    def __len__(self) -> int:
+        return len(self.step)
+
+
+@dataclass(frozen=True, slots=True)
+class _Flat:
+    """The arrays the compiled loop reads, flattened as ``advisor_decide`` expects."""
+
+    log_probs: FloatArray  # (M, S*4)
+    log_weights: FloatArray  # (M,)
+    probs: FloatArray  # (M, S*4)
+    theta: FloatArray  # (S*4,)
+    neg_entropy: FloatArray  # (S,)
+
+
+_FLAT: weakref.WeakKeyDictionary[AdviceTables, _Flat] = weakref.WeakKeyDictionary()
+
+
+def _flat(tables: AdviceTables) -> _Flat:
+    flat = _FLAT.get(tables)
+    if flat is None:
+        m = tables.n_models
+        flat = _Flat(
+            np.ascontiguousarray(tables.log_probs.reshape(m, -1)),
+            np.ascontiguousarray(tables.log_weights),
+            np.ascontiguousarray(tables.probs.reshape(m, -1)),
+            np.ascontiguousarray(tables.theta.reshape(-1)),
+            np.ascontiguousarray(tables.neg_entropy),
+        )
+        _FLAT[tables] = flat
+    return flat
+
+
+@njit(cache=True)
+def _decide(
+    loglik: FloatArray,
+    flat: tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray],
+    s: int,
+    z: FloatArray,
+) -> tuple[float, float]:  # pragma: no cover - compiled
+    """(KL[theta_s || P(A | s, H)], P(M1 | H)): Advisor.decide's arithmetic, step for step
+    (``z`` is scratch space, one entry per model)."""
+    _, log_weights, probs, theta, neg_entropy = flat
+    n_models = loglik.shape[0]
+    mx = loglik[0] + log_weights[0]
+    for m in range(n_models):
+        z[m] = loglik[m] + log_weights[m]
+        if z[m] > mx:
+            mx = z[m]
+    tot = 0.0
+    for m in range(n_models):
+        z[m] = math.exp(z[m] - mx)
+        tot += z[m]
+    b = s * 4
+    p0 = z[0] / tot
+    m0, m1 = p0 * probs[0, b], p0 * probs[0, b + 1]
+    m2, m3 = p0 * probs[0, b + 2], p0 * probs[0, b + 3]
+    for m in range(1, n_models):
+        pm = z[m] / tot
+        m0 += pm * probs[m, b]
+        m1 += pm * probs[m, b + 1]
+        m2 += pm * probs[m, b + 2]
+        m3 += pm * probs[m, b + 3]
+    cross = theta[b] * math.log(m0) + theta[b + 1] * math.log(m1)
+    cross += theta[b + 2] * math.log(m2)
+    cross += theta[b + 3] * math.log(m3)
+    kl = neg_entropy[s] - cross
+    if kl < 0.0:
+        kl = 0.0
+    return kl, p0
+
+
+@njit(cache=True)
+def _observe_stream(
+    ring: FloatArray,
+    loglik: FloatArray,
+    pos: int,
+    flat: tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray],
+    kappa: float,
+    count: int,
+    benefit: float,
+    moves: tuple[IntArray, IntArray, IntArray],
+    resync: tuple[IntArray, FloatArray],
+    out: tuple[FloatArray, FloatArray, BoolArray, IntArray, FloatArray],
+) -> tuple[int, int, float]:  # pragma: no cover - compiled
+    """Advisor.observe for each (s, a, s'), accounting as Advisor.decide. At event
+    ``resync[0][r]`` the sums become ``resync[1][r]`` (the core's exact re-sum). Fills ``out``
+    (kl, p_normal, advise, count, benefit); returns (ring position, advice count, benefit)."""
+    log_probs = flat[0]
+    states, actions, next_states = moves
+    resync_at, resync_sums = resync
+    kl_out, p_out, advise_out, count_out, benefit_out = out
+    window = ring.shape[1]
+    z = np.empty(ring.shape[0])
+    r = 0
+    for i in range(states.shape[0]):
+        k = states[i] * 4 + actions[i]
+        for m in range(ring.shape[0]):
+            lp = log_probs[m, k]
+            loglik[m] += lp - ring[m, pos]
+            ring[m, pos] = lp
+        pos += 1
+        if pos == window:
+            pos = 0
+            if r < resync_at.shape[0] and resync_at[r] == i:
+                loglik[:] = resync_sums[r]
+                r += 1
+        kl, p0 = _decide(loglik, flat, next_states[i], z)
+        advise = kl >= kappa
+        if advise:
+            count += 1
+            benefit += kl
+        kl_out[i] = kl
+        p_out[i] = p0
+        advise_out[i] = advise
+        count_out[i] = count
+        benefit_out[i] = benefit
+    return pos, count, benefit
+
+
+class StreamAdvisor(Advisor):
+    """An :class:`Advisor` with :meth:`observe_many` for a batch of one explorer's moves.
+
+    Its window is one float64 array (models x W), 8 bytes an entry, where the core keeps
+    lists of Python floats (about 32 bytes an entry): thousands of sessions hold one each.
+    :meth:`append` is the core's, step for step, on that array.
+    """
+
+    __slots__ = ("_window",)
+
+    def reset(self) -> None:
+        super().reset()
+        self._ring = []  # the core's lists are not used: the window lives in ``_window``
+        self._window = np.zeros((self.tables.n_models, self.window))
+
+    def append(self, state: int, action: int) -> None:
+        """Add (s, a) to H exactly as :meth:`Advisor.append` does."""
+        t = self.tables
+        if not (0 <= state < t.n_states and 0 <= action < N_ACTIONS):
+            self._check(state, action)
+        k = state * N_ACTIONS + action
+        pos, ring, loglik = self._pos, self._window, self._loglik
+        for m, table in enumerate(t.log_probs_flat):
+            lp = table[k]
+            loglik[m] += lp - float(ring[m, pos])
+            ring[m, pos] = lp
+        pos += 1
+        self.steps += 1
+        if pos == self.window:
+            pos = 0
+            if self.steps % resync_period(self.window) == 0:
+                for m in range(len(loglik)):
+                    loglik[m] = math.fsum(ring[m].tolist())
+        self._pos = pos
+
+    def _resyncs(
+        self, ring: FloatArray, log_probs: FloatArray, keys: IntArray
+    ) -> tuple[IntArray, FloatArray]:
+        """Events of this batch after which the core re-sums the window exactly, and the
+        ``math.fsum`` of the window there (for each model)."""
+        w, n = self.window, len(keys)
+        period = resync_period(w)
+        first = (period - self.steps % period) % period or period  # pairs until the next one
+        at = np.arange(first - 1, n, period, dtype=np.int64)
+        sums = np.empty((len(at), ring.shape[0]))
+        if len(at):
+            pos = self._pos
+            for m in range(ring.shape[0]):
+                # the window before the batch, oldest first, then the batch's pairs
+                tape = np.concatenate((ring[m, pos:], ring[m, :pos], log_probs[m].take(keys)))
+                for r, i in enumerate(at.tolist()):
+                    sums[r, m] = math.fsum(tape[i + 1 : i + 1 + w].tolist())
+        return at, sums
+
+    def observe_many(
+        self, states: IntArray, actions: IntArray, next_states: IntArray
+    ) -> DecisionColumns:
+        """Same as ``[self.observe(s, a, s2) for ...]``, in columns. Inputs must be valid
+        (states in range, actions 0..3): the caller checks them first."""
+        n = len(states)
+        if n < SMALL_BATCH:
+            moves = zip(states.tolist(), actions.tolist(), next_states.tolist(), strict=True)
+            return DecisionColumns.of([self.observe(s, a, s2) for s, a, s2 in moves])
+        f = _flat(self.tables)
+        keys = states * 4 + actions
+        ring = self._window  # updated in place
+        loglik = np.array(self._loglik, dtype=np.float64)
+        kl, p_normal, benefit = np.empty(n), np.empty(n), np.empty(n)
+        advise, count = np.empty(n, dtype=np.bool_), np.empty(n, dtype=np.int64)
+        pos, self.advice_count, self.benefit = _observe_stream(
+            ring, loglik, self._pos,
+            (f.log_probs, f.log_weights, f.probs, f.theta, f.neg_entropy),
+            self.kappa, self.advice_count, self.benefit,
+            (states, actions, next_states), self._resyncs(ring, f.log_probs, keys),
+            (kl, p_normal, advise, count, benefit),
+        )  # fmt: skip
+        self._loglik, self._pos = loglik.tolist(), pos
+        self.steps += n
+        self.decisions += n
+        return DecisionColumns(
+            list(range(self.steps - n + 1, self.steps + 1)),
+            next_states.tolist(),
+            advise.tolist(),
+            kl.tolist(),
+            p_normal.tolist(),
+            count.tolist(),
+            (self.kappa * count).tolist(),
+            benefit.tolist(),
+        )
+
+
+def warm_up() -> None:
+    """Load (or compile, the first time) the numba loop, so no request waits for it."""
+    tables = AdviceTables.paper(np.full((2, 4), 0.25))
+    moves = np.zeros(SMALL_BATCH, dtype=np.int64)
+    StreamAdvisor(tables, window=4).observe_many(moves, moves, moves)

@@ -1,0 +1,88 @@
+"""What the viewer reads: plain snapshots of domains and live sessions.
+
+The viewer is a consumer of state. It never reaches into the service; something else (the
+service's adapter, :mod:`app.service.viewer_feed`, or a test) hands it a :class:`Snapshot`
+through a :data:`Feed`, a callable the pump calls at a fixed rate. Snapshots are cheap to make
+(references to arrays the owner does not mutate, short lists) and carry version numbers so the
+viewer redraws only what changed.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+import numpy as np
+import numpy.typing as npt
+
+from app.domain.grid import GridDomain
+
+FloatArray = npt.NDArray[np.float64]
+Cell = tuple[int, int]
+Probabilities = tuple[float, float, float, float]
+
+
+@dataclass(frozen=True, eq=False)
+class DomainView:
+    """A domain and its current prior ``theta`` (states x 4); ``prior_version`` changes with it."""
+
+    domain: GridDomain
+    theta: FloatArray
+    prior_version: int = 0
+
+    @property
+    def name(self) -> str:
+        return self.domain.name
+
+
+class AdviceGiven(NamedTuple):
+    """Advice the advisor gave at ``cell``: theta of that cell, in the order N, E, S, W.
+
+    A named tuple: feeds build many of these per tick, and tuples are cheap to make."""
+
+    step: int
+    cell: Cell
+    probabilities: Probabilities
+
+
+@dataclass(frozen=True)
+class SessionView:
+    """One live explorer as the viewer draws it (recent history only).
+
+    ``p_normal_history`` holds P(M1 | H) after each of the last decisions, the newest last; the
+    newest belongs to decision ``steps``. ``advice`` holds (step, cell, theta of the cell)
+    triples, oldest first: :class:`AdviceGiven` or plain tuples of that shape.
+    """
+
+    session_id: str
+    domain: str
+    steps: int
+    position: Cell
+    p_normal: float
+    advice_count: int
+    total_cost: float
+    kappa: float
+    path: Sequence[Cell] = ()
+    p_normal_history: Sequence[float] = ()
+    advice: Sequence[tuple[int, Cell, Probabilities]] = ()
+    agent_type: str | None = None
+
+    @property
+    def version(self) -> tuple[int, int]:
+        """Changes whenever there is something new to draw."""
+        return (self.steps, self.advice_count)
+
+
+@dataclass(frozen=True)
+class Snapshot:
+    """Everything the viewer shows, at one instant."""
+
+    domains: dict[str, DomainView] = field(default_factory=dict)
+    sessions: Sequence[SessionView] = ()
+
+    def sessions_of(self, domain: str) -> list[SessionView]:
+        return [s for s in self.sessions if s.domain == domain]
+
+
+Feed = Callable[[], Snapshot]

@@ -1,0 +1,155 @@
+"""AdvisorClient and AsyncAdvisorClient against a real uvicorn server, REST and websocket."""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Coroutine
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any, TypeVar
+
+import numpy as np
+import pytest
+
+from app.advice.advisor import Advisor
+from app.advice.models import AdviceTables
+from app.client import AdvisorClient, AdvisorError, AsyncAdvisorClient
+from tests.client.conftest import Server
+
+TINY = ["#######", "#G..#G#", "#.#.#.#", "#...#.#", "###...#", "#S....#", "#######"]
+E = {"state": [28, 0], "action": "E"}
+W = {"state": [28, 1], "action": "W"}
+T = TypeVar("T")
+
+
+def run_async(coro: Coroutine[Any, Any, T]) -> T:
+    """Run a coroutine on a loop of its own in a worker thread.
+
+    The browser tests' session-scoped Playwright keeps an event loop in the main thread, where
+    ``asyncio.run`` would refuse to start; a fresh thread has none.
+    """
+    with ThreadPoolExecutor(1) as pool:
+        return pool.submit(asyncio.run, coro).result()
+
+
+def test_client_rest_calls(server: Server) -> None:
+    with AdvisorClient(server.url, admin_key=server.admin_key) as client:
+        assert client.health()["status"] == "ok"
+        assert "default" in {d["name"] for d in client.domains()}
+        assert client.put_domain("tiny-rest", TINY)["start"] == [5, 1]
+        steps = [{"state": [5, 1], "action": "E"}, {"state": [5, 2], "action": "E"}]
+        assert client.add_trajectories("tiny-rest", [{"steps": steps}]) == {
+            "accepted": 1,
+            "pairs": 2,
+        }
+        assert client.prior("tiny-rest")["trajectories"] == 1
+        session = client.create_session("tiny-rest", kappa=0.0, window=10, start=(5, 1))
+        assert session.decision["state"] == [5, 1] and session.kappa == 0.0
+        one = client.step(session, {"state": [5, 1], "action": "E"})
+        assert one["step"] == 1 and one["advise"]
+        many = client.events(
+            session, [{"state": [5, 2], "action": "W"}, {"state": [5, 1], "action": "E"}]
+        )
+        assert [d["step"] for d in many] == [2, 3]
+        assert client.session(session)["steps"] == 3
+        assert client.sessions()["total"] >= 1
+        assert any(s["session_id"] == session.session_id for s in client.overview()["sessions"])
+        assert client.end_session(session)["steps"] == 3
+        client.delete_domain("tiny-rest")
+
+
+def test_client_raises_the_services_reason(server: Server) -> None:
+    with AdvisorClient(server.url) as client:
+        with pytest.raises(AdvisorError) as err:
+            client.domain("nowhere")
+        assert err.value.status == 404 and "nowhere" in err.value.detail
+        with pytest.raises(AdvisorError) as err:
+            client.put_domain("x", TINY)  # no admin key given to the client
+        assert err.value.status == 401
+        session = client.create_session()
+        with pytest.raises(AdvisorError) as err:
+            client.events(session, {"state": [27, 0], "action": "N"})
+        assert err.value.status == 422 and err.value.detail == "event 0: state [27, 0] is a wall"
+    with AdvisorClient(server.url, admin_key="wrong") as client, pytest.raises(AdvisorError) as err:
+        client.sessions()
+    assert err.value.status == 403
+
+
+def test_client_stream_decides_in_order_and_survives_bad_frames(server: Server) -> None:
+    with AdvisorClient(server.url) as client:
+        session = client.create_session(window=20)
+        with client.stream(session) as stream:
+            assert stream.send(E)["step"] == 1
+            assert [d["step"] for d in stream.send([W, E] * 250)] == list(range(2, 502))
+            with pytest.raises(AdvisorError) as err:
+                stream.send({"state": [28, 0], "action": "up"})
+            assert err.value.status == 422
+            assert stream.send(W)["step"] == 502
+        assert client.session(session)["steps"] == 502
+
+
+def test_client_stream_with_a_wrong_token_is_refused(server: Server) -> None:
+    with AdvisorClient(server.url) as client:
+        session = client.create_session()
+        other = client.create_session()
+        forged = type(session)(
+            session.session_id, other.token, "default", 0.5, 300, session.decision
+        )
+        with client.stream(forged) as stream, pytest.raises(AdvisorError) as err:
+            stream.send(E)
+        assert err.value.status == 403 and "does not belong" in err.value.detail
+
+
+def test_decisions_over_the_wire_equal_the_core(server: Server) -> None:
+    """A random walk through real uvicorn: each decision equals a core Advisor's."""
+    from app.domain.grid import GridDomain
+
+    with AdvisorClient(server.url) as client:
+        theta = client.prior("default")["theta"]
+        grid = GridDomain.from_strings(client.domain("default")["map"])
+        table = np.array([theta[r][c] for r, c in grid.cells.tolist()])
+        core = Advisor(AdviceTables.paper(table), kappa=0.5, window=50)
+        session = client.create_session(window=50)
+        core.start(grid.start)
+        rng = np.random.default_rng(7)
+        s, events, expected = grid.start, [], []
+        for a in rng.integers(0, 4, 400).tolist():
+            s2 = grid.step(s, a)
+            events.append({"state": grid.cell(s), "action": "NESW"[a]})
+            expected.append(core.observe(s, a, s2))
+            s = s2
+        with client.stream(session) as stream:
+            got = stream.send(events[:150]) + stream.send(events[150:])
+    assert [d["kl"] for d in got] == [d.kl for d in expected]
+    assert [d["p_normal"] for d in got] == [d.p_normal for d in expected]
+    assert [d["advise"] for d in got] == [d.advise for d in expected]
+
+
+def test_async_client_rest_and_stream(server: Server) -> None:
+    async def scenario() -> tuple[int, list[int], int]:
+        async with AsyncAdvisorClient(server.url, admin_key=server.admin_key) as client:
+            session = await client.create_session("default", kappa=0.5)
+            one = await client.events(session, E)
+            async with await client.stream(session) as stream:
+                many = await stream.send([W, E] * 10)
+                with pytest.raises(AdvisorError):
+                    await stream.send({"state": [28, 0]})
+            summary = await client.end_session(session)
+            return one["step"], [d["step"] for d in many], summary["steps"]
+
+    one, many, steps = run_async(scenario())
+    assert one == 1 and many == list(range(2, 22)) and steps == 21
+
+
+def test_async_clients_in_parallel(server: Server) -> None:
+    async def explorer(client: AsyncAdvisorClient) -> int:
+        session = await client.create_session()
+        async with await client.stream(session) as stream:
+            for _ in range(20):
+                await stream.send([E, W])
+        return int((await client.session(session))["steps"])
+
+    async def scenario() -> list[int]:
+        async with AsyncAdvisorClient(server.url) as client:
+            return list(await asyncio.gather(*(explorer(client) for _ in range(8))))
+
+    assert run_async(scenario()) == [40] * 8

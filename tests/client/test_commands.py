@@ -1,0 +1,54 @@
+"""``python -m app serve`` and ``python -m app simulate`` as a user runs them."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+from app.client import AdvisorClient
+from tests.client.conftest import REPO, Server, start_server, stop_server
+
+
+def simulate(*args: str) -> subprocess.CompletedProcess[str]:
+    cmd = [sys.executable, "-m", "app", "simulate", *args]
+    return subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=120)
+
+
+def test_simulate_drives_explorers_and_prints_outcomes(server: Server) -> None:
+    with AdvisorClient(server.url) as client:
+        before = client.overview()["total_sessions"]
+    options = ["--explorer", "random-avoid", "--advice", "on", "--episodes", "3"]
+    run = simulate("--server", server.url, *options, "--explorers", "2", "--steps", "60")
+    assert run.returncode == 0, run.stderr
+    lines = run.stdout.strip().splitlines()
+    assert sum("episode" in line for line in lines) == 3
+    assert lines[-1].startswith("random-avoid, advice on, kappa 0.5: ")
+    assert "reached their goal" in lines[-1] and "advice per 100 decisions" in lines[-1]
+    with AdvisorClient(server.url) as client:  # each episode's session was ended
+        assert client.overview()["total_sessions"] == before
+
+
+def test_simulate_optimal_explorers_reach_their_goals(server: Server) -> None:
+    run = simulate("--server", server.url, "--explorer", "optimal", "--advice", "off",
+                   "--episodes", "2", "--steps", "500")  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    assert "2/2 reached their goal (mean reward 1000)" in run.stdout
+
+
+def test_simulate_explains_bad_options_and_unreachable_servers() -> None:
+    run = simulate("--explorer", "teleporter")
+    assert run.returncode == 2 and "--explorer must be one of" in run.stderr
+    run = simulate("--server", "http://127.0.0.1:9", "--episodes", "1")
+    assert run.returncode == 2 and "cannot reach" in run.stderr
+
+
+def test_serve_prints_the_generated_admin_key_once(tmp_path: Path) -> None:
+    first = start_server(tmp_path / "data")
+    _, err = stop_server(first)
+    assert first.admin_key in err and "shown only now" in err
+    assert "Created domain 'default'" in err
+    second = start_server(tmp_path / "data")
+    _, err = stop_server(second)
+    assert second.admin_key == first.admin_key
+    assert first.admin_key not in err and "Created domain" not in err

@@ -1,0 +1,163 @@
+"""Events to (s, a, s'): the vectorised checks against a slow, obviously correct version."""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from app.domain.grid import ACTIONS, GridDomain
+from app.service.events import (
+    SMALL_EVENTS,
+    BadInput,
+    _many_moves,
+    describe_errors,
+    parse_events,
+    to_moves,
+)
+from tests.service.conftest import TINY
+
+DOMAIN = GridDomain.from_strings(TINY)
+ROWS, COLS = DOMAIN.shape
+
+
+def slow_moves(events: list[dict[str, Any]]) -> list[tuple[int, int, int]] | int:
+    """The spec, one event at a time: the moves, or the index of the first bad event."""
+    out = []
+    for i, e in enumerate(events):
+        try:
+            s = DOMAIN.state(*e["state"])
+            nxt = e.get("next_state")
+            s2 = None if nxt is None else DOMAIN.state(*nxt)
+        except ValueError:
+            return i
+        a = e.get("action")
+        a = None if a is None else (ACTIONS.index(a) if isinstance(a, str) else a)
+        if a is None and s2 is None:
+            return i
+        if s2 is None:
+            s2 = DOMAIN.step(s, a)  # type: ignore[arg-type]
+        elif s2 != s and DOMAIN.move_between(s, s2) is None:
+            return i  # not one move away
+        if a is None:
+            a = DOMAIN.move_between(s, s2)
+            if a is None:  # unchanged cell, no action: ambiguous
+                return i
+        out.append((s, a, s2))
+    return out
+
+
+cells = st.tuples(st.integers(0, ROWS), st.integers(0, COLS))  # includes off-map and walls
+events = st.fixed_dictionaries(
+    {"state": cells},
+    optional={
+        "action": st.one_of(st.none(), st.sampled_from([*ACTIONS, 0, 1, 2, 3])),
+        "next_state": st.one_of(st.none(), cells),
+    },
+)
+
+
+@given(st.lists(events, max_size=30))
+def test_to_moves_matches_slow_version(batch: list[dict[str, Any]]) -> None:
+    expected = slow_moves(batch)
+    parsed, single = parse_events(json.dumps(batch), 1000)
+    assert not single
+    if isinstance(expected, int):
+        with pytest.raises(BadInput) as err:
+            to_moves(DOMAIN, parsed)
+        assert err.value.detail.startswith(f"event {expected}:")
+        assert err.value.status == 422
+    else:
+        s, a, s2 = to_moves(DOMAIN, parsed)
+        assert list(zip(s.tolist(), a.tolist(), s2.tolist(), strict=True)) == expected
+
+
+@given(st.lists(st.tuples(st.sampled_from(range(DOMAIN.n_states)), st.integers(0, 3)), max_size=20))
+def test_the_three_event_forms_give_the_same_moves(pairs: list[tuple[int, int]]) -> None:
+    with_action = [{"state": DOMAIN.cell(s), "action": ACTIONS[a]} for s, a in pairs]
+    both = [
+        e | {"next_state": DOMAIN.cell(DOMAIN.step(s, a))}
+        for e, (s, a) in zip(with_action, pairs, strict=True)
+    ]
+    moved = [(s, a) for s, a in pairs if DOMAIN.step(s, a) != s]
+    only_next = [
+        {"state": DOMAIN.cell(s), "next_state": DOMAIN.cell(DOMAIN.step(s, a))} for s, a in moved
+    ]
+    a1 = np.stack(to_moves(DOMAIN, parse_events(json.dumps(with_action), 100)[0]))
+    a2 = np.stack(to_moves(DOMAIN, parse_events(json.dumps(both), 100)[0]))
+    a3 = np.stack(to_moves(DOMAIN, parse_events(json.dumps(only_next), 100)[0]))
+    np.testing.assert_array_equal(a1, a2)
+    keep = np.array([DOMAIN.step(s, a) != s for s, a in pairs], dtype=bool)
+    np.testing.assert_array_equal(a1[:, keep] if pairs else a1, a3)
+
+
+@pytest.mark.parametrize(
+    ("body", "message"),
+    [
+        ('{"state": [5, 1]}', "event 0: give an action, a next_state or both"),
+        ('{"state": [0, 0], "action": "N"}', "event 0: state [0, 0] is a wall"),
+        ('{"state": [9, 1], "action": "N"}', "event 0: state [9, 1] is off the 7x7 map"),
+        ('{"state": [5, 1], "next_state": [5, 1]}', "ambiguous"),
+        ('{"state": [5, 1], "next_state": [5, 3]}', "is not one move from state [5, 1]"),
+        ('{"state": [5, 1], "action": "E", "next_state": [0, 0]}', "next_state [0, 0] is a wall"),
+        ('{"state": [5, 1], "action": "up"}', "event.action: an action is 'N', 'E', 'S', 'W'"),
+        ('{"state": [5, 1], "action": true}', "event.action: an action is"),
+        ('{"state": [5, 1], "action": 1.0}', "event.action: an action is"),
+        ('{"state": [5, 1], "action": 4}', "event.action: an action is"),
+        ('{"state": ["5", 1], "action": "N"}', "event.state[0]: Input should be a valid integer"),
+        ('{"state": [-1, 1], "action": "N"}', "event.state[0]: Input should be greater than"),
+        ('{"state": [5, 1], "action": "N", "why": 1}', "event.why: Extra inputs are not permitted"),
+        ('[{"state": [5, 1], "action": "N"}, {"state": [5]}]', "events[1].state"),
+        ('{"state": [5, 1], "action": "N"', "Invalid JSON"),
+        ('"N"', "send JSON: an event"),
+        ("", "send JSON: an event"),
+        ("[" * 10_000 + "]" * 10_000, "recursion limit"),
+    ],
+)
+def test_bad_events_are_refused_with_a_reason(body: str, message: str) -> None:
+    with pytest.raises(BadInput) as err:
+        to_moves(DOMAIN, parse_events(body, 100)[0])
+    assert err.value.status == 422
+    assert message in err.value.detail
+
+
+def test_unchanged_cell_with_action_is_a_bump() -> None:
+    s, a, s2 = to_moves(DOMAIN, parse_events('{"state": [5, 1], "action": "W"}', 10)[0])
+    assert (s[0], a[0], s2[0]) == (DOMAIN.state(5, 1), 3, DOMAIN.state(5, 1))
+
+
+def test_an_observed_move_other_than_the_action_is_accepted() -> None:
+    # a slippery world: the explorer meant N (a wall) but slid E
+    body = '{"state": [5, 1], "action": "N", "next_state": [5, 2]}'
+    _, a, s2 = to_moves(DOMAIN, parse_events(body, 10)[0])
+    assert (a[0], s2[0]) == (0, DOMAIN.state(5, 2))
+
+
+def test_too_many_events_is_413() -> None:
+    with pytest.raises(BadInput) as err:
+        parse_events(json.dumps([{"state": [5, 1], "action": "N"}] * 11), 10)
+    assert err.value.status == 413
+    assert "at most 10" in err.value.detail
+
+
+def test_describe_errors_names_place_and_problem_and_counts_the_rest() -> None:
+    errors = [{"loc": ("body", "items", i, "x"), "msg": "bad"} for i in range(8)]
+    text = describe_errors(errors, limit=2)
+    assert text == "body.items[0].x: bad; body.items[1].x: bad (and 6 more)"
+
+
+@given(st.lists(events, max_size=SMALL_EVENTS))
+def test_small_batches_are_checked_as_large_ones_are(batch: list[dict[str, Any]]) -> None:
+    """The plain-Python path for small batches and the numpy path agree: moves and errors."""
+    parsed, _ = parse_events(json.dumps(batch), 100)
+    outcomes = []
+    for check in (to_moves, _many_moves):
+        try:
+            outcomes.append([a.tolist() for a in check(DOMAIN, parsed)])
+        except BadInput as exc:
+            outcomes.append([exc.detail, exc.status])
+    assert outcomes[0] == outcomes[1]

@@ -1,0 +1,65 @@
+"""Public read-only routes: /health, /overview (no tokens), / and /walk, /static."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from fastapi.testclient import TestClient
+
+from app.service.main import create_app
+from tests.service.conftest import make_settings, open_session
+
+
+def test_health(client: TestClient) -> None:
+    r = client.get("/health")
+    assert r.status_code == 200
+    body = r.json()
+    assert body["status"] == "ok" and body["database"] == "sqlite"
+    assert body["domains"] == 1 and body["sessions"] == 0 and body["uptime_seconds"] >= 0
+
+
+def test_overview_shows_figures_and_never_tokens(client: TestClient) -> None:
+    sid, auth, created = open_session(client, kappa=0.0)
+    moves = [{"state": [28, 0], "action": "E"}, {"state": [28, 1], "action": "W"}] * 60
+    client.post(f"/sessions/{sid}/events", json=moves, headers=auth)
+    open_session(client)
+    r = client.get("/overview")
+    assert r.status_code == 200
+    assert created["token"] not in r.text
+    body = r.json()
+    assert body["total_sessions"] == 2
+    assert body["domains"] == [
+        {"name": "default", "rows": 30, "cols": 30, "n_states": body["domains"][0]["n_states"],
+         "trajectories": 16, "sessions": 2}
+    ]  # fmt: skip
+    s = next(x for x in body["sessions"] if x["session_id"] == sid)
+    assert s["steps"] == 120 and s["position"] == [28, 0] and s["advice_count"] == 121
+    assert len(s["path"]) == 100 and s["path"][-2:] == [[28, 1], [28, 0]]
+    assert len(s["p_normal_history"]) == 120 + 1  # start + every step, under the 200 kept
+    assert s["last_advice"]["step"] == 120 and s["last_advice"]["state"] == [28, 0]
+    assert set(s["last_advice"]["advice"]) == {"N", "E", "S", "W"}
+    r = client.get("/overview", params={"limit": 1})
+    assert len(r.json()["sessions"]) == 1 and r.json()["total_sessions"] == 2
+
+
+def test_pages_are_404_json_when_not_installed(client: TestClient) -> None:
+    for path in ("/", "/walk"):
+        r = client.get(path)
+        assert r.status_code == 404
+        assert "not installed" in r.json()["detail"]
+    assert client.get("/static/app.js").status_code == 404
+
+
+def test_pages_and_static_files_are_served(tmp_path: Path) -> None:
+    static = tmp_path / "static"
+    static.mkdir()
+    (static / "index.html").write_text("<h1>dashboard</h1>")
+    (static / "walk.html").write_text("<h1>walk</h1>")
+    (static / "app.js").write_text("let x = 1;")
+    with TestClient(create_app(make_settings(tmp_path / "data", static_dir=static))) as client:
+        r = client.get("/")
+        assert r.status_code == 200 and "dashboard" in r.text
+        assert r.headers["content-type"].startswith("text/html")
+        assert client.get("/walk").text == "<h1>walk</h1>"
+        assert client.get("/static/app.js").text == "let x = 1;"
+        assert client.get("/static/../config.py").status_code == 404
