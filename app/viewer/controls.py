@@ -1,0 +1,120 @@
+"""The viewer's control panel: pickers, the kappa slider, layer toggles, the picked session.
+
+There are no ``on_update`` callbacks: the pump reads the handles' values on each tick and
+applies them. That keeps GUI threads out of the scene and avoids feedback loops (assigning
+``.value`` or ``.options`` from code fires ``on_update`` at once in the assigning thread, and
+the pump assigns dropdown options whenever domains or sessions come and go).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import viser
+import viser.uplot
+
+from app.advice.advisor import DEFAULT_KAPPA
+from app.viewer.scene import LAYERS
+from app.viewer.state import SessionView
+
+NONE = "(none)"
+#: What "lost" means for the kappa shading.
+LOST_CERTAIN = "P(M1|H) = 0: certainly lost"
+LOST_PICKED = "P(M1|H) of the picked session"
+KAPPA_MAX = 1.4  # just above log 4, the largest KL[theta_s || uniform]
+LAYER_LABELS = {
+    "prior": "Prior arrows",
+    "shading": "Kappa shading",
+    "paths": "Session paths",
+    "markers": "Session markers",
+    "advice": "Advice given",
+}
+
+
+class Controls:
+    """The GUI handles and what the person chose with them."""
+
+    def __init__(self, server: viser.ViserServer):
+        gui = server.gui
+        self._shown: tuple[object, ...] | None = None
+        self.domain = gui.add_dropdown("Domain", (NONE,))
+        self.session = gui.add_dropdown("Session", (NONE,), hint="Sessions on this domain")
+        with gui.add_folder("Advice threshold"):
+            self.kappa = gui.add_slider(
+                "kappa", 0.0, KAPPA_MAX, 0.01, DEFAULT_KAPPA, hint="Cost of one piece of advice"
+            )
+            self.lost = gui.add_dropdown("Lost means", (LOST_CERTAIN, LOST_PICKED))
+            self.shading_text = gui.add_markdown("")
+        with gui.add_folder("Layers"):
+            self.layers = {
+                name: gui.add_checkbox(LAYER_LABELS[name], initial_value=True) for name in LAYERS
+            }
+        with gui.add_folder("Picked session"):
+            self.stats = gui.add_markdown("No session picked.")
+            self.plot = gui.add_uplot(
+                (np.zeros(1), np.full(1, 0.5)),
+                (
+                    viser.uplot.Series(label="step"),
+                    viser.uplot.Series(label="P(M1|H)", stroke="#326edc", width=2),
+                ),
+                title="p_normal over time",
+                scales={"x": viser.uplot.Scale(time=False), "y": viser.uplot.Scale(range=(0, 1))},
+                aspect=1.6,
+                visible=False,
+            )
+
+    # ---- reading the choices -------------------------------------------------------------
+    @property
+    def picked_domain(self) -> str | None:
+        return None if self.domain.value == NONE else self.domain.value
+
+    @property
+    def picked_session(self) -> str | None:
+        return None if self.session.value == NONE else self.session.value
+
+    def layer_visible(self, layer: str) -> bool:
+        return bool(self.layers[layer].value)
+
+    # ---- refreshing from the pump --------------------------------------------------------
+    def set_domains(self, names: Sequence[str]) -> None:
+        set_options(self.domain, tuple(names) or (NONE,))
+
+    def set_sessions(self, ids: Sequence[str]) -> None:
+        set_options(self.session, (NONE, *ids))
+
+    def show_shading(self, cells: int, total: int, kappa: float, p_normal: float) -> None:
+        self.shading_text.content = (
+            f"Shaded: **{cells}** of {total} cells would be advised at kappa = {kappa:.2f} "
+            f"for an explorer with P(M1|H) = {p_normal:.3f} "
+            "(advise iff KL[theta_s || P(A|s,H)] >= kappa)."
+        )
+
+    def show_session(self, s: SessionView | None) -> None:
+        key = None if s is None else (s.session_id, s.version, s.p_normal)
+        if key == self._shown:
+            return
+        self._shown = key
+        if s is None:
+            self.stats.content = "No session picked."
+            self.plot.visible = False
+            return
+        per_100 = 100.0 * s.advice_count / (s.steps + 1)
+        self.stats.content = (
+            f"**{s.session_id}**" + (f" ({s.agent_type})" if s.agent_type else "") + "\n\n"
+            f"steps **{s.steps}**, at {list(s.position)}, P(M1|H) **{s.p_normal:.3f}**\n\n"
+            f"advice **{s.advice_count}** ({per_100:.1f} per 100 decisions), "
+            f"cost **{s.total_cost:.2f}** at kappa {s.kappa:g}"
+        )
+        history = np.asarray(s.p_normal_history, dtype=np.float64)
+        if history.size == 0:
+            history = np.array([s.p_normal])
+        steps = np.arange(s.steps - history.size + 1, s.steps + 1, dtype=np.float64)
+        self.plot.data = (steps, history)
+        self.plot.visible = True
+
+
+def set_options(dropdown: viser.GuiDropdownHandle[str], options: tuple[str, ...]) -> None:
+    """Replace a dropdown's options only when they changed (each assignment is a message)."""
+    if tuple(dropdown.options) != options:
+        dropdown.options = options

@@ -1,0 +1,127 @@
+// The dashboard: polls GET /overview about once a second and redraws two tables.
+"use strict";
+
+(() => {
+  const { ACTIONS, ARROWS, fetchJSON, showViewerLink, fmt } = MazeUI;
+  const POLL_MS = 1000;
+  const $ = (id) => document.getElementById(id);
+
+  function cell(text, className = "") {
+    const td = document.createElement("td");
+    td.textContent = text;
+    if (className) td.className = className;
+    return td;
+  }
+
+  function emptyRow(columns, text) {
+    const tr = document.createElement("tr");
+    tr.className = "empty";
+    const td = cell(text);
+    td.colSpan = columns;
+    tr.append(td);
+    return tr;
+  }
+
+  function bar(p) {
+    const td = document.createElement("td");
+    td.className = "left";
+    const outer = document.createElement("span");
+    outer.className = p < 0.5 ? "bar lost" : "bar";
+    const inner = document.createElement("span");
+    inner.style.width = `${Math.round(100 * Math.min(1, Math.max(0, p)))}%`;
+    outer.append(inner);
+    td.append(outer, document.createTextNode(fmt(p)));
+    return td;
+  }
+
+  /** A small line of recent P(M1|H) values on a fixed 0..1 scale. */
+  function sparkline(values) {
+    const td = document.createElement("td");
+    td.className = "left";
+    const w = 110, h = 22;
+    const svg = document.createElementNS("http://www.w3.org/2000/svg", "svg");
+    svg.setAttribute("class", "spark");
+    svg.setAttribute("width", w);
+    svg.setAttribute("height", h);
+    svg.setAttribute("viewBox", `0 0 ${w} ${h}`);
+    if (values.length > 1) {
+      const line = document.createElementNS(svg.namespaceURI, "polyline");
+      const points = values.map((v, i) => `${(i * (w - 2)) / (values.length - 1) + 1},` +
+        `${(1 - v) * (h - 2) + 1}`);
+      line.setAttribute("points", points.join(" "));
+      line.setAttribute("fill", "none");
+      line.setAttribute("stroke", "#326edc");
+      line.setAttribute("stroke-width", "1.5");
+      svg.append(line);
+    }
+    td.append(svg);
+    return td;
+  }
+
+  function lastAdvice(advice) {
+    if (!advice) return cell("–", "left");
+    const best = ACTIONS.reduce((a, b) => (advice.advice[b] > advice.advice[a] ? b : a));
+    return cell(`step ${advice.step} at [${advice.state.join(", ")}]: ` +
+      `${ARROWS[best]} ${best} ${Math.round(100 * advice.advice[best])}%`, "left");
+  }
+
+  function renderDomains(domains) {
+    const body = $("domains").tBodies[0];
+    if (!domains.length) {
+      body.replaceChildren(emptyRow(6, "No domains."));
+      return;
+    }
+    body.replaceChildren(...domains.map((d) => {
+      const tr = document.createElement("tr");
+      tr.dataset.domain = d.name;
+      const walk = document.createElement("td");
+      walk.className = "left";
+      const a = document.createElement("a");
+      a.href = `/walk?domain=${encodeURIComponent(d.name)}`;
+      a.textContent = "walk it";
+      walk.append(a);
+      tr.append(cell(d.name, "left"), cell(`${d.rows}×${d.cols}`), cell(d.n_states),
+                cell(d.trajectories), cell(d.sessions), walk);
+      return tr;
+    }));
+  }
+
+  function renderSessions(sessions, total) {
+    const body = $("sessions").tBodies[0];
+    $("session-total").textContent = total > sessions.length
+      ? `(${total} live; the ${sessions.length} most recently active shown)` : `(${total} live)`;
+    if (!sessions.length) {
+      body.replaceChildren(emptyRow(12, "No live sessions. Walk the maze, or run python -m app simulate."));
+      return;
+    }
+    body.replaceChildren(...sessions.map((s) => {
+      const tr = document.createElement("tr");
+      tr.dataset.sessionId = s.session_id;
+      tr.append(cell(s.session_id, "left mono"), cell(s.domain, "left"),
+                cell(s.agent_type || "–", "left"), cell(s.kappa), cell(s.steps),
+                cell(`[${s.position.join(", ")}]`), bar(s.p_normal),
+                sparkline(s.p_normal_history || []), cell(s.advice_count),
+                cell(fmt(s.total_cost, 2)), cell(fmt(s.advice_per_100, 1)),
+                lastAdvice(s.last_advice));
+      return tr;
+    }));
+  }
+
+  async function poll() {
+    try {
+      const overview = await fetchJSON("/overview");
+      renderDomains(overview.domains);
+      renderSessions(overview.sessions, overview.total_sessions);
+      $("status").textContent = `Updated ${new Date().toLocaleTimeString()}`;
+      $("status").classList.remove("error");
+    } catch (err) {
+      $("status").textContent = `Cannot reach the service (${err.message}); retrying…`;
+      $("status").classList.add("error");
+    } finally {
+      setTimeout(poll, POLL_MS);
+    }
+  }
+
+  poll();
+  fetchJSON("/viewer").then((v) => showViewerLink($("viewer-link"), v)).catch(() => {});
+})();

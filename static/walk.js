@@ -1,0 +1,235 @@
+// The walk page: a person walks a maze with the arrow keys; every move goes to the advisor over
+// the session's websocket, and each decision that advises is drawn as arrows with probabilities.
+"use strict";
+
+(() => {
+  const { ACTIONS, MOVES, ARROWS, COLOURS, fetchJSON, fitCanvas, drawMaze, centre, drawArrow,
+          goalIndex, fmt } = MazeUI;
+  const KEYS = {
+    ArrowUp: "N", ArrowRight: "E", ArrowDown: "S", ArrowLeft: "W",
+    w: "N", d: "E", s: "S", a: "W", W: "N", D: "E", S: "S", A: "W",
+  };
+  const MIN_ADVICE_P = 0.03; // arrows below this probability are not drawn
+  const $ = (id) => document.getElementById(id);
+  const canvas = $("maze");
+  const ctx = canvas.getContext("2d");
+
+  const walk = {
+    map: null, cell: 20, pos: null, path: [], session: null, socket: null, pending: 0,
+    decision: null, advice: null, advisedCells: [],
+  };
+
+  function setStatus(text, isError = false) {
+    const el = $("status");
+    el.textContent = text;
+    el.classList.toggle("error", isError);
+  }
+
+  function isFree(r, c) {
+    const map = walk.map;
+    return r >= 0 && r < map.length && c >= 0 && c < map[0].length && map[r][c] !== "#";
+  }
+
+  // The same transitions as the service: a move into a wall or off the map stays put.
+  function stepLocal(pos, a) {
+    const [dr, dc] = MOVES[a];
+    const r = pos[0] + dr, c = pos[1] + dc;
+    return isFree(r, c) ? [r, c] : [pos[0], pos[1]];
+  }
+
+  function draw() {
+    if (!walk.map) return;
+    const cell = walk.cell;
+    drawMaze(ctx, walk.map, cell);
+    ctx.fillStyle = "rgba(214, 69, 69, 0.35)";
+    for (const rc of walk.advisedCells) {
+      const [x, y] = centre(rc, cell);
+      ctx.beginPath();
+      ctx.arc(x, y, cell * 0.16, 0, 2 * Math.PI);
+      ctx.fill();
+    }
+    if (walk.path.length > 1) {
+      ctx.strokeStyle = COLOURS.path;
+      ctx.lineWidth = Math.max(2, cell * 0.18);
+      ctx.lineJoin = "round";
+      ctx.beginPath();
+      walk.path.forEach((rc, i) => {
+        const [x, y] = centre(rc, cell);
+        if (i === 0) ctx.moveTo(x, y); else ctx.lineTo(x, y);
+      });
+      ctx.stroke();
+    }
+    if (walk.pos) {
+      const [x, y] = centre(walk.pos, cell);
+      ctx.fillStyle = COLOURS.walker;
+      ctx.beginPath();
+      ctx.arc(x, y, cell * 0.32, 0, 2 * Math.PI);
+      ctx.fill();
+      if (walk.advice && walk.pending === 0) drawAdvice(x, y, walk.advice);
+    }
+  }
+
+  function drawAdvice(x, y, advice) {
+    const cell = walk.cell;
+    ctx.font = `bold ${Math.max(10, Math.floor(cell * 0.55))}px system-ui, sans-serif`;
+    for (const a of ACTIONS) {
+      const p = advice[a];
+      if (p < MIN_ADVICE_P) continue;
+      const [x2, y2] = drawArrow(ctx, x, y, a, cell * (0.45 + 2.2 * p), COLOURS.advice,
+                                 Math.max(2, cell * 0.14));
+      const [dr, dc] = MOVES[a];
+      const label = `${Math.round(100 * p)}%`;
+      const tx = x2 + dc * cell * 0.9, ty = y2 + dr * cell * 0.55;
+      const w = ctx.measureText(label).width + 6;
+      ctx.fillStyle = "rgba(255, 255, 255, 0.9)";
+      ctx.fillRect(tx - w / 2, ty - cell * 0.35, w, cell * 0.7);
+      ctx.fillStyle = COLOURS.advice;
+      ctx.fillText(label, tx, ty);
+    }
+  }
+
+  function showDecision(d) {
+    walk.decision = d;
+    $("steps").textContent = d.step;
+    $("position").textContent = `[${d.state[0]}, ${d.state[1]}]`;
+    $("p-normal").textContent = fmt(d.p_normal);
+    $("kl").textContent = `${fmt(d.kl)} nats`;
+    $("advice-count").textContent = d.cost.advice_count;
+    $("cost").textContent = fmt(d.cost.total, 2);
+    const g = goalIndex(walk.map, d.state);
+    $("goal-note").textContent = g >= 0 ? `You are on goal G${g}.` : "";
+    const panel = $("advice");
+    if (d.advise && d.advice) {
+      walk.advice = d.advice;
+      walk.advisedCells.push(d.state);
+      $("advice-step").textContent = d.step;
+      const list = $("advice-list");
+      list.replaceChildren(...ACTIONS.map((a) => {
+        const li = document.createElement("li");
+        li.dataset.action = a;
+        li.innerHTML = `<span class="arrow"></span><span class="p"></span>` +
+          `<span class="bar"><span></span></span>`;
+        li.querySelector(".arrow").textContent = `${ARROWS[a]} ${a}`;
+        li.querySelector(".p").textContent = `${(100 * d.advice[a]).toFixed(1)}%`;
+        li.querySelector(".bar > span").style.width = `${(100 * d.advice[a]).toFixed(1)}%`;
+        return li;
+      }));
+      panel.hidden = false;
+    } else {
+      walk.advice = null;
+      panel.hidden = true;
+    }
+  }
+
+  function onMessage(event) {
+    let data;
+    try {
+      data = JSON.parse(event.data);
+    } catch (err) {
+      setStatus(`Unreadable message from the service: ${err}`, true);
+      return;
+    }
+    if (data && !Array.isArray(data) && data.detail) {
+      setStatus(`The service refused a move: ${data.detail}`, true);
+      walk.pending = 0;
+      if (walk.decision) walk.pos = walk.decision.state; // back to where the service has us
+      draw();
+      return;
+    }
+    for (const d of Array.isArray(data) ? data : [data]) {
+      walk.pending = Math.max(0, walk.pending - 1);
+      showDecision(d);
+      if (walk.pending === 0 && (d.state[0] !== walk.pos[0] || d.state[1] !== walk.pos[1])) {
+        walk.pos = d.state; // the service is the truth
+        walk.path.push(d.state);
+      }
+    }
+    draw();
+  }
+
+  function move(a) {
+    const socket = walk.socket;
+    if (!socket || socket.readyState !== WebSocket.OPEN) return;
+    const from = walk.pos;
+    walk.pos = stepLocal(from, a);
+    walk.path.push(walk.pos);
+    walk.pending += 1;
+    socket.send(JSON.stringify({ state: from, action: a }));
+    draw();
+  }
+
+  function openSocket(created) {
+    const scheme = location.protocol === "https:" ? "wss" : "ws";
+    const url = `${scheme}://${location.host}/sessions/${encodeURIComponent(created.session_id)}` +
+      `/stream?token=${encodeURIComponent(created.token)}`;
+    const socket = new WebSocket(url);
+    walk.socket = socket;
+    socket.addEventListener("open", () => {
+      if (walk.socket === socket) setStatus("Connected: walk with the arrow keys.");
+    });
+    socket.addEventListener("message", (e) => { if (walk.socket === socket) onMessage(e); });
+    socket.addEventListener("close", (e) => {
+      if (walk.socket !== socket) return;
+      walk.socket = null;
+      setStatus(`Disconnected (${e.code}${e.reason ? ": " + e.reason : ""}). Press “New walk”.`,
+                e.code !== 1000);
+    });
+  }
+
+  async function newWalk() {
+    const name = $("domain").value;
+    if (!name) return;
+    if (walk.socket) {
+      const old = walk.socket;
+      walk.socket = null;
+      old.close(1000, "new walk");
+    }
+    setStatus("Starting a session…");
+    try {
+      const domain = await fetchJSON(`/domains/${encodeURIComponent(name)}`);
+      const kappa = Number($("kappa").value);
+      const body = Number.isFinite(kappa) && kappa >= 0 ? { kappa } : {};
+      const created = await fetchJSON(`/domains/${encodeURIComponent(name)}/sessions`, {
+        method: "POST", body: JSON.stringify(body),
+      });
+      Object.assign(walk, {
+        map: domain.map, pos: created.decision.state, path: [created.decision.state],
+        session: created, pending: 0, advice: null, advisedCells: [],
+      });
+      walk.cell = fitCanvas(canvas, domain.rows, domain.cols, 640);
+      $("session").textContent = `Session ${created.session_id} · κ = ${created.kappa} · ` +
+        `window ${created.window}`;
+      document.body.dataset.sessionId = created.session_id;
+      showDecision(created.decision);
+      draw();
+      openSocket(created);
+      canvas.focus();
+    } catch (err) {
+      setStatus(`Could not start a walk: ${err.message}`, true);
+    }
+  }
+
+  async function loadDomains() {
+    const select = $("domain");
+    const listed = await fetchJSON("/domains");
+    const domains = Array.isArray(listed) ? listed : listed.domains;
+    const wanted = new URLSearchParams(location.search).get("domain");
+    select.replaceChildren(...domains.map((d) => new Option(d.name, d.name)));
+    const names = domains.map((d) => d.name);
+    select.value = names.includes(wanted) ? wanted : (names.includes("default") ? "default" : names[0]);
+  }
+
+  document.addEventListener("keydown", (e) => {
+    const a = KEYS[e.key];
+    if (!a || e.target.closest("input, select, textarea")) return;
+    e.preventDefault();
+    move(a);
+  });
+  $("restart").addEventListener("click", newWalk);
+  $("domain").addEventListener("change", newWalk);
+
+  loadDomains()
+    .then(newWalk)
+    .catch((err) => setStatus(`Could not load the mazes: ${err.message}`, true));
+  fetchJSON("/viewer").then((v) => MazeUI.showViewerLink($("viewer-link"), v)).catch(() => {});
+})();

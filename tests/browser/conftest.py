@@ -1,0 +1,148 @@
+"""Real service (uvicorn in a thread, temp data dir, free ports) and real headless Chromium.
+
+Every page a test opens records console errors and uncaught exceptions; the ``page`` fixture
+fails the test if there were any. Screenshots go to ``test-artifacts/`` at the repository root.
+"""
+
+from __future__ import annotations
+
+import re
+import shutil
+import socket
+import threading
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import httpx
+import pytest
+import uvicorn
+from fastapi import FastAPI
+from playwright.sync_api import Browser, ConsoleMessage, Page, sync_playwright
+
+from app.service.config import Settings
+from app.service.main import create_app
+from app.viewer.viewer import Viewer
+
+CHROMIUM = "/usr/bin/chromium"
+FLAGS = [
+    "--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
+    "--disable-component-update", "--disable-sync", "--no-first-run",
+    "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
+]  # fmt: skip
+ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts"
+ADMIN = "browser-test-admin-key"
+
+
+def free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+def wait_until(condition: Callable[[], object], timeout: float = 20.0, what: str = "") -> None:
+    """Poll ``condition`` until it is truthy; fail naming ``what`` after ``timeout`` seconds."""
+    deadline = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() > deadline:
+            pytest.fail(f"timed out after {timeout}s waiting for {what or condition}")
+        time.sleep(0.05)
+
+
+@dataclass
+class Service:
+    app: FastAPI
+    base: str
+    http: httpx.Client
+
+    @property
+    def viewer(self) -> Viewer:
+        viewer: Viewer = self.app.state.viewer
+        return viewer
+
+    def new_session(self, moves: str = "", kappa: float = 0.5) -> tuple[str, dict[str, str]]:
+        """A session on ``default`` that made ``moves`` (one list of events)."""
+        created = self.http.post("/domains/default/sessions", json={"kappa": kappa})
+        assert created.status_code == 201, created.text
+        body = created.json()
+        sid, auth = body["session_id"], {"Authorization": f"Bearer {body['token']}"}
+        self.move(sid, auth, body["decision"]["state"], moves)
+        return sid, auth
+
+    def move(self, sid: str, auth: dict[str, str], state: list[int], moves: str) -> list[int]:
+        for a in moves:
+            answer = self.http.post(
+                f"/sessions/{sid}/events", json={"state": state, "action": a}, headers=auth
+            )
+            assert answer.status_code == 200, answer.text
+            state = answer.json()["state"]
+        return state
+
+
+@pytest.fixture(scope="session")
+def service(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Service]:
+    settings = Settings(
+        host="127.0.0.1",
+        port=free_port(),
+        data_dir=tmp_path_factory.mktemp("browser-data"),
+        admin_key=ADMIN,
+        viewer_enabled=True,
+        viewer_port=free_port(),
+    )
+    app = create_app(settings)
+    server = uvicorn.Server(
+        uvicorn.Config(app, host="127.0.0.1", port=settings.port, log_level="warning")
+    )
+    thread = threading.Thread(target=server.run, name="uvicorn", daemon=True)
+    thread.start()
+    wait_until(lambda: server.started, 60.0, "uvicorn to start")
+    base = f"http://127.0.0.1:{settings.port}"
+    with httpx.Client(base_url=base, timeout=30.0) as http:
+        yield Service(app, base, http)
+    server.should_exit = True
+    thread.join(timeout=30.0)
+
+
+@pytest.fixture(scope="session")
+def browser() -> Iterator[Browser]:
+    if shutil.which(CHROMIUM) is None:
+        pytest.fail(f"{CHROMIUM} is missing: install Debian's chromium (make chromium)")
+    with sync_playwright() as pw:
+        chromium = pw.chromium.launch(executable_path=CHROMIUM, args=FLAGS)
+        yield chromium
+        chromium.close()
+
+
+@dataclass
+class Problems:
+    """Console errors and uncaught page errors seen by one page."""
+
+    messages: list[str] = field(default_factory=list)
+
+    def console(self, message: ConsoleMessage) -> None:
+        if message.type == "error":
+            self.messages.append(f"console error: {message.text} at {message.location}")
+
+    def page_error(self, error: Exception) -> None:
+        self.messages.append(f"uncaught: {error}")
+
+
+@pytest.fixture
+def page(browser: Browser, request: pytest.FixtureRequest) -> Iterator[Page]:
+    context = browser.new_context(viewport={"width": 1280, "height": 860})
+    tab = context.new_page()
+    tab.set_default_timeout(20_000)
+    problems = Problems()
+    tab.on("console", problems.console)
+    tab.on("pageerror", problems.page_error)
+    yield tab
+    context.close()
+    assert not problems.messages, "\n".join(problems.messages)
+
+
+def screenshot(page: Page, name: str) -> Path:
+    ARTIFACTS.mkdir(exist_ok=True)
+    path = ARTIFACTS / f"{re.sub(r'[^A-Za-z0-9_.-]', '_', name)}.png"
+    page.screenshot(path=str(path))
+    return path

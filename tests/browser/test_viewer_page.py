@@ -1,0 +1,71 @@
+"""The viser viewer, started by the service: a browser connects and the scene holds the maze."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from playwright.sync_api import Page, expect
+
+from tests.browser.conftest import Service, screenshot, wait_until
+
+pytestmark = pytest.mark.browser
+
+SCENE_NODES = {
+    "/maze/walls", "/maze/floor", "/maze/start", "/maze/goals", "/prior/arrows",
+    "/shading/cells", "/paths/lines", "/markers/points", "/advice/arrows",
+}  # fmt: skip
+
+
+def test_viewer_page_connects_and_shows_maze_prior_and_sessions(
+    service: Service, page: Page
+) -> None:
+    sessions = [service.new_session(moves)[0] for moves in ("EEEEN", "SSWWNNEE", "EEEWWWEEE")]
+    # `python -m app simulate` fills the scene with several explorers (sessions kept open)
+    before = {s["session_id"] for s in service.http.get("/overview").json()["sessions"]}
+    simulate = [
+        sys.executable, "-m", "app", "simulate", "--server", service.base, "--explorers", "4",
+        "--episodes", "4", "--steps", "60", "--keep", "--seed", "1",
+    ]  # fmt: skip
+    ran = subprocess.run(simulate, capture_output=True, text=True, timeout=120, check=False)
+    assert ran.returncode == 0, ran.stderr
+    simulated = {s["session_id"] for s in service.http.get("/overview").json()["sessions"]}
+    simulated -= before
+    assert len(simulated) == 4
+    viewer = service.viewer
+    assert viewer.server is not None
+    assert service.http.get("/viewer").json()["port"] == viewer.port
+
+    page.goto(f"http://127.0.0.1:{viewer.port}/")
+    expect(page.get_by_text("Connecting")).to_have_count(0, timeout=30_000)
+    wait_until(lambda: len(viewer.server.get_clients()) == 1, what="the viewer to see the browser")
+    wait_until(
+        lambda: (
+            viewer.scene is not None and set(sessions) | simulated <= set(viewer.scene.session_ids)
+        ),
+        what="the pump to draw the sessions",
+    )
+    scene = viewer.scene
+    assert scene is not None
+    domain = scene.domain
+    names = set(viewer.server.scene._handle_from_node_name)
+    assert names >= SCENE_NODES, SCENE_NODES - names
+    assert scene.walls.batched_positions.shape == (int(domain.walls.sum()), 3)
+    assert scene.prior_arrows.batched_positions.shape == (4 * domain.n_states, 3)
+    drawn = scene.session_nodes
+    assert drawn["/markers/points"].points.shape[0] == len(scene.session_ids) >= 7
+
+    # pick a session in the GUI (server side: the browser's panel follows)
+    assert viewer.controls is not None
+    viewer.controls.session.value = sessions[2]
+    expect(page.get_by_text("p_normal over time")).to_be_visible()
+    expect(page.get_by_text("steps 9", exact=False)).to_be_visible()
+
+    # the browser really renders the scene: walls, floor and arrows make a varied image
+    client = next(iter(viewer.server.get_clients().values()))
+    image = client.get_render(240, 320, timeout=60.0)
+    assert image.shape[:2] == (240, 320)
+    assert np.asarray(image, dtype=np.float64).std() > 10.0
+    screenshot(page, "viewer")

@@ -1,0 +1,62 @@
+"""/walk: a person walks with the arrow keys; moves reach the service; advice shows when given."""
+
+from __future__ import annotations
+
+import pytest
+from playwright.sync_api import Page, expect
+
+from tests.browser.conftest import ADMIN, Service, screenshot
+
+pytestmark = pytest.mark.browser
+
+
+def summary(service: Service, sid: str) -> dict[str, object]:
+    answer = service.http.get(f"/sessions/{sid}", headers={"X-API-Key": ADMIN})
+    assert answer.status_code == 200, answer.text
+    body: dict[str, object] = answer.json()
+    return body
+
+
+def test_walk_keys_move_the_explorer_and_advice_appears_when_lost(
+    service: Service, page: Page
+) -> None:
+    with page.expect_response(
+        lambda r: r.url.endswith("/domains/default/sessions") and r.request.method == "POST"
+    ) as created_info:
+        page.goto(service.base + "/walk")
+    created = created_info.value.json()
+    sid = created["session_id"]
+    assert created["decision"]["state"] == [28, 0]
+    expect(page.locator("#status")).to_contain_text("Connected")
+
+    # walking like the experts (east along the bottom corridor): recorded, no advice
+    for _ in range(3):
+        page.keyboard.press("ArrowRight")
+    expect(page.locator("#steps")).to_have_text("3")
+    expect(page.locator("#position")).to_have_text("[28, 3]")
+    seen = summary(service, sid)
+    assert seen["steps"] == 3 and seen["position"] == [28, 3]
+    assert float(page.locator("#p-normal").inner_text()) > 0.5
+    expect(page.locator("#advice")).to_be_hidden()
+
+    # a lost-looking walk: bumping into the walls and going back and forth
+    for key in ["ArrowDown", "ArrowDown", "ArrowLeft", "ArrowRight", "ArrowLeft", "ArrowRight"]:
+        page.keyboard.press(key)
+    expect(page.locator("#steps")).to_have_text("9")
+    expect(page.locator("#advice")).to_be_visible()
+    items = page.locator("#advice-list li")
+    expect(items).to_have_count(4)
+    expect(items.first).to_contain_text("%")
+    seen = summary(service, sid)
+    assert seen["steps"] == 9 and seen["position"] == [28, 3]
+    advice_count = seen["advice_count"]
+    assert isinstance(advice_count, int) and advice_count >= 1
+    expect(page.locator("#advice-count")).to_have_text(str(advice_count))
+    shown_p = float(page.locator("#p-normal").inner_text())
+    assert shown_p == pytest.approx(seen["p_normal"], abs=6e-4)
+    # the most likely direction, as advised on the page, is the prior's at that cell
+    prior = service.http.get("/domains/default/prior").json()["theta"][28][3]
+    best = "NESW"[max(range(4), key=lambda a: prior[a])]
+    shown = {li.get_attribute("data-action"): li.inner_text() for li in items.all()}
+    assert f"{100 * max(prior):.1f}%" in shown[best]
+    screenshot(page, "walk-advised")

@@ -1,0 +1,123 @@
+"""The adapter between the service and the viewer: snapshots, the lifespan hook, GET /viewer."""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+
+from app.service.config import Settings
+from app.service.main import create_app
+from app.service.viewer_feed import ServiceFeed
+from app.viewer.viewer import Viewer
+from tests.viewer.conftest import free_port, wait_until
+
+ADMIN = "viewer-test-admin-key"
+
+
+def settings(tmp: Path, viewer: bool) -> Settings:
+    return Settings(
+        data_dir=tmp,
+        admin_key=ADMIN,
+        viewer_enabled=viewer,
+        viewer_port=free_port(),
+        bootstrap_per_goal=2,
+    )
+
+
+@pytest.fixture(scope="module")
+def client(tmp_path_factory: pytest.TempPathFactory) -> Iterator[TestClient]:
+    app = create_app(settings(tmp_path_factory.mktemp("feed"), viewer=False))
+    with TestClient(app) as c:
+        yield c
+
+
+def walk(client: TestClient, moves: str) -> tuple[str, dict[str, str]]:
+    """A new session that makes ``moves`` one event at a time; its id and auth header."""
+    created = client.post("/domains/default/sessions", json={"kappa": 0.5})
+    assert created.status_code == 201
+    body = created.json()
+    auth = {"Authorization": f"Bearer {body['token']}"}
+    state = body["decision"]["state"]
+    for a in moves:
+        event = {"state": state, "action": a}
+        answer = client.post(f"/sessions/{body['session_id']}/events", json=event, headers=auth)
+        assert answer.status_code == 200
+        state = answer.json()["state"]
+    return body["session_id"], auth
+
+
+def test_feed_snapshot_holds_domains_with_their_prior(client: TestClient) -> None:
+    feed = ServiceFeed(client.app.state.service)  # type: ignore[attr-defined]
+    snap = feed()
+    view = snap.domains["default"]
+    prior = client.get("/domains/default/prior").json()
+    grid = np.array([[v if v is not None else [np.nan] * 4 for v in row] for row in prior["theta"]])
+    cells = view.domain.cells
+    np.testing.assert_allclose(view.theta, grid[cells[:, 0], cells[:, 1]], rtol=1e-12)
+    assert feed().domains["default"] is view  # nothing changed: the same view, same version
+
+
+def test_feed_snapshot_holds_each_session_as_the_service_sees_it(client: TestClient) -> None:
+    sid, auth = walk(client, "EEEWW")
+    snap = ServiceFeed(client.app.state.service)()  # type: ignore[attr-defined]
+    mine = next(s for s in snap.sessions if s.session_id == sid)
+    summary = client.get(f"/sessions/{sid}", headers=auth).json()
+    assert mine.steps == summary["steps"] == 5
+    assert list(mine.position) == summary["position"]
+    assert mine.p_normal == pytest.approx(summary["p_normal"])
+    assert mine.advice_count == summary["advice_count"]
+    assert mine.total_cost == pytest.approx(summary["total_cost"])
+    assert [list(c) for c in mine.path] == [[28, 0], [28, 1], [28, 2], [28, 3], [28, 2], [28, 1]]
+    assert len(mine.p_normal_history) == 6
+    assert len(mine.advice) <= mine.advice_count
+    for given in mine.advice:
+        assert sum(given.probabilities) == pytest.approx(1.0)
+
+
+def test_feed_prior_version_goes_up_when_trajectories_arrive(client: TestClient) -> None:
+    feed = ServiceFeed(client.app.state.service)  # type: ignore[attr-defined]
+    before = feed().domains["default"]
+    steps = [{"state": [28, c], "action": "E"} for c in range(0, 6)]
+    answer = client.post(
+        "/domains/default/trajectories",
+        json={"trajectories": [{"steps": steps}]},
+        headers={"X-API-Key": ADMIN},
+    )
+    assert answer.status_code == 201
+    after = feed().domains["default"]
+    assert after.prior_version == before.prior_version + 1
+    assert not np.array_equal(after.theta, before.theta)
+
+
+def test_viewer_status_says_disabled_without_a_viewer(client: TestClient) -> None:
+    answer = client.get("/viewer")
+    assert answer.status_code == 200
+    assert answer.json() == {"enabled": False, "port": None, "clients": 0, "ticks": 0}
+
+
+def test_service_starts_and_stops_the_viewer_when_enabled(tmp_path: Path) -> None:
+    cfg = settings(tmp_path, viewer=True)
+    app = create_app(cfg)
+    with TestClient(app) as c:
+        viewer: Viewer = app.state.viewer
+        status = c.get("/viewer").json()
+        assert status["enabled"] and status["clients"] == 0
+        assert status["port"] == viewer.port
+        assert viewer.port == cfg.viewer_port
+        ticked = threading.Event()
+        real_feed = viewer.feed
+
+        def watched() -> object:
+            ticked.set()
+            return real_feed()
+
+        viewer.feed = watched  # type: ignore[assignment]
+        assert ticked.wait(timeout=10.0)  # the pump reads the service by itself
+        wait_until(lambda: c.get("/viewer").json()["ticks"] > status["ticks"])
+    assert app.state.viewer is None
+    assert viewer._thread is not None and not viewer._thread.is_alive()

@@ -1,0 +1,170 @@
+"""The Viewer's pump and controls, fed plain snapshots (no service, no browser)."""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from app.domain.generate import generate_domain
+from app.domain.grid import GridDomain
+from app.viewer import geometry as geo
+from app.viewer.controls import LOST_PICKED, NONE
+from app.viewer.state import DomainView, Snapshot
+from app.viewer.viewer import Viewer, pump_wait
+from tests.viewer.conftest import FakeFeed, free_port, walk
+
+
+def snapshot(domain: GridDomain, theta: np.ndarray, n_sessions: int, version: int = 0) -> Snapshot:
+    rng = np.random.default_rng(7)
+    sessions = [walk(domain, theta, f"w{i}", 30 + 10 * i, rng) for i in range(n_sessions)]
+    return Snapshot({domain.name: DomainView(domain, theta, version)}, sessions)
+
+
+def test_viewer_tick_draws_the_first_domain(
+    viewer: Viewer, feed: FakeFeed, domain: GridDomain, theta: np.ndarray
+) -> None:
+    feed.snapshot = snapshot(domain, theta, 2)
+    viewer.tick()
+    assert viewer.controls is not None and viewer.scene is not None
+    assert viewer.controls.domain.options == (domain.name,)
+    assert viewer.controls.picked_domain == domain.name
+    assert viewer.scene.domain is domain
+    assert viewer.controls.session.options == (NONE, "w0", "w1")
+    assert set(viewer.scene.session_ids) == {"w0", "w1"}
+    assert viewer.server is not None
+    assert viewer.server.initial_camera.look_at[2] == 0.0
+
+
+def test_viewer_session_options_follow_the_live_sessions(
+    viewer: Viewer, feed: FakeFeed, domain: GridDomain, theta: np.ndarray
+) -> None:
+    feed.snapshot = snapshot(domain, theta, 3)
+    viewer.tick()
+    assert viewer.controls is not None
+    viewer.controls.session.value = "w2"
+    viewer.tick()
+    assert "steps **50**" in viewer.controls.stats.content
+    assert viewer.controls.plot.visible
+    x, y = viewer.controls.plot.data
+    assert x[-1] == 50 and len(x) == len(y) == 51
+    feed.snapshot = snapshot(domain, theta, 2)  # w2 ended
+    viewer.tick()
+    assert viewer.controls.session.options == (NONE, "w0", "w1")
+    assert viewer.controls.picked_session is None
+    assert viewer.controls.stats.content == "No session picked."
+
+
+def test_viewer_kappa_slider_and_lost_mode_drive_the_shading(
+    viewer: Viewer, feed: FakeFeed, domain: GridDomain, theta: np.ndarray
+) -> None:
+    feed.snapshot = snapshot(domain, theta, 1)
+    viewer.tick()
+    controls, scene = viewer.controls, viewer.scene
+    assert controls is not None and scene is not None
+    for kappa in (0.1, 0.8):
+        controls.kappa.value = kappa
+        viewer.tick()
+        assert scene.shaded.sum() == geo.advised_cells(theta, kappa, 0.0).sum()
+        assert f"kappa = {kappa:.2f}" in controls.shading_text.content
+    controls.session.value = "w0"
+    controls.lost.value = LOST_PICKED
+    viewer.tick()
+    p = feed.snapshot.sessions[0].p_normal
+    assert np.array_equal(scene.shaded, geo.advised_cells(theta, 0.8, p))
+
+
+def test_viewer_updates_the_prior_when_its_version_changes(
+    viewer: Viewer, feed: FakeFeed, domain: GridDomain, theta: np.ndarray
+) -> None:
+    feed.snapshot = snapshot(domain, theta, 0)
+    viewer.tick()
+    new = np.roll(theta, 2, axis=1)
+    feed.snapshot = Snapshot({domain.name: DomainView(domain, new, 1)})
+    viewer.tick()
+    assert viewer.scene is not None
+    scales = viewer.scene.prior_arrows.batched_scales[:, 0]
+    np.testing.assert_allclose(scales, geo.ARROW_REACH * new.ravel(), rtol=1e-6)
+
+
+def test_viewer_layer_checkboxes_hide_layers(
+    viewer: Viewer, feed: FakeFeed, domain: GridDomain, theta: np.ndarray
+) -> None:
+    feed.snapshot = snapshot(domain, theta, 1)
+    viewer.tick()
+    assert viewer.controls is not None and viewer.scene is not None
+    viewer.controls.layers["prior"].value = False
+    viewer.tick()
+    assert not viewer.scene.frames["prior"].visible
+    assert viewer.scene.frames["paths"].visible
+
+
+def test_viewer_switches_domains_and_clears_when_none_left(
+    viewer: Viewer, feed: FakeFeed, domain: GridDomain, theta: np.ndarray
+) -> None:
+    other = generate_domain(7, 9, seed=1, n_goals=2)
+    other_theta = np.full((other.n_states, 4), 0.25)
+    feed.snapshot = Snapshot(
+        {domain.name: DomainView(domain, theta), other.name: DomainView(other, other_theta)}
+    )
+    viewer.tick()
+    assert viewer.controls is not None
+    viewer.controls.domain.value = other.name
+    viewer.tick()
+    assert viewer.scene is not None and viewer.scene.domain is other
+    assert viewer.scene.walls.batched_positions.shape[0] == int(other.walls.sum())
+    feed.snapshot = Snapshot()
+    viewer.tick()
+    assert viewer.scene is None
+    assert viewer.controls.domain.options == (NONE,)
+
+
+def test_viewer_pump_ticks_by_itself_and_survives_a_failing_feed(
+    domain: GridDomain, theta: np.ndarray
+) -> None:
+    good = snapshot(domain, theta, 1)
+    ticked = threading.Event()
+    calls = {"n": 0}
+
+    def flaky() -> Snapshot:
+        calls["n"] += 1
+        if calls["n"] == 1:
+            raise RuntimeError("feed failed once")
+        ticked.set()
+        return good
+
+    viewer = Viewer(flaky, port=free_port(), rate_hz=50.0, idle_rate_hz=50.0)
+    viewer.start()
+    try:
+        assert ticked.wait(timeout=10.0)
+        # the pump is not per event: it read the feed, it did not get pushed to
+        assert calls["n"] >= 2
+    finally:
+        viewer.stop()
+    assert viewer.scene is not None and viewer.scene.domain is domain
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [({"rate_hz": 0.0}, "rate_hz"), ({"idle_rate_hz": -1.0}, "idle_rate_hz"),
+     ({"max_share": 0.0}, "max_share"), ({"max_share": 1.5}, "max_share")],
+)  # fmt: skip
+def test_viewer_refuses_bad_pacing(kwargs: dict[str, float], message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        Viewer(Snapshot, **kwargs)
+
+
+@given(st.floats(0.0, 2.0), st.floats(0.01, 2.0), st.floats(0.01, 1.0))
+def test_pump_wait_keeps_the_rate_and_caps_the_share(
+    elapsed: float, period: float, share: float
+) -> None:
+    wait = pump_wait(elapsed, period, share)
+    assert wait >= 0.0
+    assert elapsed + wait >= period - 1e-12  # never faster than the rate
+    if elapsed > 0:
+        assert elapsed / (elapsed + wait) <= share + 1e-9  # never more than the share
+    if elapsed <= share * period:  # a cheap tick: the plain fixed rate
+        assert elapsed + wait == pytest.approx(period)
