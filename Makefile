@@ -35,8 +35,9 @@ format: venv
 test: venv chromium lint
 	$(BIN)/python -m pytest
 
+## The service on 127.0.0.1:8000 with the viewer on :8080; SQLite and the admin key under ./data.
 run: venv
-	$(BIN)/python -m app train --out prior.npz
+	$(BIN)/python -m app serve
 
 bench: venv
 	$(BIN)/python benchmarks/bench_core.py --write docs/PERFORMANCE.md
