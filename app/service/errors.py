@@ -47,12 +47,29 @@ def allowed_methods(app: FastAPI, path: str) -> list[str]:
 
 async def _http_error(request: Request, exc: Exception) -> Response:
     assert isinstance(exc, StarletteHTTPException)
+    unreadable = _unreadable_body(request, exc.__cause__) if exc.status_code == 400 else None
+    if unreadable is not None:
+        return unreadable
     if exc.status_code == 405:
         allowed = allowed_methods(request.app, request.url.path)
         if allowed:
             detail = f"{request.method} is not allowed here: use {', '.join(allowed)}"
             return _json(405, detail, headers={"Allow": ", ".join(allowed)})
     return await http_exception_handler(request, exc)
+
+
+def _unreadable_body(request: Request, cause: BaseException | None) -> JSONResponse | None:
+    """Why FastAPI could not read a JSON body (it answers every such failure with one vague
+    400): over the size limit while it was still arriving (413), nested too deeply for the
+    parser, or not text."""
+    if isinstance(cause, _TooLarge):
+        limit = request.app.state.settings.max_body_bytes
+        return _json(413, f"the request body is larger than {limit} bytes")
+    if isinstance(cause, RecursionError):
+        return _json(400, TOO_DEEP)
+    if isinstance(cause, UnicodeDecodeError):
+        return _json(400, f"the JSON body is not valid UTF-8 text: {cause.reason}")
+    return None
 
 
 async def _validation(_: Request, exc: Exception) -> JSONResponse:
@@ -80,8 +97,11 @@ async def _no_session(_: Request, exc: Exception) -> JSONResponse:
     return _json(404, f"no live session {exc.args[0]!r} (it never existed, ended or expired)")
 
 
+TOO_DEEP = "the JSON body is nested too deeply to parse"
+
+
 async def _too_deep(_: Request, exc: Exception) -> JSONResponse:
-    return _json(400, "the JSON body is nested too deeply to parse")
+    return _json(400, TOO_DEEP)
 
 
 def install_error_handlers(app: FastAPI) -> None:

@@ -46,6 +46,9 @@ Kappa = Annotated[
     ),
 ]  # fmt: skip
 Window = Annotated[int, Field(strict=True, ge=1, description="History window W (pairs).")]
+#: alpha0 bounds: beyond them theta over- or underflows (4 alpha0 is inf, alpha0 / count is 0)
+#: and a prior's tables cannot be built; the store must never hold such a domain.
+ALPHA0_MIN, ALPHA0_MAX = 1e-6, 1e6
 
 
 class Strict(BaseModel):
@@ -75,7 +78,12 @@ class DomainBase(Strict):
         min_length=1,
     )
     alpha0: float = Field(
-        1.0, gt=0.0, allow_inf_nan=False, description="Dirichlet hyperprior alpha0 (> 0)."
+        1.0,
+        strict=True,  # true is not a number
+        ge=ALPHA0_MIN,
+        le=ALPHA0_MAX,
+        allow_inf_nan=False,
+        description=f"Dirichlet hyperprior alpha0 ({ALPHA0_MIN:g} to {ALPHA0_MAX:g}).",
     )
 
 

@@ -1,0 +1,90 @@
+"""A real server per test module: ``python -m app serve`` (uvicorn) on a free loopback port,
+a temporary data dir, extra ``ADVISOR_*`` settings from the environment."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import httpx
+import pytest
+
+from tests.client.conftest import free_port
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+@dataclass
+class Live:
+    """A running ``python -m app serve`` process."""
+
+    url: str
+    port: int
+    admin_key: str
+    data_dir: Path
+    process: subprocess.Popen[bytes]
+    log: Path
+
+    @property
+    def admin(self) -> dict[str, str]:
+        return {"X-API-Key": self.admin_key}
+
+    def pid(self) -> int:
+        return self.process.pid
+
+
+def start(data_dir: Path, port: int | None = None, timeout: float = 60.0, **env: str) -> Live:
+    """Start the service on 127.0.0.1 and wait until ``/health`` answers (or fail, showing its
+    log). ``env``: extra settings, e.g. ``ADVISOR_MAX_SESSIONS="5"``."""
+    port = port or free_port()
+    data_dir.mkdir(parents=True, exist_ok=True)
+    log = data_dir.parent / f"server-{port}.log"
+    environ = os.environ | {"ADVISOR_BOOTSTRAP_PER_GOAL": "2"} | env
+    cmd = [sys.executable, "-m", "app", "serve", "--host", "127.0.0.1", "--port", str(port),
+           "--data-dir", str(data_dir), "--no-viewer", "--log-level", "warning"]  # fmt: skip
+    with log.open("ab") as out:
+        proc = subprocess.Popen(cmd, cwd=REPO, env=environ, stdout=out, stderr=out)
+    url = f"http://127.0.0.1:{port}"
+    deadline = time.monotonic() + timeout
+    with httpx.Client(timeout=2.0) as http:
+        while True:
+            if proc.poll() is not None:
+                raise RuntimeError(f"server exited {proc.returncode}: {log.read_text()[-2000:]}")
+            with contextlib.suppress(httpx.TransportError):
+                if http.get(f"{url}/health").status_code == 200:
+                    break
+            if time.monotonic() > deadline:
+                proc.kill()
+                proc.wait(10)
+                raise RuntimeError(f"server at {url} did not answer /health: {log.read_text()}")
+            time.sleep(0.05)
+    key = (data_dir / "admin_key").read_text().strip()
+    return Live(url, port, key, data_dir, proc, log)
+
+
+def stop(live: Live, sig: int = signal.SIGTERM) -> int:
+    """Stop the server (SIGTERM: a clean shutdown; SIGKILL: a crash); its exit code."""
+    if live.process.poll() is None:
+        live.process.send_signal(sig)
+    return live.process.wait(30)
+
+
+def server_errors(live: Live) -> list[str]:
+    """Tracebacks the server logged (uvicorn logs every unhandled exception)."""
+    text = live.log.read_text(errors="replace")
+    return [line for line in text.splitlines() if "Exception in ASGI application" in line]
+
+
+@pytest.fixture(scope="module")
+def live(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Live]:
+    """One server for the module, stopped (cleanly) after it."""
+    server = start(tmp_path_factory.mktemp("live") / "data")
+    yield server
+    stop(server)
