@@ -4,8 +4,9 @@ Plain Python, one step at a time: the obvious version the compiled kernels in
 :mod:`app.agents.fast` are tested against, and readable documentation of the protocol.
 
 One step (METHOD.md): the advisor has decided for the explorer's state ``s``; the explorer
-acts (sampling theta_s if advised and ``advised`` is on), moves to ``s'``; reaching its goal
-ends the episode; otherwise the advisor appends (s, a) to its window and decides for ``s'``.
+acts (sampling the advice, ``decision.advice``, if advised and ``advised`` is on), moves to
+``s'``; reaching its goal ends the episode; otherwise the advisor appends (s, a) to its
+window and decides for ``s'``. Any advisor of :mod:`app.advice.strategies` can watch.
 With ``advised=False`` the advisor still watches (its P(M1 | H) is recorded) but its advice
 is not passed on.
 """
@@ -71,7 +72,8 @@ def run_episode(
     for _ in range(max_steps):
         rec.states.append(s)
         rec.decisions.append(decision)
-        advice = advisor.tables.theta[s] if advised and decision.advise else None
+        # the advisor's payload: theta_s for the paper's rule, theta^w_s for goal-aware advice
+        advice = np.asarray(decision.advice) if advised and decision.advice is not None else None
         a = explorer.act(s, rng, advice)
         s_next = int(domain.next_state[s, a])
         rec.actions.append(a)

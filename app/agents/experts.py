@@ -13,6 +13,7 @@ from typing import Literal
 import numpy as np
 import numpy.typing as npt
 
+from app.advice.goals import GoalPriors
 from app.advice.priors import ActionPrior
 from app.domain.grid import N_ACTIONS, GridDomain
 
@@ -111,3 +112,23 @@ def train_prior(
         )
     trajectories = expert_trajectories(domain, rng, source, per_goal, epsilon)
     return prior.fit(trajectories, domain.n_states)
+
+
+def train_goal_priors(
+    domain: GridDomain,
+    rng: np.random.Generator,
+    source: Literal["start", "anywhere"] = "start",
+    per_goal: int = 10,
+    alpha0: float = 1.0,
+) -> tuple[ActionPrior, GoalPriors]:
+    """The pooled prior and the per-goal counts (goal-aware advice) from the same experts.
+
+    With the same ``rng`` the pooled prior is :func:`train_prior`'s: the trajectories are
+    drawn in the same order (``per_goal`` for each goal in turn), and each is labelled with
+    the goal it was drawn for.
+    """
+    trajectories = expert_trajectories(domain, rng, source, per_goal)
+    labels: list[int | None] = [g for g in range(len(domain.goals)) for _ in range(per_goal)]
+    prior = ActionPrior(alpha0=alpha0).fit(trajectories, domain.n_states)
+    goal_priors = GoalPriors(domain.n_states, domain.goals, alpha0).add(trajectories, labels)
+    return prior, goal_priors
