@@ -30,6 +30,7 @@ class Name(StrEnum):
     figure7 = "figure7"
     difficulty = "difficulty"
     ablations = "ablations"
+    strategies = "strategies"
     all = "all"
 
 
@@ -75,7 +76,10 @@ def experiment(
     seed: Annotated[int, typer.Option(help="Seeds every random choice.")] = 0,
     tasks: Annotated[
         int | None,
-        typer.Option(min=1, help="Random one-shot tasks per explorer [20; ablations 200]."),
+        typer.Option(
+            min=1,
+            help="Random one-shot tasks per explorer [20; ablations 200; strategies 50 per map].",
+        ),
     ] = None,
     kappa: Annotated[float, typer.Option(min=0.0, help="Cost of one piece of advice.")] = 0.5,
     alpha0: Annotated[float, typer.Option(help="Dirichlet hyperprior alpha0 (> 0).")] = 1.0,
@@ -100,14 +104,39 @@ def experiment(
     trajectories: Annotated[
         int, typer.Option(min=1, help="Figure 7: trajectories per explorer and kappa.")
     ] = 10,
+    maps: Annotated[
+        int | None, typer.Option(min=0, help="Strategies: generated mazes besides --maze [10].")
+    ] = None,
+    map_size: Annotated[
+        int | None, typer.Option(min=5, help="Strategies: rows = columns of a generated maze [29].")
+    ] = None,
+    braid: Annotated[
+        float | None, typer.Option(help="Strategies: braid of the braided mazes [0.2].")
+    ] = None,
+    beta: Annotated[
+        float | None,
+        typer.Option(help="Strategies: goal-aware weight of per-goal likelihoods, 0..1 [0]."),
+    ] = None,
+    workers: Annotated[
+        int | None, typer.Option(min=1, help="Strategies: worker processes [2].")
+    ] = None,
     out: Annotated[
         Path | None, typer.Option(help="Results directory [results/<name>-<time>].")
     ] = None,
     progress: Annotated[bool, typer.Option(help="Progress bars.")] = True,
 ) -> None:
-    """Reproduce the paper's Table I and Figures 5-7 (or the ablations) on a maze."""
+    """Reproduce the paper's Table I and Figures 5-7 (or the ablations, or compare the
+    advising strategies) on a maze."""
     options = {k: v for k, v in locals().items() if k not in ("name", "out")}
-    from app.experiments import ablations, difficulty, figure5, figure6, figure7, table1
+    from app.experiments import (
+        ablations,
+        difficulty,
+        figure5,
+        figure6,
+        figure7,
+        strategies,
+        table1,
+    )
     from app.experiments.output import RunDir, default_run_dir
 
     run_dir = RunDir(out or default_run_dir(name.value))
@@ -124,6 +153,7 @@ def experiment(
                 Name.figure7: figure7,
                 Name.difficulty: difficulty,
                 Name.ablations: ablations,
+                Name.strategies: strategies,
             }[name]
             module.run(build(module.Args, options), run_dir)
     except (ValueError, MapError) as exc:
