@@ -333,6 +333,7 @@ def run(args: Args, out: RunDir) -> dict[str, Any]:
     out.json("strategies", result)
     out.csv("strategies", summary["rows"])
     out.csv("strategies_maps", summary["map_rows"])
+    out.csv("strategies_versus", summary["versus"])
     out.csv("strategies_tasks", report.task_rows(results))
     out.markdown("strategies", report.markdown(summary, args, elapsed))
     for scope, fig in report.plots(summary, args).items():

@@ -107,8 +107,34 @@ def summarise(results: Results, args: Args) -> dict[str, Any]:
     return {
         "rows": rows,
         "map_rows": map_rows,
+        "versus": versus(results),
         "targets": targets(results, rows, args),
     }
+
+
+def versus(results: Results) -> list[dict[str, Any]]:
+    """goal_aware at its default level against every other curve's default, paired per task
+    over the suite (positive: goal-aware succeeds more often)."""
+    d = defaults(results)
+    ga = d["goal_aware"]
+    out = []
+    for explorer in FIXED_EXPLORERS:
+        data = results.data[explorer]
+        for name, c in d.items():
+            if name == "goal_aware":
+                continue
+            diff = paired(data[ga.key]["success"], data[c.key]["success"])
+            out.append(
+                {
+                    "explorer": explorer,
+                    "goal_aware": ga.key,
+                    "other": c.key,
+                    "difference": diff[0],
+                    "difference_ci_low": diff[1],
+                    "difference_ci_high": diff[2],
+                }
+            )
+    return out
 
 
 def find(rows: list[dict[str, Any]], scope: str, explorer: str, key: str) -> dict[str, Any]:
@@ -282,13 +308,14 @@ def markdown(summary: dict[str, Any], args: Args, elapsed: float) -> str:
                 "advice /task",
                 "change vs no advice",
                 "trapped / failed",
-                f"{args.maze.stem} success %",
-                f"{args.maze.stem} advice /100",
+                f"map `{args.maze.stem}` success %",
+                f"map `{args.maze.stem}` advice /100",
             ],
             table,
         )
     )
     parts.append(helps_table(rows, default_keys, configs))
+    parts.append(versus_table(summary["versus"], default_keys, configs))
     parts.append(kinds_table(rows, default_keys, configs))
     parts.append(targets_text(summary["targets"]))
     parts.append(sweep_table(rows))
@@ -333,6 +360,23 @@ def helps_table(
         "**Who advice helps and who it hurts** (suite, default levels): change in success "
         "(percentage points) against no advice; *helps* / *hurts* when the paired 95% interval "
         "excludes 0.\n\n" + markdown_table(header, table)
+    )
+
+
+def versus_table(
+    versus: list[dict[str, Any]], keys: list[str], configs: dict[str, dict[str, Any]]
+) -> str:
+    others = [k for k in keys if configs[k]["curve"] != "goal_aware"]
+    by = {(v["explorer"], v["other"]): v for v in versus}
+    table = [
+        [explorer, *(change(by[explorer, k], "difference") for k in others)]
+        for explorer in FIXED_EXPLORERS
+    ]
+    ga = next(k for k in keys if configs[k]["curve"] == "goal_aware")
+    return (
+        f"**Goal-aware advice against every other default** (suite): success of "
+        f"{short(configs[ga])} minus the other's, percentage points, paired per task "
+        "[95% CI].\n\n" + markdown_table(["explorer", *(short(configs[k]) for k in others)], table)
     )
 
 

@@ -44,6 +44,7 @@ def test_strategies_writes_every_file(tiny_run: tuple[Path, dict]) -> None:  # t
         "strategies.csv",
         "strategies_maps.csv",
         "strategies_tasks.csv",
+        "strategies_versus.csv",
         "strategies.md",
         "strategies_suite.png",
         "strategies_file.png",
@@ -52,6 +53,8 @@ def test_strategies_writes_every_file(tiny_run: tuple[Path, dict]) -> None:  # t
     assert [m["kind"] for m in saved["maps"]] == ["file", "perfect", "braided"]
     text = (out / "strategies.md").read_text()
     assert "Who advice helps" in text and "Target 1" in text and "Target 2" in text
+    assert "against every other default" in text
+    assert {v["other"] for v in result["versus"]} >= {"none", "paper@0.5", "always"}
     n_configs = len(result["configs"])
     tasks = (out / "strategies_tasks.csv").read_text().splitlines()
     assert len(tasks) == 1 + 5 * n_configs * 3 * 2  # explorers x configs x maps x tasks
