@@ -64,9 +64,12 @@ class RuleAdvisor(Advisor):
         self._rng = np.random.default_rng(self.params.seed)
         super().__init__(tables, kappa, window)
 
-    def start(self, state: int) -> Decision:
+    def reset(self) -> None:
+        """Forget the history, the cost, the last move, and restart the random rule's draws
+        (a new explorer is advised as a fresh advisor would advise it)."""
+        super().reset()
         self._last = None
-        return super().start(state)
+        self._rng = np.random.default_rng(self.params.seed)
 
     def observe(self, state: int, action: int, next_state: int) -> Decision:
         self.append(state, action)

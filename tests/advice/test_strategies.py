@@ -121,6 +121,23 @@ def test_random_rule_rate_and_seed() -> None:
     assert sum(run(0.2, 7)) / 2001 == pytest.approx(0.2, abs=0.03)
 
 
+@pytest.mark.parametrize("rule", ["early", "importance", "mistake", "random", "always"])
+def test_a_restarted_rule_advisor_advises_as_a_fresh_one(rule: str) -> None:
+    rng = np.random.default_rng(3)
+    theta = rng.dirichlet(np.full(4, 0.5), size=6)
+    tables = AdviceTables.paper(theta)
+    params = StrategyParams(rate=0.3, threshold=0.2, n_steps=4, seed=11)
+    moves = [(int(s), int(a), int(s2)) for s, a, s2 in rng.integers(0, 6, (300, 3)) % [6, 4, 6]]
+
+    def episode(adv: RuleAdvisor) -> list[tuple[bool, float]]:
+        out = [adv.start(0)] + [adv.observe(s, a, s2) for s, a, s2 in moves]
+        return [(d.advise, d.kl) for d in out]
+
+    reused = RuleAdvisor(tables, rule, params=params)
+    episode(reused)  # a first explorer
+    assert episode(reused) == episode(RuleAdvisor(tables, rule, params=params))
+
+
 def test_make_advisor_builds_each_strategy_and_rejects_unknown() -> None:
     theta = np.full((3, 4), 0.25)
     tables = AdviceTables.paper(theta)
