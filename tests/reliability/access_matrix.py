@@ -1,0 +1,224 @@
+"""The access matrix: every route of the service with every kind of credential, as the service
+answers it. ``python -m tests.reliability.access_matrix --write docs/ACCESS.md`` writes it;
+``tests/reliability/test_access.py`` checks that the service answers as the policy says and
+that the document is up to date.
+
+Every cell is one request to a fresh resource (a new session, a new domain name), so a cell
+that deletes or ends something cannot change another cell's answer.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+
+from fastapi.testclient import TestClient
+from starlette.websockets import WebSocketDisconnect
+
+from app.service.config import REPO_ROOT
+from app.service.main import create_app
+from tests.service.conftest import TINY, make_settings
+
+COLUMNS = {
+    "none": "no credentials",
+    "wrong": "wrong admin key",
+    "other": "another session's token",
+    "admin": "admin key",
+    "own": "the session's own token",
+}
+E = {"state": [5, 1], "action": "E"}
+TRAJECTORIES = {"trajectories": [{"steps": [E]}]}
+
+
+@dataclass(frozen=True)
+class Route:
+    method: str
+    path: str
+    who: str  # "anyone", "admin", "token" (the session's), "token or admin"
+    body: object = None
+
+
+ROUTES = [
+    Route("GET", "/health", "anyone"),
+    Route("GET", "/domains", "anyone"),
+    Route("GET", "/domains/{name}", "anyone"),
+    Route("PUT", "/domains/{new}", "admin", {"map": TINY}),
+    Route("DELETE", "/domains/{new}", "admin"),
+    Route("POST", "/domains/{name}/trajectories", "admin", TRAJECTORIES),
+    Route("GET", "/domains/{name}/prior", "anyone"),
+    Route("POST", "/domains/{name}/sessions", "anyone", {}),
+    Route("POST", "/sessions/{session_id}/events", "token", E),
+    Route("GET", "/sessions/{session_id}", "token or admin"),
+    Route("DELETE", "/sessions/{session_id}", "token or admin"),
+    Route("GET", "/sessions", "admin"),
+    Route("WS", "/sessions/{session_id}/stream", "token"),
+    Route("GET", "/overview", "anyone"),
+    Route("GET", "/viewer", "anyone"),
+    Route("GET", "/", "anyone"),
+    Route("GET", "/walk", "anyone"),
+]
+#: What each kind of route answers to each column ("ok": its success status).
+POLICY = {
+    "anyone": {"none": "ok", "wrong": "ok", "other": "ok", "admin": "ok", "own": "ok"},
+    "admin": {"none": "401", "wrong": "403", "other": "401", "admin": "ok", "own": "401"},
+    "token": {"none": "401", "wrong": "401", "other": "403", "admin": "401", "own": "ok"},
+    "token or admin": {"none": "401", "wrong": "403", "other": "403", "admin": "ok", "own": "ok"},
+}
+#: A websocket refusal is a close code: 4400 + the HTTP status it stands for.
+WS_CLOSE = {"401": "close 4401", "403": "close 4403"}
+
+
+@dataclass
+class Cell:
+    """One measured answer: its status, and whether it is a success."""
+
+    status: str
+    ok: bool
+
+
+class Service:
+    """A fresh app (TestClient) on a temporary data directory, with helpers for fresh
+    resources."""
+
+    def __init__(self, client: TestClient):
+        self.client = client
+        self.admin_key: str = client.app.state.service.admin_key  # type: ignore[attr-defined]
+        self.counter = 0
+        r = client.put("/domains/tiny", json={"map": TINY}, headers=self.admin)
+        assert r.status_code == 201, r.text
+
+    @property
+    def admin(self) -> dict[str, str]:
+        return {"X-API-Key": self.admin_key}
+
+    def session(self) -> tuple[str, str]:
+        r = self.client.post("/domains/tiny/sessions", json={})
+        assert r.status_code == 201, r.text
+        return r.json()["session_id"], r.json()["token"]
+
+    def new_domain(self, create: bool) -> str:
+        self.counter += 1
+        name = f"fresh{self.counter}"
+        if create:
+            assert self.client.put(f"/domains/{name}", json={"map": TINY}, headers=self.admin)
+        return name
+
+
+@contextmanager
+def service() -> Iterator[Service]:
+    with tempfile.TemporaryDirectory() as tmp:
+        settings = make_settings(Path(tmp) / "data", static_dir=REPO_ROOT / "static")
+        with TestClient(create_app(settings)) as client:
+            yield Service(client)
+
+
+def headers(column: str, svc: Service, own: str, other: str) -> dict[str, str]:
+    return {
+        "none": {},
+        "wrong": {"X-API-Key": "not-the-admin-key"},
+        "other": {"Authorization": f"Bearer {other}"},
+        "admin": svc.admin,
+        "own": {"Authorization": f"Bearer {own}"},
+    }[column]
+
+
+def measure_cell(svc: Service, route: Route, column: str) -> Cell:
+    sid, own = svc.session()
+    _, other = svc.session()
+    path = route.path.format(
+        name="tiny", session_id=sid, new=svc.new_domain(create=route.method == "DELETE")
+    )
+    sent = headers(column, svc, own, other)
+    if route.method == "WS":
+        return _websocket(svc.client, path, sent)
+    r = svc.client.request(
+        route.method,
+        path,
+        content=None if route.body is None else json.dumps(route.body),
+        headers=sent | ({"Content-Type": "application/json"} if route.body is not None else {}),
+    )
+    return Cell(str(r.status_code), r.is_success)
+
+
+def _websocket(client: TestClient, path: str, sent: dict[str, str]) -> Cell:
+    with client.websocket_connect(path, headers=sent) as ws:
+        ws.send_text(json.dumps(E))
+        try:
+            answer = json.loads(ws.receive_text())
+        except WebSocketDisconnect as closed:
+            return Cell(f"close {closed.code}", False)
+    assert answer["step"] == 1, answer
+    return Cell("open", True)
+
+
+Matrix = dict[tuple[str, str], dict[str, Cell]]
+
+
+def measure() -> Matrix:
+    with service() as svc:
+        return {(r.method, r.path): {c: measure_cell(svc, r, c) for c in COLUMNS} for r in ROUTES}
+
+
+def expected(route: Route, column: str) -> Callable[[Cell], bool]:
+    """Whether a measured cell is what the policy says for ``route`` and ``column``."""
+    want = POLICY[route.who][column]
+    if want == "ok":
+        return lambda cell: cell.ok
+    if route.method == "WS":
+        return lambda cell: cell.status == WS_CLOSE[want]
+    return lambda cell: cell.status == want
+
+
+def render(matrix: Matrix) -> str:
+    head = " | ".join(COLUMNS.values())
+    lines = [
+        "# Access matrix",
+        "",
+        "<!-- generated by `.venv/bin/python -m tests.reliability.access_matrix --write "
+        "docs/ACCESS.md`; tests/reliability/test_access.py fails when it is out of date -->",
+        "",
+        "What the service answers to each route with each kind of credential, measured on a",
+        "fresh service (each cell one request to a fresh session or domain). Admin",
+        "credentials: the `X-API-Key` header; session credentials: `Authorization: Bearer",
+        '<token>` (the websocket also takes `?token=`). "Another session\'s token" is a valid',
+        "token of a different live session; on routes without a session, \"the session's own",
+        'token" is any valid session token. A websocket is accepted (`open`: it answers',
+        "events) or closed with 4400 + the HTTP status it stands for (4401 missing, 4403",
+        "wrong). Bodies are valid, so a refusal is about credentials alone.",
+        "",
+        f"| route | who | {head} |",
+        "|---" * (len(COLUMNS) + 2) + "|",
+    ]
+    for route in ROUTES:
+        cells = matrix[(route.method, route.path)]
+        row = " | ".join(f"{cells[c].status}" for c in COLUMNS)
+        lines.append(f"| `{route.method} {route.path}` | {route.who} | {row} |")
+    lines += [
+        "",
+        "`{new}` is a domain name not yet in use (PUT creates it: 201) or one just created",
+        "(DELETE removes it: 204).",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--write", type=Path, help="write the markdown here (else: print it)")
+    args = parser.parse_args(argv)
+    text = render(measure())
+    if args.write:
+        args.write.write_text(text, encoding="utf-8")
+    else:
+        sys.stdout.write(text)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
