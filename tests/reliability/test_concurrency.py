@@ -42,7 +42,7 @@ from tests.reliability.conftest import Live, server_errors
 from tests.service.conftest import TINY
 
 EXPLORERS = 100
-FRAMES = 10
+FRAMES = 25
 MAX_BATCH = 60
 WRITERS = 4  # trajectory writers, each posting batches one after another
 TIME_LIMIT = 120.0  # seconds: a bound, never an expectation
