@@ -39,11 +39,15 @@ def serve(
     except ValidationError as exc:
         typer.echo(f"error: bad setting: {exc}", err=True)
         raise typer.Exit(code=2) from None
-    uvicorn.run(
-        create_app(settings),
-        host=settings.host,
-        port=settings.port,
-        log_level=log_level,
-        ws_max_size=settings.max_body_bytes + 1024,
-        ws_per_message_deflate=False,  # compressing 100 kB frames costs more than it saves here
-    )
+    uvicorn.run(create_app(settings), **uvicorn_options(settings, log_level))
+
+
+def uvicorn_options(settings: Settings, log_level: str = "info") -> dict[str, Any]:
+    """How ``serve`` runs uvicorn (one worker); the benchmarks' baseline apps run the same."""
+    return {
+        "host": settings.host,
+        "port": settings.port,
+        "log_level": log_level,
+        "ws_max_size": settings.max_body_bytes + 1024,
+        "ws_per_message_deflate": False,  # compressing 100 kB frames costs more than it saves
+    }

@@ -58,10 +58,14 @@ def bearer_token(conn: HTTPConnection) -> str | None:
 
 
 async def get_session(conn: HTTPConnection, session_id: SessionId) -> LiveSession:
-    """The session, if the bearer token is its own (401 without one, 403 for another's).
+    """The session, if the bearer token is its own (401 without one, 403 for another's)."""
+    return session_for(conn, session_id)
 
-    This runs on every event request, so it reads the header itself rather than through
-    sub-dependencies (each costs FastAPI a resolution step); routes using it declare the
+
+def session_for(conn: HTTPConnection, session_id: str) -> LiveSession:
+    """:func:`get_session` as a plain call, for the event route: it runs on every event, and
+    a nested dependency costs FastAPI another resolution step on every request. It reads the
+    header itself rather than through security sub-dependencies; routes using it declare the
     bearer scheme in OpenAPI with :data:`BEARER`."""
     state = service_of(conn)
     token = bearer_token(conn)

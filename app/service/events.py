@@ -25,6 +25,7 @@ import numpy.typing as npt
 from pydantic import TypeAdapter, ValidationError
 
 from app.domain.grid import GridDomain
+from app.service.scan import checked_moves, scan_events
 from app.service.schemas import ACTION_BRANCHES, ACTION_RULE, EventIn
 
 IntArray = npt.NDArray[np.int64]
@@ -95,6 +96,31 @@ def parse_events(raw: bytes | str, max_events: int) -> tuple[list[EventIn], bool
     if len(events) > max_events:
         raise BadInput(f"too many events: {len(events)} in one batch, at most {max_events}", 413)
     return events, adapter is EVENT
+
+
+def read_moves(
+    domain: GridDomain, raw: bytes | str, max_events: int
+) -> tuple[tuple[IntArray, IntArray, IntArray], bool]:
+    """JSON text -> (checked (s, a, s') arrays, single): :func:`parse_events` then
+    :func:`to_moves`, or for a plain list of more than :data:`SMALL_EVENTS` events the
+    compiled reader (:mod:`app.service.scan`) and the same checks, with the same results and
+    the same errors."""
+    head = raw.lstrip()[:1]
+    if head in (b"[", "["):
+        scanned = scan_events(raw, SMALL_EVENTS + 1)
+        if scanned is not None:
+            cells, actions, nexts = scanned
+            if len(cells) > max_events:
+                raise BadInput(
+                    f"too many events: {len(cells)} in one batch, at most {max_events}", 413
+                )
+            moves, bad = checked_moves(domain.state_of, domain.next_state, *scanned)
+            if bad >= 0:  # the numpy checks name the first bad event and why
+                _checked_moves(domain, cells, actions, nexts)
+                raise AssertionError(f"event {bad} passed the numpy checks")  # pragma: no cover
+            return moves, False
+    events, single = parse_events(raw, max_events)
+    return to_moves(domain, events), single
 
 
 def _cell_states(
@@ -198,7 +224,15 @@ def _many_moves(domain: GridDomain, events: list[EventIn]) -> tuple[IntArray, In
     cells = np.fromiter(flat(e["state"] for e in events), np.int64, 2 * n).reshape(n, 2)
     actions = np.fromiter((ACTION_CODE[e.get("action")] for e in events), np.int64, n)
     nexts = np.fromiter(flat(e.get("next_state") or NO_CELL for e in events), np.int64, 2 * n)
-    nexts = nexts.reshape(n, 2)
+    return _checked_moves(domain, cells, actions, nexts.reshape(n, 2))
+
+
+def _checked_moves(
+    domain: GridDomain, cells: IntArray, actions: IntArray, nexts: IntArray
+) -> tuple[IntArray, IntArray, IntArray]:
+    """The checks of :func:`to_moves` on arrays: cells (n, 2), action codes (-1: none) and
+    next cells (n, 2; -1: none)."""
+    n = len(cells)
     has_action, has_next = actions >= 0, nexts[:, 0] >= 0
     states, bad_state = _cell_states(domain, cells, np.ones(n, dtype=bool))
     given_next, bad_next = _cell_states(domain, nexts, has_next)

@@ -16,9 +16,10 @@ from app.service import viewer_feed
 from app.service.config import VERSION, Settings
 from app.service.errors import BodyLimit, install_error_handlers
 from app.service.openapi import install_openapi
+from app.service.ops import warm_up
 from app.service.routes import ROUTERS
+from app.service.routes.sessions import add_event_route
 from app.service.state import ServiceState, open_state
-from app.service.stream_advisor import warm_up
 
 Stop = Callable[[], Awaitable[None]]
 
@@ -71,6 +72,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.settings = settings
     install_error_handlers(app)
     app.add_middleware(BodyLimit, max_bytes=settings.max_body_bytes)
+    add_event_route(app)  # the busiest route first, on the app's own router
     for router in ROUTERS:
         app.include_router(router)
     app.include_router(viewer_feed.router)

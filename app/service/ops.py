@@ -6,15 +6,22 @@ the others run on the event loop and never block.
 
 from __future__ import annotations
 
+import json
+
+import numpy as np
+
 from app.advice.advisor import Decision
-from app.domain.grid import GridDomain, MapError
+from app.advice.models import AdviceTables
+from app.domain.grid import ACTIONS, GridDomain, MapError
 from app.service.domains import DomainState
-from app.service.encode import encode_decisions, fragments
-from app.service.events import BadInput, parse_events, to_moves
+from app.service.encode import encode_decisions, fragments, packed
+from app.service.events import SMALL_EVENTS, BadInput, read_moves
 from app.service.ingest import parse_trajectories, to_trajectories
 from app.service.registry import LiveSession, TooManySessions
 from app.service.schemas import Cell, DomainPut, SessionCreate, TrajectoriesAccepted
 from app.service.state import ServiceState
+from app.service.stream_advisor import StreamAdvisor
+from app.service.stream_advisor import warm_up as warm_up_advisor
 
 
 def cell_state(domain: GridDomain, cell: Cell, what: str) -> int:
@@ -44,11 +51,12 @@ def create_session(
 
 def apply_events(state: ServiceState, session: LiveSession, raw: bytes | str) -> str:
     """Events (JSON text: one or a list) -> decisions (JSON text: one or a list, in order)."""
-    events, single = parse_events(raw, state.settings.max_batch_events)
-    moves = to_moves(session.domain.domain, events)
+    moves, single = read_moves(session.domain.domain, raw, state.settings.max_batch_events)
     tables = session.advisor.tables
     cols = state.registry.observe(session, moves)
-    return encode_decisions(cols, fragments(tables, session.domain.cell_json), single)
+    cell_json = session.domain.cell_json
+    parts, pack = fragments(tables, cell_json), packed(tables, cell_json)
+    return encode_decisions(cols, parts, single, pack)
 
 
 def put_domain(state: ServiceState, name: str, body: DomainPut) -> tuple[DomainState, bool, bool]:
@@ -74,3 +82,18 @@ def ingest(state: ServiceState, domain: DomainState, raw: bytes) -> Trajectories
     items = to_trajectories(domain.domain, body, state.settings.max_trajectory_steps)
     state.catalog.add_trajectories(domain, items)
     return TrajectoriesAccepted(accepted=len(items), pairs=sum(len(t.pairs) for t in items))
+
+
+def warm_up() -> None:
+    """Load (or compile, the first time) every compiled loop of :func:`apply_events` (reader,
+    checks, advisor, encoder), so that no request waits for it."""
+    warm_up_advisor()
+    grid = GridDomain.from_strings(["#####", "#S.G#", "#####"])
+    tables = AdviceTables.paper(np.full((grid.n_states, 4), 0.25))
+    event = {"state": list(grid.cell(grid.start)), "action": ACTIONS[1]}
+    moves, _ = read_moves(grid, json.dumps([event] * (SMALL_EVENTS + 1)), SMALL_EVENTS + 1)
+    advisor = StreamAdvisor(tables)
+    advisor.start(grid.start)
+    cols = advisor.observe_many(*moves)
+    cells = [f"[{r},{c}]" for r, c in grid.cells.tolist()]
+    encode_decisions(cols, fragments(tables, cells), False, packed(tables, cells))

@@ -12,7 +12,7 @@ from __future__ import annotations
 import secrets
 import threading
 import time
-from collections import Counter, deque
+from collections import Counter
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from typing import Any
@@ -51,6 +51,10 @@ class Recent:
 
     def extend(self, values: list[int] | list[float]) -> None:
         size, k = self._buf.shape[0], len(values)
+        if k == 1:  # one event per request: no index arrays
+            self._buf[self._count % size] = values[0]
+            self._count += 1
+            return
         m = min(k, size)
         self._buf[np.arange(self._count + k - m, self._count + k) % size] = values[k - m :]
         self._count += k
@@ -61,6 +65,55 @@ class Recent:
             np.arange(self._count - m, self._count) % self._buf.shape[0]
         ].tolist()
         return out
+
+
+class AdviceLog:
+    """The last ``size`` pieces of advice as (step, state, tables that advised), oldest first,
+    in one numpy ring (the tables as an index into a short list: they change only when the
+    prior does). About 1.3 kB for 50 entries where a deque of tuples takes about 7 kB:
+    100,000 sessions hold one each (docs/PERFORMANCE.md, memory)."""
+
+    __slots__ = ("_buf", "_count", "_tables")
+
+    def __init__(self, size: int):
+        self._buf = np.zeros((3, size), dtype=np.int64)  # step, state, index into _tables
+        self._count = 0
+        self._tables: list[AdviceTables] = []
+
+    def extend(self, steps: list[int], states: list[int], tables: AdviceTables) -> None:
+        k, size = len(steps), self._buf.shape[1]
+        if not k:
+            return
+        if not self._tables or self._tables[-1] is not tables:
+            self._compact()
+            self._tables.append(tables)
+        m = min(k, size)
+        at = np.arange(self._count + k - m, self._count + k) % size
+        self._buf[0, at] = steps[k - m :]
+        self._buf[1, at] = states[k - m :]
+        self._buf[2, at] = len(self._tables) - 1
+        self._count += k
+
+    def _compact(self) -> None:
+        """Forget tables no entry refers to any more (so the list stays short)."""
+        if len(self._tables) < 4:
+            return
+        live = self._order()
+        used = sorted(set(self._buf[2, live].tolist()))
+        remap = np.zeros(len(self._tables), dtype=np.int64)
+        remap[used] = np.arange(len(used))
+        self._buf[2, live] = remap[self._buf[2, live]]
+        self._tables = [self._tables[i] for i in used]
+
+    def _order(self) -> npt.NDArray[np.int64]:
+        size = self._buf.shape[1]
+        m = min(self._count, size)
+        return np.arange(self._count - m, self._count) % size
+
+    def items(self) -> list[tuple[int, int, AdviceTables]]:
+        order = self._order()
+        steps, states, which = self._buf[:, order].tolist()
+        return [(a, s, self._tables[t]) for a, s, t in zip(steps, states, which, strict=True)]
 
 
 @dataclass(eq=False, slots=True)
@@ -82,8 +135,8 @@ class LiveSession:
     path: Recent | None = None
     p_history: Recent | None = None
     # (step, state, the tables that advised): theta_s is read at snapshot time, so an entry
-    # costs a few pointers; created at the first advice
-    advice_log: deque[tuple[int, int, AdviceTables]] | None = None
+    # costs three numbers; created at the first advice
+    advice_log: AdviceLog | None = None
     closed: bool = False
 
     def record(self, cols: DecisionColumns) -> None:
@@ -92,7 +145,8 @@ class LiveSession:
             return
         if self.path is None or self.p_history is None:
             self.path = Recent(self.sizes[0], np.int32, self.position)
-            self.p_history = Recent(self.sizes[1], np.float64, self.p_normal)
+            # for plots only: 7 significant digits are plenty, at half the memory
+            self.p_history = Recent(self.sizes[1], np.float32, self.p_normal)
         self.position = cols.state[-1]
         self.p_normal = cols.p_normal[-1]
         self.path.extend(cols.state)
@@ -102,10 +156,11 @@ class LiveSession:
 
     def log_advice(self, steps: list[int], states: list[int], advise: list[bool]) -> None:
         if self.advice_log is None:
-            self.advice_log = deque(maxlen=RECENT_ADVICE)
-        tables = self.advisor.tables
+            self.advice_log = AdviceLog(RECENT_ADVICE)
         advised = [i for i, a in enumerate(advise) if a][-RECENT_ADVICE:]
-        self.advice_log.extend((steps[i], states[i], tables) for i in advised)
+        self.advice_log.extend(
+            [steps[i] for i in advised], [states[i] for i in advised], self.advisor.tables
+        )
 
 
 @dataclass(frozen=True, slots=True)
@@ -267,7 +322,7 @@ def _snap(s: LiveSession, now: float) -> SessionSnapshot:
         s.p_history.tolist() if s.p_history else [s.p_normal],
         [
             (step, (int(cells[st, 0]), int(cells[st, 1])), _advice(tables, st))
-            for step, st, tables in s.advice_log or ()
+            for step, st, tables in (s.advice_log.items() if s.advice_log else ())
         ],
     )  # fmt: skip
 

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 import weakref
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
@@ -40,7 +40,8 @@ SMALL_BATCH = 8
 @dataclass(frozen=True, slots=True)
 class DecisionColumns:
     """Decisions for a batch, one list per field of :class:`Decision` (the advice is
-    ``tables.theta[state]`` where ``advise`` is true)."""
+    ``tables.theta[state]`` where ``advise`` is true). A batch from the compiled loop also
+    keeps (state, advise, advice_count) as arrays, for the compiled encoder."""
 
     step: list[int]
     state: list[int]
@@ -50,6 +51,9 @@ class DecisionColumns:
     advice_count: list[int]
     total_cost: list[float]
     benefit: list[float]
+    arrays: tuple[IntArray, BoolArray, IntArray] | None = field(
+        default=None, compare=False, repr=False
+    )
 
     @classmethod
     def of(cls, decisions: list[Decision]) -> DecisionColumns:
@@ -241,6 +245,12 @@ class StreamAdvisor(Advisor):
         """Same as ``[self.observe(s, a, s2) for ...]``, in columns. Inputs must be valid
         (states in range, actions 0..3): the caller checks them first."""
         n = len(states)
+        if n == 1:  # one event per request
+            d = self.observe(int(states[0]), int(actions[0]), int(next_states[0]))
+            return DecisionColumns(
+                [d.step], [d.state], [d.advise], [d.kl], [d.p_normal], [d.advice_count],
+                [d.total_cost], [d.benefit],
+            )  # fmt: skip
         if n < SMALL_BATCH:
             moves = zip(states.tolist(), actions.tolist(), next_states.tolist(), strict=True)
             return DecisionColumns.of([self.observe(s, a, s2) for s, a, s2 in moves])
@@ -269,6 +279,7 @@ class StreamAdvisor(Advisor):
             count.tolist(),
             (self.kappa * count).tolist(),
             benefit.tolist(),
+            (next_states, advise, count),
         )
 
 

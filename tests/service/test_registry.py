@@ -8,7 +8,8 @@ import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
 
-from app.service.registry import Recent
+from app.advice.models import AdviceTables
+from app.service.registry import AdviceLog, Recent
 
 
 @given(
@@ -24,3 +25,25 @@ def test_recent_keeps_what_a_bounded_deque_keeps(
         ring.extend(batch)
         reference.extend(batch)
         assert ring.tolist() == list(reference)
+
+
+TABLES = [AdviceTables.paper(np.full((2, 4), 0.25)) for _ in range(6)]
+
+
+@given(
+    size=st.integers(1, 12),
+    batches=st.lists(
+        st.tuples(st.lists(st.integers(0, 10**6), max_size=30), st.integers(0, 5)), max_size=12
+    ),
+)
+def test_advice_log_keeps_what_a_bounded_deque_keeps(
+    size: int, batches: list[tuple[list[int], int]]
+) -> None:
+    log, reference = AdviceLog(size), deque(maxlen=size)
+    for steps, which in batches:
+        states = [s % 97 for s in steps]
+        log.extend(steps, states, TABLES[which])
+        reference.extend((a, s, TABLES[which]) for a, s in zip(steps, states, strict=True))
+        got = log.items()
+        assert [(a, s) for a, s, _ in got] == [(a, s) for a, s, _ in reference]
+        assert all(t is r for (_, _, t), (_, _, r) in zip(got, reference, strict=True))

@@ -2,17 +2,18 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Body, Query, Request, Response
+from fastapi import APIRouter, Body, FastAPI, Query, Request, Response
 
 from app.service import ops
 from app.service.deps import (
     BEARER,
     AdminDep,
     DomainDep,
-    SessionDep,
+    SessionId,
     SessionOrAdminDep,
     StateDep,
     service_of,
+    session_for,
 )
 from app.service.openapi import body
 from app.service.public import session_created, session_public
@@ -47,17 +48,27 @@ async def create_session(
     return session_created(session, decision)
 
 
-@router.post(
-    "/sessions/{session_id}/events",
-    response_model=DecisionPublic | list[DecisionPublic],
-    openapi_extra=body("Events") | BEARER,
-    responses=ERRORS | {413: {"model": ErrorPublic}},
-)
-async def post_events(request: Request, session: SessionDep) -> Response:
+async def post_events(request: Request, session_id: SessionId) -> Response:
     """One event, or a list: the decision for each, in order (one object for one event). A
     batch with a bad event is refused whole and changes nothing."""
+    session = session_for(request, session_id)  # not a dependency: see session_for
     text = ops.apply_events(service_of(request), session, await request.body())
     return Response(text, media_type="application/json")
+
+
+def add_event_route(app: FastAPI) -> None:
+    """``POST /sessions/{session_id}/events`` on the app's own router rather than through an
+    included one: FastAPI matches the routes of an included router in extra steps on every
+    request (measured: about 50 of 275 us of CPU per one-event request)."""
+    app.add_api_route(
+        "/sessions/{session_id}/events",
+        post_events,
+        methods=["POST"],
+        tags=["sessions"],
+        response_model=DecisionPublic | list[DecisionPublic],
+        openapi_extra=body("Events") | BEARER,
+        responses=ERRORS | {413: {"model": ErrorPublic}},
+    )
 
 
 @router.get("/sessions/{session_id}", responses=ERRORS)

@@ -1,0 +1,313 @@
+"""A compiled reader for the common shape of an event batch: a JSON list of events written
+plainly, ``[{"state": [28, 0], "action": "E"}, {"state": [28, 1], "next_state": [27, 1]}]``.
+
+For a 500-event websocket message, pydantic-core builds about 4,000 Python objects (dicts,
+lists, ints) that :func:`app.service.events.to_moves` then reads back one by one; this reads
+the bytes once, in a numba loop, straight into arrays. It accepts a strict subset of what the
+pydantic schema (``list[EventIn]``) accepts, with the same meaning:
+
+* keys ``"state"`` (required), ``"action"`` and ``"next_state"``, each at most once, without
+  escapes; JSON whitespace anywhere between tokens;
+* a cell is ``[row, col]``: two non-negative integers below 2**31 in plain digits;
+* an action is ``"N"``, ``"E"``, ``"S"``, ``"W"``, a digit 0-3, or ``null``; a next state a cell
+  or ``null``.
+
+Anything else (an empty list, a float, a sign, an escape, an unknown or repeated key, a
+non-ASCII byte, ...) makes it answer ``None``, and the caller falls back to the full parser,
+which then accepts it or names the error exactly as before. ``tests/service/test_scan.py`` checks
+the two against each other on random and mutated texts.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+from numba import njit
+
+IntArray = npt.NDArray[np.int64]
+ByteArray = npt.NDArray[np.uint8]
+
+# byte values
+_SPACE, _TAB, _LF, _CR = 32, 9, 10, 13
+_QUOTE, _COMMA, _COLON = 34, 44, 58
+_LBRACKET, _RBRACKET, _LBRACE, _RBRACE = 91, 93, 123, 125
+_ZERO, _NINE = 48, 57
+_N, _E, _S, _W = 78, 69, 83, 87
+_LOWER_N, _LOWER_U, _LOWER_L = 110, 117, 108
+_DOT, _LOWER_E, _UPPER_E = 46, 101, 69
+_BAD = -1
+_LIMIT = 2**31  # coordinates are below this (schemas.Coordinate)
+
+
+@njit(cache=True, inline="always")
+def _skip(buf: ByteArray, i: int) -> int:  # pragma: no cover - compiled
+    n = buf.shape[0]
+    while i < n and (buf[i] == _SPACE or buf[i] == _LF or buf[i] == _CR or buf[i] == _TAB):
+        i += 1
+    return i
+
+
+@njit(cache=True, inline="always")
+def _int(buf: ByteArray, i: int) -> tuple[int, int]:  # pragma: no cover - compiled
+    """(value, index after it) of plain digits at ``i``; value -1 if not a plain integer
+    below 2**31 (leading zeros, fractions, exponents and signs included)."""
+    n = buf.shape[0]
+    if i >= n or buf[i] < _ZERO or buf[i] > _NINE:
+        return _BAD, i
+    if buf[i] == _ZERO and i + 1 < n and _ZERO <= buf[i + 1] <= _NINE:
+        return _BAD, i
+    v = 0
+    k = i
+    while k < n and _ZERO <= buf[k] <= _NINE:
+        v = v * 10 + (buf[k] - _ZERO)
+        k += 1
+        if k - i > 10:
+            return _BAD, k
+    if v >= _LIMIT:
+        return _BAD, k
+    if k < n and (buf[k] == _DOT or buf[k] == _LOWER_E or buf[k] == _UPPER_E):
+        return _BAD, k
+    return v, k
+
+
+@njit(cache=True, inline="always")
+def _cell(buf: ByteArray, i: int) -> tuple[int, int, int]:  # pragma: no cover - compiled
+    """(row, col, index after) of ``[row, col]`` at ``i``; row -1 if it is not one."""
+    n = buf.shape[0]
+    if i >= n or buf[i] != _LBRACKET:
+        return _BAD, _BAD, i
+    r, i = _int(buf, _skip(buf, i + 1))
+    if r < 0:
+        return _BAD, _BAD, i
+    i = _skip(buf, i)
+    if i >= n or buf[i] != _COMMA:
+        return _BAD, _BAD, i
+    c, i = _int(buf, _skip(buf, i + 1))
+    if c < 0:
+        return _BAD, _BAD, i
+    i = _skip(buf, i)
+    if i >= n or buf[i] != _RBRACKET:
+        return _BAD, _BAD, i
+    return r, c, i + 1
+
+
+@njit(cache=True, inline="always")
+def _null(buf: ByteArray, i: int) -> bool:  # pragma: no cover - compiled
+    return bool(
+        i + 3 < buf.shape[0]
+        and buf[i] == _LOWER_N
+        and buf[i + 1] == _LOWER_U
+        and buf[i + 2] == _LOWER_L
+        and buf[i + 3] == _LOWER_L
+    )
+
+
+@njit(cache=True, inline="always")
+def _key(buf: ByteArray, i: int) -> tuple[int, int]:  # pragma: no cover - compiled
+    """(0 state, 1 action, 2 next_state or -1, index after the closing quote) at ``i``."""
+    n = buf.shape[0]
+    if i >= n or buf[i] != _QUOTE:
+        return _BAD, i
+    k = i + 1
+    while k < n and buf[k] != _QUOTE:
+        if buf[k] == 92 or buf[k] >= 128:  # an escape or non-ASCII: not a plain key
+            return _BAD, k
+        k += 1
+    if k >= n:
+        return _BAD, k
+    length = k - i - 1
+    j = i + 1
+    if length == 5:  # state
+        ok = buf[j] == 115 and buf[j + 1] == 116 and buf[j + 2] == 97 and buf[j + 3] == 116
+        if ok and buf[j + 4] == 101:
+            return 0, k + 1
+    elif length == 6:  # action
+        ok = buf[j] == 97 and buf[j + 1] == 99 and buf[j + 2] == 116 and buf[j + 3] == 105
+        if ok and buf[j + 4] == 111 and buf[j + 5] == 110:
+            return 1, k + 1
+    elif length == 10:  # next_state
+        ok = buf[j] == 110 and buf[j + 1] == 101 and buf[j + 2] == 120 and buf[j + 3] == 116
+        ok = ok and buf[j + 4] == 95 and buf[j + 5] == 115 and buf[j + 6] == 116
+        ok = ok and buf[j + 7] == 97 and buf[j + 8] == 116 and buf[j + 9] == 101
+        if ok:
+            return 2, k + 1
+    return _BAD, k
+
+
+@njit(cache=True, inline="always")
+def _action(buf: ByteArray, i: int) -> tuple[int, int]:  # pragma: no cover - compiled
+    """(code 0-3, -1 for null, -2 if not an action, index after) at ``i``."""
+    n = buf.shape[0]
+    if i >= n:
+        return -2, i
+    b = buf[i]
+    if b == _QUOTE:
+        if i + 2 < n and buf[i + 2] == _QUOTE:
+            c = buf[i + 1]
+            if c == _N:
+                return 0, i + 3
+            if c == _E:
+                return 1, i + 3
+            if c == _S:
+                return 2, i + 3
+            if c == _W:
+                return 3, i + 3
+        return -2, i
+    if _ZERO <= b <= _ZERO + 3:
+        if i + 1 < n and (
+            _ZERO <= buf[i + 1] <= _NINE
+            or buf[i + 1] == _DOT
+            or buf[i + 1] == _LOWER_E
+            or buf[i + 1] == _UPPER_E
+        ):
+            return -2, i
+        return b - _ZERO, i + 1
+    if _null(buf, i):
+        return -1, i + 4
+    return -2, i
+
+
+@njit(cache=True)
+def _scan(buf: ByteArray, out: IntArray) -> int:  # pragma: no cover - compiled
+    """Fill ``out`` rows with (row, col, action, next row, next col) per event (-1 for an
+    absent action or next state); the number of events, or -1 if the text is not of the
+    plain form (see the module)."""
+    n = buf.shape[0]
+    i = _skip(buf, 0)
+    if i >= n or buf[i] != _LBRACKET:
+        return _BAD
+    i = _skip(buf, i + 1)
+    count = 0
+    while True:
+        if i >= n or buf[i] != _LBRACE or count >= out.shape[0]:
+            return _BAD
+        i = _skip(buf, i + 1)
+        seen = 0
+        r = c = nr = nc = a = -1
+        while True:
+            key, i = _key(buf, i)
+            if key < 0 or seen & (1 << key):
+                return _BAD
+            seen |= 1 << key
+            i = _skip(buf, i)
+            if i >= n or buf[i] != _COLON:
+                return _BAD
+            i = _skip(buf, i + 1)
+            if key == 0:
+                r, c, i = _cell(buf, i)
+                if r < 0:
+                    return _BAD
+            elif key == 1:
+                a, i = _action(buf, i)
+                if a == -2:
+                    return _BAD
+            elif _null(buf, i):
+                i += 4
+            else:
+                nr, nc, i = _cell(buf, i)
+                if nr < 0:
+                    return _BAD
+            i = _skip(buf, i)
+            if i >= n:
+                return _BAD
+            if buf[i] == _COMMA:
+                i = _skip(buf, i + 1)
+                continue
+            if buf[i] == _RBRACE:
+                break
+            return _BAD
+        if not seen & 1:
+            return _BAD
+        out[count, 0] = r
+        out[count, 1] = c
+        out[count, 2] = a
+        out[count, 3] = nr
+        out[count, 4] = nc
+        count += 1
+        i = _skip(buf, i + 1)
+        if i >= n:
+            return _BAD
+        if buf[i] == _COMMA:
+            i = _skip(buf, i + 1)
+            continue
+        if buf[i] == _RBRACKET:
+            break
+        return _BAD
+    if _skip(buf, i + 1) != n:
+        return _BAD
+    return count
+
+
+def scan_events(
+    raw: bytes | str, min_events: int = 1
+) -> tuple[IntArray, IntArray, IntArray] | None:
+    """(cells (n, 2), action codes (n,) with -1 for none, next cells (n, 2) with -1 for none)
+    of a plain JSON list of at least ``min_events`` events, or ``None`` when ``raw`` is
+    anything else (then the full parser decides)."""
+    data = raw.encode() if isinstance(raw, str) else raw
+    most = data.count(b"{")
+    if most < max(min_events, 1):
+        return None
+    out = np.empty((most, 5), dtype=np.int64)
+    n = _scan(np.frombuffer(data, dtype=np.uint8), out)
+    if n < max(min_events, 1):
+        return None
+    rows = out[:n]
+    return rows[:, 0:2], rows[:, 2], rows[:, 3:5]
+
+
+@njit(cache=True)
+def _moves(
+    state_of: IntArray,
+    next_state: IntArray,
+    cells: IntArray,
+    actions: IntArray,
+    nexts: IntArray,
+    out: tuple[IntArray, IntArray, IntArray],
+) -> int:  # pragma: no cover - compiled
+    """The checks of :func:`app.service.events.to_moves` in one loop: fills (s, a, s') and
+    returns -1, or the index of the first bad event (whose message the caller writes)."""
+    rows, cols = state_of.shape
+    out_s, out_a, out_s2 = out
+    for i in range(cells.shape[0]):
+        r, c = cells[i, 0], cells[i, 1]
+        if r < 0 or r >= rows or c < 0 or c >= cols or state_of[r, c] < 0:
+            return i
+        s = state_of[r, c]
+        a = actions[i]
+        has_next = nexts[i, 0] >= 0
+        if has_next:
+            r2, c2 = nexts[i, 0], nexts[i, 1]
+            if r2 >= rows or c2 < 0 or c2 >= cols or state_of[r2, c2] < 0:
+                return i
+            s2 = state_of[r2, c2]
+        elif a < 0:
+            return i
+        else:
+            s2 = next_state[s, a]
+        if a < 0 or has_next:
+            lands = -1
+            for k in range(4):
+                if next_state[s, k] == s2:
+                    lands = k
+                    break
+            if has_next and s2 != s and lands < 0:
+                return i
+            if a < 0:
+                if s2 == s:
+                    return i
+                a = lands
+        out_s[i] = s
+        out_a[i] = a
+        out_s2[i] = s2
+    return -1
+
+
+def checked_moves(
+    state_of: IntArray, next_state: IntArray, cells: IntArray, actions: IntArray, nexts: IntArray
+) -> tuple[tuple[IntArray, IntArray, IntArray], int]:
+    """((s, a, s'), -1) for events that pass every check, else (partial arrays, the index of
+    the first bad event)."""
+    n = len(cells)
+    out = (np.empty(n, np.int64), np.empty(n, np.int64), np.empty(n, np.int64))
+    return out, _moves(state_of, next_state, cells, actions, nexts, out)

@@ -1,0 +1,115 @@
+"""The compiled reader of plain event lists (app/service/scan.py) against the full parser:
+``read_moves`` must give what ``parse_events`` + ``to_moves`` give, moves or error, for any
+text; the reader may only decline (and let the full parser answer)."""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+import numpy as np
+from hypothesis import given
+from hypothesis import strategies as st
+
+from app.domain.grid import ACTIONS, GridDomain
+from app.service.events import SMALL_EVENTS, BadInput, parse_events, read_moves, to_moves
+from app.service.scan import scan_events
+from tests.service.conftest import TINY
+
+DOMAIN = GridDomain.from_strings(TINY)
+ROWS, COLS = DOMAIN.shape
+
+cells = st.lists(st.integers(0, ROWS), min_size=2, max_size=2)  # includes off-map and walls
+events = st.fixed_dictionaries(
+    {"state": cells},
+    optional={
+        "action": st.one_of(st.none(), st.sampled_from([*ACTIONS, 0, 1, 2, 3])),
+        "next_state": st.one_of(st.none(), cells),
+    },
+)
+layouts = st.sampled_from([(None, (",", ":")), (None, (", ", ": ")), (1, None), (" \t", None)])
+
+
+def outcome(fn: Any, raw: str | bytes) -> Any:
+    try:
+        moves, single = fn(raw)
+    except BadInput as exc:
+        return ("refused", exc.status, exc.detail)
+    return ([a.tolist() for a in moves], single)
+
+
+def slow(raw: str | bytes) -> Any:
+    events, single = parse_events(raw, 100)
+    return to_moves(DOMAIN, events), single
+
+
+def fast(raw: str | bytes) -> Any:
+    return read_moves(DOMAIN, raw, 100)
+
+
+@given(st.lists(events, max_size=40), layouts, st.booleans())
+def test_read_moves_equals_parse_then_to_moves(
+    batch: list[dict[str, Any]], layout: tuple[Any, Any], as_bytes: bool
+) -> None:
+    indent, separators = layout
+    text = json.dumps(batch, indent=indent, separators=separators)
+    raw: str | bytes = text.encode() if as_bytes else text
+    assert outcome(fast, raw) == outcome(slow, raw)
+
+
+@given(
+    st.lists(events, min_size=SMALL_EVENTS + 1, max_size=30),
+    st.data(),
+)
+def test_mutated_texts_get_the_same_answer(batch: list[dict[str, Any]], data: Any) -> None:
+    text = json.dumps(batch)
+    edits = data.draw(st.lists(st.tuples(st.integers(0, len(text)), st.sampled_from(
+        ['"', ",", ":", "[", "]", "{", "}", " ", "-", ".", "e", "0", "7", "null", "true",
+         '"x"', '"state"', '"action"', "\\u0041", "\u00e9", "1e3", "00", "99999999999", ""]
+    )), max_size=3))  # fmt: skip
+    for at, piece in edits:
+        cut = data.draw(st.integers(0, 2))
+        text = text[:at] + piece + text[at + cut :]
+    assert outcome(fast, text) == outcome(slow, text)
+
+
+def test_the_reader_declines_what_it_does_not_read_plainly() -> None:
+    good = [{"state": [5, 1], "action": "E"}] * (SMALL_EVENTS + 1)
+    assert scan_events(json.dumps(good)) is not None
+    declined = [
+        '[{"state": [5, 1.0], "action": "E"}]',
+        '[{"state": [5, 1], "action": "E", "action": "E"}]',
+        '[{"state": [5, 1], "action": "\\u0045"}]',
+        '[{"st\\u0061te": [5, 1], "action": "E"}]',
+        '[{"state": [5, 1], "action": "E", "why": 1}]',
+        '[{"state": [5, -1], "action": "E"}]',
+        '[{"state": [5, 01], "action": "E"}]',
+        '[{"state": [5, 2147483648], "action": "E"}]',
+        '[{"state": [5, 1], "action": 4}]',
+        '[{"state": [5, 1], "action": 1e0}]',
+        '[{"state": [5, 1], "action": true}]',
+        '[{"action": "E"}]',
+        '[{"state": [5, 1, 2], "action": "E"}]',
+        '[{"state": null, "action": "E"}]',
+        '[{"state": [5, 1], "action": "E"},]',
+        '[{"state": [5, 1], "action": "E"}] x',
+        '{"state": [5, 1], "action": "E"}',
+        "[]",
+    ]
+    for text in declined:
+        assert scan_events(text) is None, text
+        assert outcome(fast, text) == outcome(slow, text), text
+
+
+def test_a_large_plain_batch_is_read_by_the_compiled_reader() -> None:
+    rng = np.random.default_rng(0)
+    s, batch = DOMAIN.start, []
+    for a in rng.integers(0, 4, 500).tolist():
+        batch.append({"state": list(DOMAIN.cell(s)), "action": ACTIONS[a]})
+        s = DOMAIN.step(s, a)
+    text = json.dumps(batch)
+    scanned = scan_events(text)
+    assert scanned is not None and len(scanned[0]) == 500
+    assert outcome(fast, text) == outcome(slow, text)
+    too_many = outcome(lambda raw: read_moves(DOMAIN, raw, 499), text)
+    assert too_many == ("refused", 413, "too many events: 500 in one batch, at most 499")
