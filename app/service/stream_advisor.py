@@ -30,6 +30,8 @@ from app.advice.models import AdviceTables
 from app.domain.grid import N_ACTIONS
 
 IntArray = npt.NDArray[np.int64]
+KeyArray = npt.NDArray[np.int32]
+EraArray = npt.NDArray[np.uint8]
 FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
 
@@ -139,7 +141,7 @@ def _decide(
 
 @njit(cache=True)
 def _observe_stream(
-    ring: FloatArray,
+    window: tuple[KeyArray, EraArray, FloatArray, int],
     loglik: FloatArray,
     pos: int,
     flat: tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray],
@@ -150,24 +152,33 @@ def _observe_stream(
     resync: tuple[IntArray, FloatArray],
     out: tuple[FloatArray, FloatArray, BoolArray, IntArray, FloatArray],
 ) -> tuple[int, int, float]:  # pragma: no cover - compiled
-    """Advisor.observe for each (s, a, s'), accounting as Advisor.decide. At event
+    """Advisor.observe for each (s, a, s'), accounting as Advisor.decide. The window is
+    (pair keys, era of each pair, log-prob tables of each era, the current era): the pair
+    leaving it is subtracted with the table it was added with, as the core does. At event
     ``resync[0][r]`` the sums become ``resync[1][r]`` (the core's exact re-sum). Fills ``out``
     (kl, p_normal, advise, count, benefit); returns (ring position, advice count, benefit)."""
+    keys, eras, stack, now = window
     log_probs = flat[0]
     states, actions, next_states = moves
     resync_at, resync_sums = resync
     kl_out, p_out, advise_out, count_out, benefit_out = out
-    window = ring.shape[1]
-    z = np.empty(ring.shape[0])
+    size = keys.shape[0]
+    n_models = loglik.shape[0]
+    z = np.empty(n_models)
     r = 0
     for i in range(states.shape[0]):
         k = states[i] * 4 + actions[i]
-        for m in range(ring.shape[0]):
+        old = keys[pos]
+        for m in range(n_models):
             lp = log_probs[m, k]
-            loglik[m] += lp - ring[m, pos]
-            ring[m, pos] = lp
+            if old >= 0:
+                loglik[m] += lp - stack[eras[pos], m, old]
+            else:
+                loglik[m] += lp - 0.0  # the core's ring holds 0.0 until the window fills
+        keys[pos] = k
+        eras[pos] = now
         pos += 1
-        if pos == window:
+        if pos == size:
             pos = 0
             if r < resync_at.shape[0] and resync_at[r] == i:
                 loglik[:] = resync_sums[r]
@@ -188,34 +199,81 @@ def _observe_stream(
 class StreamAdvisor(Advisor):
     """An :class:`Advisor` with :meth:`observe_many` for a batch of one explorer's moves.
 
-    Its window is one float64 array (models x W), 8 bytes an entry, where the core keeps
-    lists of Python floats (about 32 bytes an entry): thousands of sessions hold one each.
-    :meth:`append` is the core's, step for step, on that array.
+    The core's window keeps, per model, the log-probabilities it added (lists of Python
+    floats, about 32 bytes an entry and model). This one keeps each pair's key
+    ``s * 4 + a`` (int32) and the *era* of the tables it was added with (uint8, an index into
+    ``_eras``, the tables in use since the session started or last changed tables): 5 bytes a
+    pair whatever the number of models, against 16 for a float64 array of two models. The
+    value the core stored is ``log_probs[m][key]`` of that era's tables, so removing a pair
+    and the exact re-sums use exactly the core's numbers; 100,000 sessions hold one each
+    (docs/PERFORMANCE.md, memory). :meth:`append` is the core's, step for step.
     """
 
-    __slots__ = ("_window",)
+    __slots__ = ("_era", "_eras", "_keys")
 
     def reset(self) -> None:
         super().reset()
-        self._ring = []  # the core's lists are not used: the window lives in ``_window``
-        self._window = np.zeros((self.tables.n_models, self.window))
+        self._ring = []  # the core's lists are not used: the window lives in ``_keys``
+        self._keys = np.full(self.window, -1, dtype=np.int32)  # -1: empty (the core's 0.0)
+        self._era = np.zeros(self.window, dtype=np.uint8)
+        self._eras: list[AdviceTables] = [self.tables]
+
+    def _current_era(self) -> int:
+        """The era of ``self.tables`` (a new one if the tables changed since the last pair;
+        eras no pair of the window refers to any more are forgotten first)."""
+        if self._eras[-1] is not self.tables:
+            used = np.unique(self._era[self._keys >= 0]) if len(self._eras) > 1 else None
+            if used is not None and len(used) < len(self._eras):
+                remap = np.zeros(len(self._eras), dtype=np.uint8)
+                remap[used] = np.arange(len(used), dtype=np.uint8)
+                self._era[:] = remap[self._era]
+                self._eras = [self._eras[e] for e in used.tolist()]
+            if len(self._eras) >= 255:  # pragma: no cover - 255 prior updates in one window
+                raise RuntimeError("too many table changes within one window")
+            self._eras.append(self.tables)
+        return len(self._eras) - 1
+
+    def _stack(self) -> FloatArray:
+        """(eras, models, S*4): each era's log-probability tables."""
+        if len(self._eras) == 1:
+            return _flat(self._eras[0]).log_probs[None]
+        return np.stack([_flat(t).log_probs for t in self._eras])
+
+    @property
+    def _window(self) -> FloatArray:
+        """The window as the core holds it: (models, W) log-probabilities, 0.0 where empty."""
+        stack = self._stack()
+        filled = self._keys >= 0
+        values = np.zeros((stack.shape[1], self.window))
+        keys, eras = self._keys[filled], self._era[filled]
+        for m in range(stack.shape[1]):
+            values[m, filled] = stack[eras, m, keys]
+        return values
 
     def append(self, state: int, action: int) -> None:
         """Add (s, a) to H exactly as :meth:`Advisor.append` does."""
         t = self.tables
         if not (0 <= state < t.n_states and 0 <= action < N_ACTIONS):
             self._check(state, action)
+        now = self._current_era()
         k = state * N_ACTIONS + action
-        pos, ring, loglik = self._pos, self._window, self._loglik
-        for m, table in enumerate(t.log_probs_flat):
-            lp = table[k]
-            loglik[m] += lp - float(ring[m, pos])
-            ring[m, pos] = lp
+        pos, loglik = self._pos, self._loglik
+        old = int(self._keys[pos])
+        if old >= 0:
+            before = self._eras[int(self._era[pos])].log_probs_flat
+            for m, table in enumerate(t.log_probs_flat):
+                loglik[m] += table[k] - before[m][old]
+        else:
+            for m, table in enumerate(t.log_probs_flat):
+                loglik[m] += table[k] - 0.0
+        self._keys[pos] = k
+        self._era[pos] = now
         pos += 1
         self.steps += 1
         if pos == self.window:
             pos = 0
             if self.steps % resync_period(self.window) == 0:
+                ring = self._window
                 for m in range(len(loglik)):
                     loglik[m] = math.fsum(ring[m].tolist())
         self._pos = pos
@@ -224,15 +282,15 @@ class StreamAdvisor(Advisor):
         self, ring: FloatArray, log_probs: FloatArray, keys: IntArray
     ) -> tuple[IntArray, FloatArray]:
         """Events of this batch after which the core re-sums the window exactly, and the
-        ``math.fsum`` of the window there (for each model)."""
+        ``math.fsum`` of the window there (for each model); ``ring`` is :attr:`_window`."""
         w, n = self.window, len(keys)
         period = resync_period(w)
         first = (period - self.steps % period) % period or period  # pairs until the next one
         at = np.arange(first - 1, n, period, dtype=np.int64)
-        sums = np.empty((len(at), ring.shape[0]))
+        sums = np.empty((len(at), log_probs.shape[0]))
         if len(at):
             pos = self._pos
-            for m in range(ring.shape[0]):
+            for m in range(log_probs.shape[0]):
                 # the window before the batch, oldest first, then the batch's pairs
                 tape = np.concatenate((ring[m, pos:], ring[m, :pos], log_probs[m].take(keys)))
                 for r, i in enumerate(at.tolist()):
@@ -255,16 +313,19 @@ class StreamAdvisor(Advisor):
             moves = zip(states.tolist(), actions.tolist(), next_states.tolist(), strict=True)
             return DecisionColumns.of([self.observe(s, a, s2) for s, a, s2 in moves])
         f = _flat(self.tables)
+        now = self._current_era()
         keys = states * 4 + actions
-        ring = self._window  # updated in place
+        period = resync_period(self.window)
+        needs_resync = (self.steps % period) + n >= period
+        resync = self._resyncs(self._window if needs_resync else _NO_RING, f.log_probs, keys)
         loglik = np.array(self._loglik, dtype=np.float64)
         kl, p_normal, benefit = np.empty(n), np.empty(n), np.empty(n)
         advise, count = np.empty(n, dtype=np.bool_), np.empty(n, dtype=np.int64)
         pos, self.advice_count, self.benefit = _observe_stream(
-            ring, loglik, self._pos,
+            (self._keys, self._era, self._stack(), now), loglik, self._pos,
             (f.log_probs, f.log_weights, f.probs, f.theta, f.neg_entropy),
             self.kappa, self.advice_count, self.benefit,
-            (states, actions, next_states), self._resyncs(ring, f.log_probs, keys),
+            (states, actions, next_states), resync,
             (kl, p_normal, advise, count, benefit),
         )  # fmt: skip
         self._loglik, self._pos = loglik.tolist(), pos
@@ -281,6 +342,9 @@ class StreamAdvisor(Advisor):
             benefit.tolist(),
             (next_states, advise, count),
         )
+
+
+_NO_RING = np.zeros((0, 0))
 
 
 def warm_up() -> None:
