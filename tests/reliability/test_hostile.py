@@ -11,6 +11,7 @@ bad trajectories and the step limit (test_routes_domains.py), garbage to every r
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 from collections.abc import Iterator
 from typing import Any
@@ -134,20 +135,31 @@ def test_giant_batches_are_413_and_change_nothing(http: httpx.Client, live: Live
     refused(r, 413, f"larger than {LIMIT} bytes")
     assert http.get("/domains/tiny").json()["trajectories"] == 0
 
-    async def frames() -> tuple[dict[str, Any], int | None, str]:
+    async def frames() -> tuple[dict[str, Any], str]:
         url = f"{ws_url(live)}/sessions/{sid}/stream?token={token}"
-        async with websockets.connect(url, max_size=None) as ws:
+        ws = await websockets.connect(url, max_size=None)
+        try:
             await ws.send(json.dumps(batch))
             too_many: dict[str, Any] = json.loads(await ws.recv())
             # far over the frame limit: uvicorn closes the connection (1009, message too big)
-            await ws.send(" " * (LIMIT + 64 * 1024))
-            with pytest.raises(websockets.ConnectionClosed) as closed:
-                await asyncio.wait_for(ws.recv(), 10)
-            return too_many, closed.value.rcvd.code if closed.value.rcvd else None, ""
+            # as soon as it reads the frame's length, without reading the rest, so the close
+            # frame may be overtaken by a reset while this end is still sending
+            try:
+                await ws.send(" " * (LIMIT + 64 * 1024))
+                answer = await asyncio.wait_for(ws.recv(), 10)
+            except websockets.ConnectionClosed as closed:
+                code = closed.rcvd.code if closed.rcvd else "no close frame"
+                return too_many, f"closed {code}"
+            except OSError as exc:
+                return too_many, f"reset ({type(exc).__name__})"
+            return too_many, f"answered {str(answer)[:100]}"
+        finally:
+            with contextlib.suppress(Exception):
+                await ws.close()
 
-    too_many, code, _ = run_async(frames())
+    too_many, outcome = run_async(frames())
     assert too_many["status"] == 413 and f"at most {MAX_EVENTS}" in too_many["detail"]
-    assert code == 1009
+    assert outcome in ("closed 1009", "closed no close frame") or outcome.startswith("reset")
     assert http.get(f"/sessions/{sid}", headers=auth).json()["steps"] == 0
 
 
