@@ -78,7 +78,7 @@ async def cycle(http: httpx.AsyncClient, ws_base: str, n: int) -> None:
     await asyncio.gather(*(explorer() for _ in range(n)))
 
 
-def soak(data_dir: Path, idle: float = 1.0, max_sessions: int = 8 * PER_CYCLE) -> Soak:
+def soak(data_dir: Path, idle: float = 2.0, max_sessions: int = 8 * PER_CYCLE) -> Soak:
     """WARM_UP cycles, the baseline, CYCLES cycles, the final figure (each RSS read once the
     abandoned sessions are gone, or after a bounded wait if they never go)."""
     live: Live = start(
@@ -113,7 +113,7 @@ def soak(data_dir: Path, idle: float = 1.0, max_sessions: int = 8 * PER_CYCLE) -
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--idle", type=float, default=1.0, help="session idle seconds")
+    parser.add_argument("--idle", type=float, default=2.0, help="session idle seconds")
     parser.add_argument("--max-sessions", type=int, default=8 * PER_CYCLE)
     args = parser.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
