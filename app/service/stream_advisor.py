@@ -31,7 +31,7 @@ from app.domain.grid import N_ACTIONS
 
 IntArray = npt.NDArray[np.int64]
 KeyArray = npt.NDArray[np.int32]
-EraArray = npt.NDArray[np.uint8]
+FlagArray = npt.NDArray[np.uint8]
 FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
 
@@ -141,7 +141,7 @@ def _decide(
 
 @njit(cache=True)
 def _observe_stream(
-    window: tuple[KeyArray, EraArray, FloatArray, int],
+    window: tuple[KeyArray, FlagArray, FloatArray],
     loglik: FloatArray,
     pos: int,
     flat: tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray],
@@ -151,13 +151,14 @@ def _observe_stream(
     moves: tuple[IntArray, IntArray, IntArray],
     resync: tuple[IntArray, FloatArray],
     out: tuple[FloatArray, FloatArray, BoolArray, IntArray, FloatArray],
-) -> tuple[int, int, float]:  # pragma: no cover - compiled
-    """Advisor.observe for each (s, a, s'), accounting as Advisor.decide. The window is
-    (pair keys, era of each pair, log-prob tables of each era, the current era): the pair
-    leaving it is subtracted with the table it was added with, as the core does. At event
-    ``resync[0][r]`` the sums become ``resync[1][r]`` (the core's exact re-sum). Fills ``out``
-    (kl, p_normal, advise, count, benefit); returns (ring position, advice count, benefit)."""
-    keys, eras, stack, now = window
+) -> tuple[int, int, float, int]:  # pragma: no cover - compiled
+    """Advisor.observe for each (s, a, s'), accounting as Advisor.decide. The window is (pair
+    keys, 1 where a pair's value was kept in ``old`` because the tables changed since it was
+    added, those values): a leaving pair is subtracted with the value the core stored. At
+    event ``resync[0][r]`` the sums become ``resync[1][r]`` (the core's exact re-sum). Fills
+    ``out`` (kl, p_normal, advise, count, benefit); returns (ring position, advice count,
+    benefit, kept values that left the window)."""
+    keys, kept, old = window
     log_probs = flat[0]
     states, actions, next_states = moves
     resync_at, resync_sums = resync
@@ -166,17 +167,22 @@ def _observe_stream(
     n_models = loglik.shape[0]
     z = np.empty(n_models)
     r = 0
+    gone = 0
     for i in range(states.shape[0]):
         k = states[i] * 4 + actions[i]
-        old = keys[pos]
-        for m in range(n_models):
-            lp = log_probs[m, k]
-            if old >= 0:
-                loglik[m] += lp - stack[eras[pos], m, old]
-            else:
-                loglik[m] += lp - 0.0  # the core's ring holds 0.0 until the window fills
+        leaving = keys[pos]
+        if leaving < 0:  # the core's ring holds 0.0 until the window fills
+            for m in range(n_models):
+                loglik[m] += log_probs[m, k] - 0.0
+        elif kept[pos]:
+            for m in range(n_models):
+                loglik[m] += log_probs[m, k] - old[m, pos]
+            kept[pos] = 0
+            gone += 1
+        else:
+            for m in range(n_models):
+                loglik[m] += log_probs[m, k] - log_probs[m, leaving]
         keys[pos] = k
-        eras[pos] = now
         pos += 1
         if pos == size:
             pos = 0
@@ -193,61 +199,64 @@ def _observe_stream(
         advise_out[i] = advise
         count_out[i] = count
         benefit_out[i] = benefit
-    return pos, count, benefit
+    return pos, count, benefit, gone
 
 
 class StreamAdvisor(Advisor):
     """An :class:`Advisor` with :meth:`observe_many` for a batch of one explorer's moves.
 
-    The core's window keeps, per model, the log-probabilities it added (lists of Python
-    floats, about 32 bytes an entry and model). This one keeps each pair's key
-    ``s * 4 + a`` (int32) and the *era* of the tables it was added with (uint8, an index into
-    ``_eras``, the tables in use since the session started or last changed tables): 5 bytes a
-    pair whatever the number of models, against 16 for a float64 array of two models. The
-    value the core stored is ``log_probs[m][key]`` of that era's tables, so removing a pair
-    and the exact re-sums use exactly the core's numbers; 100,000 sessions hold one each
+    The core's window keeps, per model, the log-probability each pair added (lists of Python
+    floats, about 32 bytes an entry and model). This one keeps each pair's key ``s * 4 + a``
+    (int32, 4 bytes a pair whatever the number of models): the value the core stored is
+    ``tables.log_probs[m][key]``. Only when the tables change (a prior update) are the values
+    of the pairs then in the window kept as numbers (``_old``, models x W float64, until the
+    last of those pairs has left), since the new tables would give other values. So removing
+    a pair and the exact re-sums use exactly the core's numbers, and a session costs about
+    1.5 kB of window instead of 4.8 (W = 300, two models): 100,000 sessions hold one each
     (docs/PERFORMANCE.md, memory). :meth:`append` is the core's, step for step.
     """
 
-    __slots__ = ("_era", "_eras", "_keys")
+    __slots__ = ("_kept", "_keys", "_keys_tables", "_n_kept", "_old")
 
     def reset(self) -> None:
         super().reset()
         self._ring = []  # the core's lists are not used: the window lives in ``_keys``
         self._keys = np.full(self.window, -1, dtype=np.int32)  # -1: empty (the core's 0.0)
-        self._era = np.zeros(self.window, dtype=np.uint8)
-        self._eras: list[AdviceTables] = [self.tables]
+        self._kept = np.zeros(self.window, dtype=np.uint8)  # 1: value in _old
+        self._old: FloatArray | None = None
+        self._n_kept = 0
+        self._keys_tables = self.tables  # the tables giving the values of the other pairs
 
-    def _current_era(self) -> int:
-        """The era of ``self.tables`` (a new one if the tables changed since the last pair;
-        eras no pair of the window refers to any more are forgotten first)."""
-        if self._eras[-1] is not self.tables:
-            used = np.unique(self._era[self._keys >= 0]) if len(self._eras) > 1 else None
-            if used is not None and len(used) < len(self._eras):
-                remap = np.zeros(len(self._eras), dtype=np.uint8)
-                remap[used] = np.arange(len(used), dtype=np.uint8)
-                self._era[:] = remap[self._era]
-                self._eras = [self._eras[e] for e in used.tolist()]
-            if len(self._eras) >= 255:  # pragma: no cover - 255 prior updates in one window
-                raise RuntimeError("too many table changes within one window")
-            self._eras.append(self.tables)
-        return len(self._eras) - 1
+    def _sync_tables(self) -> None:
+        """After a change of tables, keep the values of the pairs added with the old ones."""
+        if self._keys_tables is self.tables:
+            return
+        moved = np.flatnonzero((self._keys >= 0) & (self._kept == 0))
+        if len(moved):
+            before = _flat(self._keys_tables).log_probs
+            if self._old is None:
+                self._old = np.zeros((before.shape[0], self.window))
+            self._old[:, moved] = before[:, self._keys[moved]]
+            self._kept[moved] = 1
+            self._n_kept += len(moved)
+        self._keys_tables = self.tables
 
-    def _stack(self) -> FloatArray:
-        """(eras, models, S*4): each era's log-probability tables."""
-        if len(self._eras) == 1:
-            return _flat(self._eras[0]).log_probs[None]
-        return np.stack([_flat(t).log_probs for t in self._eras])
+    def _left(self, gone: int) -> None:
+        self._n_kept -= gone
+        if self._n_kept == 0:
+            self._old = None  # every pair of the old tables has left the window
 
     @property
     def _window(self) -> FloatArray:
         """The window as the core holds it: (models, W) log-probabilities, 0.0 where empty."""
-        stack = self._stack()
+        self._sync_tables()
+        log_probs = _flat(self.tables).log_probs
         filled = self._keys >= 0
-        values = np.zeros((stack.shape[1], self.window))
-        keys, eras = self._keys[filled], self._era[filled]
-        for m in range(stack.shape[1]):
-            values[m, filled] = stack[eras, m, keys]
+        values = np.zeros((log_probs.shape[0], self.window))
+        values[:, filled] = log_probs[:, self._keys[filled]]
+        if self._old is not None:
+            kept = self._kept == 1
+            values[:, kept] = self._old[:, kept]
         return values
 
     def append(self, state: int, action: int) -> None:
@@ -255,19 +264,24 @@ class StreamAdvisor(Advisor):
         t = self.tables
         if not (0 <= state < t.n_states and 0 <= action < N_ACTIONS):
             self._check(state, action)
-        now = self._current_era()
+        self._sync_tables()
         k = state * N_ACTIONS + action
         pos, loglik = self._pos, self._loglik
-        old = int(self._keys[pos])
-        if old >= 0:
-            before = self._eras[int(self._era[pos])].log_probs_flat
-            for m, table in enumerate(t.log_probs_flat):
-                loglik[m] += table[k] - before[m][old]
-        else:
-            for m, table in enumerate(t.log_probs_flat):
+        leaving = int(self._keys[pos])
+        tables = t.log_probs_flat
+        if leaving < 0:
+            for m, table in enumerate(tables):
                 loglik[m] += table[k] - 0.0
+        elif self._kept[pos] and self._old is not None:
+            old = self._old[:, pos].tolist()
+            for m, table in enumerate(tables):
+                loglik[m] += table[k] - old[m]
+            self._kept[pos] = 0
+            self._left(1)
+        else:
+            for m, table in enumerate(tables):
+                loglik[m] += table[k] - table[leaving]
         self._keys[pos] = k
-        self._era[pos] = now
         pos += 1
         self.steps += 1
         if pos == self.window:
@@ -313,7 +327,7 @@ class StreamAdvisor(Advisor):
             moves = zip(states.tolist(), actions.tolist(), next_states.tolist(), strict=True)
             return DecisionColumns.of([self.observe(s, a, s2) for s, a, s2 in moves])
         f = _flat(self.tables)
-        now = self._current_era()
+        self._sync_tables()
         keys = states * 4 + actions
         period = resync_period(self.window)
         needs_resync = (self.steps % period) + n >= period
@@ -321,14 +335,17 @@ class StreamAdvisor(Advisor):
         loglik = np.array(self._loglik, dtype=np.float64)
         kl, p_normal, benefit = np.empty(n), np.empty(n), np.empty(n)
         advise, count = np.empty(n, dtype=np.bool_), np.empty(n, dtype=np.int64)
-        pos, self.advice_count, self.benefit = _observe_stream(
-            (self._keys, self._era, self._stack(), now), loglik, self._pos,
+        old = self._old if self._old is not None else _NO_RING
+        pos, self.advice_count, self.benefit, gone = _observe_stream(
+            (self._keys, self._kept, old), loglik, self._pos,
             (f.log_probs, f.log_weights, f.probs, f.theta, f.neg_entropy),
             self.kappa, self.advice_count, self.benefit,
             (states, actions, next_states), resync,
             (kl, p_normal, advise, count, benefit),
         )  # fmt: skip
         self._loglik, self._pos = loglik.tolist(), pos
+        if gone:
+            self._left(gone)
         self.steps += n
         self.decisions += n
         return DecisionColumns(

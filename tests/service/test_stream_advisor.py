@@ -62,3 +62,25 @@ def test_observe_many_of_nothing_changes_nothing() -> None:
     empty = np.zeros(0, dtype=np.int64)
     assert len(adv.observe_many(empty, empty, empty)) == 0
     assert adv.steps == 0 and adv.decisions == 1
+
+
+def test_tables_changing_at_every_event_keep_the_core_s_numbers() -> None:
+    """A prior update before every event (as while trajectories stream in): the values of the
+    pairs added with older tables are kept, and dropped once the last of them has left."""
+    rng = np.random.default_rng(5)
+    tables = _tables(rng, 12)
+    core, fast = Advisor(tables, 0.3, 40), StreamAdvisor(tables, 0.3, 40)
+    assert fast.start(0) == core.start(0)
+    for step in range(300):
+        if step < 200:
+            core.tables = fast.tables = _tables(rng, 12)
+        n = int(rng.choice([1, 3, 9, 60]))
+        s, a, s2 = (rng.integers(0, 12, n), rng.integers(0, 4, n),
+                    rng.integers(0, 12, n))  # fmt: skip
+        expected = DecisionColumns.of(
+            [core.observe(int(x), int(y), int(z)) for x, y, z in zip(s, a, s2, strict=True)]
+        )
+        assert fast.observe_many(s, a, s2) == expected
+        assert fast.log_likelihoods == core.log_likelihoods
+        np.testing.assert_array_equal(fast._window, np.array(core._ring))
+    assert fast._old is None  # the last prior update was more than a window ago
