@@ -86,19 +86,30 @@
     }));
   }
 
+  // The advising strategy; goal_aware sessions also list the goals still possible.
+  function strategy(s) {
+    const td = cell(s.strategy || "paper", "left");
+    if (s.goals) {
+      const open = s.goals.filter((g) => !g.ruled_out).length;
+      td.textContent += ` (${open}/${s.goals.length} goals)`;
+      td.title = s.goals.map((g) => `[${g.goal.join(", ")}]: ${g.ruled_out ? "ruled out" : g.p.toFixed(2)}`).join("\n");
+    }
+    return td;
+  }
+
   function renderSessions(sessions, total) {
     const body = $("sessions").tBodies[0];
     $("session-total").textContent = total > sessions.length
       ? `(${total} live; the ${sessions.length} most recently active shown)` : `(${total} live)`;
     if (!sessions.length) {
-      body.replaceChildren(emptyRow(12, "No live sessions. Walk the maze, or run python -m app simulate."));
+      body.replaceChildren(emptyRow(13, "No live sessions. Walk the maze, or run python -m app simulate."));
       return;
     }
     body.replaceChildren(...sessions.map((s) => {
       const tr = document.createElement("tr");
       tr.dataset.sessionId = s.session_id;
       tr.append(cell(s.session_id, "left mono"), cell(s.domain, "left"),
-                cell(s.agent_type || "–", "left"), cell(s.kappa), cell(s.steps),
+                cell(s.agent_type || "–", "left"), strategy(s), cell(s.kappa), cell(s.steps),
                 cell(`[${s.position.join(", ")}]`), bar(s.p_normal),
                 sparkline(s.p_normal_history || []), cell(s.advice_count),
                 cell(fmt(s.total_cost, 2)), cell(fmt(s.advice_per_100, 1)),

@@ -63,6 +63,13 @@ class GoalPriors:
                 self.goal_counts[g] += counts
         return self
 
+    def copy(self, alpha0: float | None = None) -> GoalPriors:
+        """The same counts (optionally under another ``alpha0``), in arrays of its own."""
+        out = GoalPriors(self.n_states, self.goals, self.alpha0 if alpha0 is None else alpha0)
+        out.goal_counts = self.goal_counts.copy()
+        out.unknown_counts = self.unknown_counts.copy()
+        return out
+
     def pooled_theta(self) -> FloatArray:
         """The paper's theta: alpha0 + all counts, normalised."""
         return self.theta(np.full(self.n_goals, 1.0 / self.n_goals))
@@ -120,6 +127,15 @@ class GoalAwareAdvisor(Advisor):
         self.beta = float(beta)
         self._log_theta_g = priors.goal_log_theta().reshape(priors.n_goals, -1).T.tolist()
         super().__init__(tables, kappa, window)
+
+    def use_priors(self, priors: GoalPriors) -> None:
+        """Advise from new per-goal counts (more expert trajectories) from the next step on.
+
+        The window keeps the log-probabilities it added, so removing them stays exact."""
+        if priors.goals != self.priors.goals or priors.n_states != self.priors.n_states:
+            raise ValueError("the new goal priors describe another domain")
+        self.priors = priors
+        self._log_theta_g = priors.goal_log_theta().reshape(priors.n_goals, -1).T.tolist()
 
     def reset(self) -> None:
         super().reset()

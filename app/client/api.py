@@ -94,8 +94,11 @@ def create_session(
     window: int | None = None,
     agent_type: str | None = None,
     start: Cell | None = None,
+    strategy: str | None = None,
+    params: Mapping[str, float | int] | None = None,
 ) -> Call:
     body: dict[str, Any] = {"kappa": kappa, "window": window, "agent_type": agent_type}
+    body |= {"strategy": strategy, "params": dict(params) if params is not None else None}
     if start is not None:
         body["start"] = [int(start[0]), int(start[1])]
     clean = {k: v for k, v in body.items() if v is not None}

@@ -144,8 +144,13 @@ class AdvisorClient(_Base):
         window: int | None = None,
         agent_type: str | None = None,
         start: Cell | None = None,
+        strategy: str | None = None,
+        params: Mapping[str, float | int] | None = None,
     ) -> Session:
-        return Session.of(self.call(api.create_session(domain, kappa, window, agent_type, start)))
+        """A new session (``strategy``: when to advise, default the paper's rule; ``params``:
+        its parameters, see the service's docs)."""
+        call = api.create_session(domain, kappa, window, agent_type, start, strategy, params)
+        return Session.of(self.call(call))
 
     def events(self, session: Session, events: EventLike | Sequence[EventLike]) -> Any:
         """Decisions over REST: one event -> one decision, a list -> a list."""
@@ -257,8 +262,10 @@ class AsyncAdvisorClient(_Base):
         window: int | None = None,
         agent_type: str | None = None,
         start: Cell | None = None,
+        strategy: str | None = None,
+        params: Mapping[str, float | int] | None = None,
     ) -> Session:
-        call = api.create_session(domain, kappa, window, agent_type, start)
+        call = api.create_session(domain, kappa, window, agent_type, start, strategy, params)
         return Session.of(await self.call(call))
 
     async def events(self, session: Session, events: EventLike | Sequence[EventLike]) -> Any:

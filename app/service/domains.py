@@ -16,6 +16,7 @@ from datetime import datetime
 
 import numpy as np
 
+from app.advice.goals import GoalPriors
 from app.advice.models import AdviceTables
 from app.advice.priors import ActionPrior
 from app.domain.grid import GridDomain, MapError
@@ -88,6 +89,9 @@ class DomainState:
     lock: threading.Lock = field(default_factory=threading.Lock)
     view: PriorView = field(init=False)
     cell_json: list[str] = field(init=False)  # "[r,c]" per state, for the decision encoder
+    # per-goal counts for goal-aware sessions: built from the stored trajectories when the
+    # first such session starts, then kept up to date (replaced whole, never changed)
+    goal_priors: GoalPriors | None = None
 
     def __post_init__(self) -> None:
         self.view = _view(self.prior, None, set())
@@ -144,15 +148,31 @@ class DomainCatalog:
                 rec, created, kept = self.store.put_domain(
                     name, "\n".join(domain.rows_text), alpha0
                 )
-                state = self._state(rec, domain, old.prior if old and kept else None)
+                state = self._state(rec, domain, old if old and kept else None)
                 self._domains[name] = state
         return state, created, kept
 
     @staticmethod
-    def _state(rec: DomainRecord, domain: GridDomain, keep: ActionPrior | None) -> DomainState:
-        tables = prior_tables(keep) if keep is not None else {}
+    def _state(rec: DomainRecord, domain: GridDomain, keep: DomainState | None) -> DomainState:
+        """The state of a put domain; ``keep``: the old state whose counts it keeps."""
+        tables = prior_tables(keep.prior) if keep is not None else {}
         prior = restore_prior(rec.alpha0, domain.n_states, tables)
-        return DomainState(rec.name, domain, prior, rec.created_at, rec.updated_at)
+        goals = keep.goal_priors if keep is not None else None
+        return DomainState(
+            rec.name, domain, prior, rec.created_at, rec.updated_at,
+            goal_priors=goals.copy(alpha0=rec.alpha0) if goals is not None else None,
+        )  # fmt: skip
+
+    def goal_priors(self, state: DomainState) -> GoalPriors:
+        """*Worker thread* the first time (reads every stored trajectory of the domain).
+
+        Counts per goal of the map, from the trajectories whose ``goal`` is that goal's cell;
+        trajectories of unknown goal (or of a cell that is not a goal) count for every goal."""
+        with state.lock:
+            if state.goal_priors is None:
+                priors = GoalPriors(state.domain.n_states, state.domain.goals, state.view.alpha0)
+                state.goal_priors = add_goals(priors, self.store.trajectories(state.name))
+            return state.goal_priors
 
     def delete(self, name: str) -> None:
         with self._lock:
@@ -175,3 +195,12 @@ class DomainCatalog:
                 state.prior.partial_fit([t.pairs for t in group], agent_type=agent_type)
             changed = {POOLED, *(t for t in groups if t is not None)}
             state.view = _view(state.prior, state.view, changed)
+            if state.goal_priors is not None:
+                state.goal_priors = add_goals(state.goal_priors.copy(), items)
+
+
+def add_goals(priors: GoalPriors, items: Sequence[Trajectory]) -> GoalPriors:
+    """``priors`` with ``items`` added under the goals they ended at (if one of the map's)."""
+    index = {g: i for i, g in enumerate(priors.goals)}
+    goal_index = [index.get(t.goal) if t.goal is not None else None for t in items]
+    return priors.add([t.pairs for t in items], goal_index)

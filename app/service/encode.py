@@ -11,7 +11,8 @@ same bytes (``tests/service/test_encode.py``), about five times faster.
 from __future__ import annotations
 
 import weakref
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -206,8 +207,13 @@ def encode_decisions(
     kl, p_normal, total, benefit = _float_texts(
         cols.kl, cols.p_normal, cols.total_cost, cols.benefit
     )
+    frags: Sequence[Sequence[str]] = parts
+    if cols.advice is not None:  # advice that is not theta_s of the tables (goal_aware)
+        own = [_with_advice(parts[0][s], a) for s, a in zip(cols.state, cols.advice, strict=True)]
+        # decision i now reads fragment i (its own advice), whether advised or not
+        frags, cols = (own, own), replace(cols, state=list(range(len(own))))
     texts = [
-        f'{{"step":{step}{parts[adv][s]}{k},"p_normal":{p},'
+        f'{{"step":{step}{frags[adv][s]}{k},"p_normal":{p},'
         f'"cost":{{"advice_count":{count},"total":{t},"benefit":{b}}}}}'
         for step, s, adv, k, p, count, t, b in zip(
             cols.step, cols.state, cols.advise, kl, p_normal, cols.advice_count, total, benefit,
@@ -217,6 +223,15 @@ def encode_decisions(
     if single:
         return texts[0]
     return "[" + ",".join(texts) + "]"
+
+
+def _with_advice(fragment: str, advice: tuple[float, float, float, float] | None) -> str:
+    """A state's fragment without advice turned into one with ``advice`` (if not None)."""
+    if advice is None:
+        return fragment
+    n, e, so, w = (repr(float(v)) for v in advice)
+    text = f'"advise":true,"advice":{{"N":{n},"E":{e},"S":{so},"W":{w}}}'
+    return fragment.replace('"advise":false,"advice":null', text)
 
 
 def decision_dict(d: Decision, domain: GridDomain) -> dict[str, Any]:

@@ -12,6 +12,7 @@ import numpy as np
 
 from app.advice.advisor import Decision
 from app.advice.models import AdviceTables
+from app.advice.strategies import StrategyParams
 from app.domain.grid import ACTIONS, GridDomain, MapError
 from app.service.domains import DomainState
 from app.service.encode import encode_decisions, fragments, packed
@@ -39,8 +40,13 @@ def create_session(
         raise BadInput(f"window: {body.window} is larger than this service allows ({limit})")
     grid = domain.domain
     start = grid.start if body.start is None else cell_state(grid, body.start, "start")
+    params = StrategyParams(**body.params.model_dump()) if body.params else StrategyParams()
+    if body.strategy == "goal_aware" and domain.goal_priors is None:
+        state.catalog.goal_priors(domain)  # reads the store once; routes call it off the loop
     try:
-        return state.registry.create(domain, body.kappa, body.window, body.agent_type, start)
+        return state.registry.create(
+            domain, body.kappa, body.window, body.agent_type, start, body.strategy, params
+        )
     except TooManySessions:
         raise BadInput(
             f"the service has its maximum of {state.registry.max_sessions} live sessions: "

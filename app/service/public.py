@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
+from dataclasses import asdict
+
 import numpy as np
 
 from app.advice.advisor import Decision
+from app.advice.goals import GoalAwareAdvisor
+from app.advice.strategies import RuleAdvisor
 from app.domain.grid import ACTIONS, GridDomain
 from app.service.domains import DomainState
 from app.service.encode import decision_dict
@@ -14,11 +18,13 @@ from app.service.schemas import (
     AdvicePublic,
     DecisionPublic,
     DomainPublic,
+    GoalBelief,
     OverviewDomain,
     OverviewSession,
     PriorPublic,
     SessionCreated,
     SessionPublic,
+    StrategyParams,
 )
 from app.service.store import POOLED
 
@@ -62,6 +68,7 @@ def session_created(s: LiveSession, decision: Decision) -> SessionCreated:
     return SessionCreated(
         session_id=s.id, token=s.token, domain=s.domain.name, agent_type=s.agent_type,
         prior_table=s.table_key, kappa=s.advisor.kappa, window=s.advisor.window,
+        strategy=s.strategy, params=_params(s),
         decision=decision_public(decision, s.domain.domain),
     )  # fmt: skip
 
@@ -69,7 +76,8 @@ def session_created(s: LiveSession, decision: Decision) -> SessionCreated:
 def session_public(s: SessionSnapshot) -> SessionPublic:
     return SessionPublic(
         session_id=s.id, domain=s.domain, agent_type=s.agent_type, prior_table=s.table_key,
-        kappa=s.kappa, window=s.window, steps=s.steps, position=s.position, p_normal=s.p_normal,
+        kappa=s.kappa, window=s.window, strategy=s.strategy, goals=_goals(s), steps=s.steps,
+        position=s.position, p_normal=s.p_normal,
         advice_count=s.advice_count, total_cost=s.total_cost, benefit=s.benefit,
         advice_per_100=s.advice_per_100, idle_seconds=s.idle_seconds, created_at=s.created_at,
     )  # fmt: skip
@@ -83,11 +91,27 @@ def overview_session(s: SessionSnapshot) -> OverviewSession:
             step=step, state=cell, advice=AdvicePublic(**dict(zip("NESW", advice, strict=True)))
         )
     return OverviewSession(
-        session_id=s.id, domain=s.domain, agent_type=s.agent_type, kappa=s.kappa, steps=s.steps,
+        session_id=s.id, domain=s.domain, agent_type=s.agent_type, kappa=s.kappa,
+        strategy=s.strategy, goals=_goals(s), steps=s.steps,
         position=s.position, p_normal=s.p_normal, advice_count=s.advice_count,
         total_cost=s.total_cost, advice_per_100=s.advice_per_100, last_advice=last,
         path=s.path, p_normal_history=s.p_history,
     )  # fmt: skip
+
+
+def _params(s: LiveSession) -> StrategyParams:
+    adv = s.advisor
+    if isinstance(adv, RuleAdvisor):
+        return StrategyParams(**asdict(adv.params))
+    if isinstance(adv, GoalAwareAdvisor):
+        return StrategyParams(beta=adv.beta)
+    return StrategyParams()
+
+
+def _goals(s: SessionSnapshot) -> list[GoalBelief] | None:
+    if s.goals is None:
+        return None
+    return [GoalBelief(goal=cell, p=p, ruled_out=out) for cell, p, out in s.goals]
 
 
 def overview_domain(d: DomainState, sessions: int) -> OverviewDomain:

@@ -20,8 +20,10 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from app.advice.advisor import Decision
+from app.advice.advisor import Advisor, Decision
+from app.advice.goals import GoalAwareAdvisor, GoalPriors
 from app.advice.models import AdviceTables
+from app.advice.strategies import StrategyParams, make_advisor
 from app.service.domains import DomainState
 from app.service.stream_advisor import DecisionColumns, StreamAdvisor
 
@@ -73,14 +75,23 @@ class AdviceLog:
     prior does). About 1.3 kB for 50 entries where a deque of tuples takes about 7 kB:
     100,000 sessions hold one each (docs/PERFORMANCE.md, memory)."""
 
-    __slots__ = ("_buf", "_count", "_tables")
+    __slots__ = ("_buf", "_count", "_own", "_tables")
 
     def __init__(self, size: int):
         self._buf = np.zeros((3, size), dtype=np.int64)  # step, state, index into _tables
         self._count = 0
         self._tables: list[AdviceTables] = []
+        # the advice itself, for advisors whose advice is not theta_s (made at the first one)
+        self._own: npt.NDArray[np.float64] | None = None
 
-    def extend(self, steps: list[int], states: list[int], tables: AdviceTables) -> None:
+    def extend(
+        self,
+        steps: list[int],
+        states: list[int],
+        tables: AdviceTables,
+        advice: list[Advice | None] | None = None,
+    ) -> None:
+        """Log advice given at ``states``: theta_s of ``tables``, or ``advice`` when given."""
         k, size = len(steps), self._buf.shape[1]
         if not k:
             return
@@ -92,6 +103,11 @@ class AdviceLog:
         self._buf[0, at] = steps[k - m :]
         self._buf[1, at] = states[k - m :]
         self._buf[2, at] = len(self._tables) - 1
+        if advice is not None and self._own is None:
+            self._own = np.full((size, 4), np.nan)
+        if self._own is not None:  # NaN rows: theta_s of the tables
+            rows = [np.nan] * 4
+            self._own[at] = [rows if a is None else a for a in advice[k - m :]] if advice else rows
         self._count += k
 
     def _compact(self) -> None:
@@ -110,10 +126,16 @@ class AdviceLog:
         m = min(self._count, size)
         return np.arange(self._count - m, self._count) % size
 
-    def items(self) -> list[tuple[int, int, AdviceTables]]:
+    def items(self) -> list[tuple[int, int, AdviceTables | Advice]]:
         order = self._order()
         steps, states, which = self._buf[:, order].tolist()
-        return [(a, s, self._tables[t]) for a, s, t in zip(steps, states, which, strict=True)]
+        if self._own is None:
+            return [(a, s, self._tables[t]) for a, s, t in zip(steps, states, which, strict=True)]
+        own = self._own[order].tolist()
+        return [
+            (a, s, self._tables[t] if o[0] != o[0] else (o[0], o[1], o[2], o[3]))  # NaN: theta
+            for a, s, t, o in zip(steps, states, which, own, strict=True)
+        ]
 
 
 @dataclass(eq=False, slots=True)
@@ -125,7 +147,8 @@ class LiveSession:
     domain: DomainState
     agent_type: str | None
     table_key: str
-    advisor: StreamAdvisor
+    advisor: Advisor  # a StreamAdvisor for the paper's rule (batches in one compiled loop)
+    strategy: str
     position: int
     p_normal: float
     created_at: datetime
@@ -135,7 +158,8 @@ class LiveSession:
     path: Recent | None = None
     p_history: Recent | None = None
     # (step, state, the tables that advised): theta_s is read at snapshot time, so an entry
-    # costs three numbers; created at the first advice
+    # costs three numbers (goal_aware sessions also keep the advice itself, which is not
+    # theta_s of the tables); created at the first advice
     advice_log: AdviceLog | None = None
     closed: bool = False
 
@@ -152,15 +176,36 @@ class LiveSession:
         self.path.extend(cols.state)
         self.p_history.extend(cols.p_normal)
         if cols.advice_count[-1] != cols.advice_count[0] or cols.advise[0]:
-            self.log_advice(cols.step, cols.state, cols.advise)
+            self.log_advice(cols.step, cols.state, cols.advise, cols.advice)
 
-    def log_advice(self, steps: list[int], states: list[int], advise: list[bool]) -> None:
+    def log_advice(
+        self,
+        steps: list[int],
+        states: list[int],
+        advise: list[bool],
+        advice: list[Advice | None] | None = None,
+    ) -> None:
         if self.advice_log is None:
             self.advice_log = AdviceLog(RECENT_ADVICE)
         advised = [i for i, a in enumerate(advise) if a][-RECENT_ADVICE:]
         self.advice_log.extend(
-            [steps[i] for i in advised], [states[i] for i in advised], self.advisor.tables
+            [steps[i] for i in advised],
+            [states[i] for i in advised],
+            self.advisor.tables,
+            None if advice is None else [advice[i] for i in advised],
         )
+
+    def observe(
+        self, states: IntArray, actions: IntArray, next_states: IntArray
+    ) -> DecisionColumns:
+        """The advisor's decisions for checked (s, a, s') arrays: the paper's rule in one
+        compiled loop, the other strategies one core call per event."""
+        adv = self.advisor
+        if isinstance(adv, StreamAdvisor):
+            return adv.observe_many(states, actions, next_states)
+        moves = zip(states.tolist(), actions.tolist(), next_states.tolist(), strict=True)
+        decisions = [adv.observe(s, a, s2) for s, a, s2 in moves]
+        return DecisionColumns.of(decisions, with_advice=isinstance(adv, GoalAwareAdvisor))
 
 
 @dataclass(frozen=True, slots=True)
@@ -173,6 +218,7 @@ class SessionSnapshot:
     table_key: str
     kappa: float
     window: int
+    strategy: str
     steps: int
     position: tuple[int, int]
     p_normal: float
@@ -185,6 +231,8 @@ class SessionSnapshot:
     path: list[tuple[int, int]]
     p_history: list[float]
     advice: list[tuple[int, tuple[int, int], Advice]]  # (step, cell, theta_s), oldest first
+    # goal_aware: (goal cell, P(goal | H), ruled out) for each goal of the map
+    goals: list[tuple[tuple[int, int], float, bool]] | None = None
 
 
 class SessionRegistry:
@@ -203,12 +251,26 @@ class SessionRegistry:
         return len(self._sessions)
 
     def create(
-        self, domain: DomainState, kappa: float, window: int, agent_type: str | None, start: int
+        self,
+        domain: DomainState,
+        kappa: float,
+        window: int,
+        agent_type: str | None,
+        start: int,
+        strategy: str = "paper",
+        params: StrategyParams | None = None,
     ) -> tuple[LiveSession, Decision]:
-        """A new session and the decision for its start state (empty history)."""
+        """A new session and the decision for its start state (empty history). A goal_aware
+        session needs ``domain.goal_priors`` built (:meth:`DomainCatalog.goal_priors`)."""
         view = domain.view
         key = view.resolve(agent_type)
-        advisor = StreamAdvisor(view.tables[key], kappa=kappa, window=window)
+        advisor: Advisor
+        if strategy == "paper":
+            advisor = StreamAdvisor(view.tables[key], kappa=kappa, window=window)
+        else:
+            advisor = make_advisor(
+                strategy, view.tables[key], kappa, window, params, domain.goal_priors
+            )
         decision = advisor.start(start)
         now = time.monotonic()
         with self.lock:
@@ -218,12 +280,13 @@ class SessionRegistry:
                 raise TooManySessions(self.max_sessions)
             sid = secrets.token_hex(8)
             session = LiveSession(
-                sid, secrets.token_urlsafe(24), domain, agent_type, key, advisor, start,
-                decision.p_normal, datetime.now(UTC), now,
+                sid, secrets.token_urlsafe(24), domain, agent_type, key, advisor, strategy,
+                start, decision.p_normal, datetime.now(UTC), now,
                 self.history_sizes,
             )  # fmt: skip
             if decision.advise:
-                session.log_advice([0], [start], [True])
+                own = [decision.advice] if isinstance(advisor, GoalAwareAdvisor) else None
+                session.log_advice([0], [start], [True], own)
             self._sessions[sid] = session
         return session, decision
 
@@ -240,7 +303,7 @@ class SessionRegistry:
         with self.lock:
             if session.closed:
                 raise SessionNotFound(session.id)
-            cols = session.advisor.observe_many(*moves)
+            cols = session.observe(*moves)
             session.record(cols)
             session.last_seen = time.monotonic()
         return cols
@@ -275,6 +338,8 @@ class SessionRegistry:
                     s.domain = domain
                     s.table_key = view.resolve(s.agent_type)
                     s.advisor.tables = view.tables[s.table_key]
+                    if isinstance(s.advisor, GoalAwareAdvisor) and domain.goal_priors is not None:
+                        s.advisor.use_priors(domain.goal_priors)
 
     def expire(self) -> int:
         with self.lock:
@@ -314,7 +379,8 @@ def _snap(s: LiveSession, now: float) -> SessionSnapshot:
     cells = s.domain.domain.cells
     adv = s.advisor
     return SessionSnapshot(
-        s.id, s.domain.name, s.agent_type, s.table_key, adv.kappa, adv.window, adv.steps,
+        s.id, s.domain.name, s.agent_type, s.table_key, adv.kappa, adv.window, s.strategy,
+        adv.steps,
         (int(cells[s.position, 0]), int(cells[s.position, 1])), s.p_normal,
         adv.advice_count, adv.total_cost, adv.benefit, adv.advice_per_100, s.created_at,
         now - s.last_seen,
@@ -324,9 +390,20 @@ def _snap(s: LiveSession, now: float) -> SessionSnapshot:
             (step, (int(cells[st, 0]), int(cells[st, 1])), _advice(tables, st))
             for step, st, tables in (s.advice_log.items() if s.advice_log else ())
         ],
+        _goals(adv, cells) if isinstance(adv, GoalAwareAdvisor) else None,
     )  # fmt: skip
 
 
-def _advice(tables: AdviceTables, state: int) -> Advice:
-    n, e, s, w = tables.theta[state].tolist()
+def _advice(source: AdviceTables | Advice, state: int) -> Advice:
+    if not isinstance(source, AdviceTables):
+        return source
+    n, e, s, w = source.theta[state].tolist()
     return (n, e, s, w)
+
+
+def _goals(adv: GoalAwareAdvisor, cells: IntArray) -> list[tuple[tuple[int, int], float, bool]]:
+    goals: GoalPriors = adv.priors
+    return [
+        ((int(cells[g, 0]), int(cells[g, 1])), p, not alive)
+        for g, p, alive in zip(goals.goals, adv.goal_posterior(), adv.alive, strict=True)
+    ]

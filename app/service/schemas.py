@@ -145,11 +145,54 @@ class PriorPublic(BaseModel):
 
 
 # ---- sessions, events and decisions ----------------------------------------------------------
+StrategyName = Literal["paper", "goal_aware", "early", "importance", "mistake", "random", "always"]
+STRATEGY_DOC = (
+    "When to advise (docs/ARCHITECTURE.md, 'Advising strategies'): 'paper' (default): iff "
+    "KL[theta_s || P(A|s,H)] >= kappa; 'goal_aware': the same rule with theta narrowed by a "
+    "posterior over the experts' goals; 'early': the first n_steps decisions; 'importance': "
+    "where KL[theta_s || uniform] >= threshold; 'mistake': after an action with theta_s(a) < "
+    "threshold; 'random': with probability rate; 'always'. Every strategy advises theta_s "
+    "(goal_aware: its narrowed theta) and costs kappa per piece of advice."
+)
+
+
+class StrategyParams(Strict):
+    """Parameters of the advising strategy; each strategy reads only its own."""
+
+    n_steps: int = Field(
+        20, strict=True, ge=0, lt=2**31, description="early: advise at the first n_steps decisions."
+    )
+    threshold: float = Field(
+        0.5, ge=0.0, allow_inf_nan=False,
+        description="importance: KL[theta_s || uniform] >= threshold (nats); mistake: "
+        "theta_s(a) < threshold.",
+    )  # fmt: skip
+    rate: float = Field(
+        0.1, ge=0.0, le=1.0, allow_inf_nan=False, description="random: P(advise) per decision."
+    )
+    beta: float = Field(
+        0.0, ge=0.0, le=1.0, allow_inf_nan=False,
+        description="goal_aware: weight of each goal's likelihood of the window (0: ruling "
+        "goals out only).",
+    )  # fmt: skip
+    seed: int = Field(0, strict=True, ge=0, lt=2**63, description="random: seed of its draws.")
+
+
 class SessionCreate(Strict):
     kappa: Kappa = 0.5
     window: Window = 300
     agent_type: AgentType | None = None
     start: Cell | None = Field(None, description="Start cell (default: the domain's start).")
+    strategy: StrategyName = Field("paper", description=STRATEGY_DOC)
+    params: StrategyParams | None = Field(None, description="The strategy's parameters.")
+
+
+class GoalBelief(BaseModel):
+    """goal_aware sessions: what the advisor believes of one goal of the map."""
+
+    goal: Cell
+    p: float = Field(description="P(goal | H), the weight of this goal's prior in the advice.")
+    ruled_out: bool = Field(description="The explorer stood on this goal and went on.")
 
 
 class CostPublic(BaseModel):
@@ -194,6 +237,8 @@ class SessionCreated(BaseModel):
     prior_table: str
     kappa: float
     window: int
+    strategy: StrategyName
+    params: StrategyParams
     decision: DecisionPublic
 
 
@@ -204,6 +249,8 @@ class SessionPublic(BaseModel):
     prior_table: str = Field(description="The prior table advising it ('*' = pooled).")
     kappa: float
     window: int
+    strategy: StrategyName
+    goals: list[GoalBelief] | None = Field(description="goal_aware sessions only, else null.")
     steps: int
     position: Cell
     p_normal: float
@@ -241,6 +288,8 @@ class OverviewSession(BaseModel):
     domain: str
     agent_type: str | None
     kappa: float
+    strategy: StrategyName
+    goals: list[GoalBelief] | None = Field(description="goal_aware sessions only, else null.")
     steps: int
     position: Cell
     p_normal: float

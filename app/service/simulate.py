@@ -18,6 +18,7 @@ import numpy as np
 import numpy.typing as npt
 import typer
 
+from app.advice.strategies import STRATEGIES
 from app.agents.explorers import FIXED_EXPLORERS, make_explorer
 from app.client import AdvisorError, AsyncAdvisorClient
 from app.client.types import Decision
@@ -47,6 +48,7 @@ class Plan:
     window: int
     delay: float
     keep: bool
+    strategy: str = "paper"
 
 
 def _advice(decision: Decision) -> npt.NDArray[np.float64] | None:
@@ -70,7 +72,11 @@ async def episode(
     explorer.reset(goal, rng)
     s = grid.start
     session = await client.create_session(
-        plan.domain, kappa=plan.kappa, window=plan.window, start=grid.cell(s)
+        plan.domain,
+        kappa=plan.kappa,
+        window=plan.window,
+        start=grid.cell(s),
+        strategy=plan.strategy,
     )
     decision = session.decision
     steps = 0
@@ -123,7 +129,8 @@ def summary(outcomes: list[Outcome], plan: Plan) -> str:
     advice = sum(o.advice_count for o in outcomes)
     per100 = 100.0 * advice / max(1, steps + n)  # one decision per step, plus each start
     return (
-        f"{plan.explorer}, advice {'on' if plan.advice else 'off'}, kappa {plan.kappa}: "
+        f"{plan.explorer}, advice {'on' if plan.advice else 'off'} ({plan.strategy}), "
+        f"kappa {plan.kappa}: "
         f"{wins}/{n} reached their goal (mean reward {1000.0 * wins / max(1, n):.0f}); "
         f"mean steps {steps / max(1, n):.1f}; advice per 100 decisions {per100:.1f}"
     )
@@ -144,6 +151,9 @@ def simulate(
     domain: Annotated[str, typer.Option(help="Domain to walk.")] = "default",
     delay: Annotated[float, typer.Option(min=0.0, help="Seconds between moves (to watch).")] = 0.0,
     keep: Annotated[bool, typer.Option(help="Leave sessions open after each episode.")] = False,
+    strategy: Annotated[
+        str, typer.Option(help="When to advise: " + " | ".join(STRATEGIES) + " (defaults).")
+    ] = "paper",
 ) -> None:
     """Drive simulated explorers through the live service and print their outcomes."""
     if explorer not in FIXED_EXPLORERS:
@@ -152,9 +162,13 @@ def simulate(
     if advice not in ("on", "off"):
         typer.echo("error: --advice must be 'on' or 'off'", err=True)
         raise typer.Exit(code=2)
+    if strategy not in STRATEGIES:
+        typer.echo(f"error: --strategy must be one of {', '.join(STRATEGIES)}", err=True)
+        raise typer.Exit(code=2)
     plan = Plan(
-        domain, explorer, advice == "on", episodes, explorers, steps, kappa, window, delay, keep
-    )
+        domain, explorer, advice == "on", episodes, explorers, steps, kappa, window, delay, keep,
+        strategy,
+    )  # fmt: skip
     try:
         outcomes = asyncio.run(run(server, plan, seed))
     except AdvisorError as exc:

@@ -41,9 +41,10 @@ SMALL_BATCH = 8
 
 @dataclass(frozen=True, slots=True)
 class DecisionColumns:
-    """Decisions for a batch, one list per field of :class:`Decision` (the advice is
-    ``tables.theta[state]`` where ``advise`` is true). A batch from the compiled loop also
-    keeps (state, advise, advice_count) as arrays, for the compiled encoder."""
+    """Decisions for a batch, one list per field of :class:`Decision`. The advice is
+    ``tables.theta[state]`` where ``advise`` is true, unless ``advice`` holds it (strategies
+    whose advice is not theta_s, as goal_aware's). A batch from the compiled loop also keeps
+    (state, advise, advice_count) as arrays, for the compiled encoder."""
 
     step: list[int]
     state: list[int]
@@ -56,15 +57,16 @@ class DecisionColumns:
     arrays: tuple[IntArray, BoolArray, IntArray] | None = field(
         default=None, compare=False, repr=False
     )
+    advice: list[tuple[float, float, float, float] | None] | None = None
 
     @classmethod
-    def of(cls, decisions: list[Decision]) -> DecisionColumns:
+    def of(cls, decisions: list[Decision], with_advice: bool = False) -> DecisionColumns:
         if not decisions:
-            return cls([], [], [], [], [], [], [], [])
+            return cls([], [], [], [], [], [], [], [], advice=[] if with_advice else None)
         c = list(zip(*decisions, strict=True))
         return cls(
             list(c[0]), list(c[1]), list(c[2]), list(c[4]), list(c[5]), list(c[6]),
-            list(c[7]), list(c[8]),
+            list(c[7]), list(c[8]), advice=list(c[3]) if with_advice else None,
         )  # fmt: skip
 
     def __len__(self) -> int:

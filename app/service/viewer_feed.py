@@ -49,6 +49,8 @@ def session_view(s: SessionSnapshot) -> SessionView:
         p_normal_history=s.p_history,
         advice=s.advice,  # (step, cell, theta_s) triples, the shape AdviceGiven names
         agent_type=s.agent_type,
+        strategy=s.strategy,
+        goals=s.goals,
     )
 
 

@@ -104,7 +104,8 @@ class Controls:
             f"**{s.session_id}**" + (f" ({s.agent_type})" if s.agent_type else "") + "\n\n"
             f"steps **{s.steps}**, at {list(s.position)}, P(M1|H) **{s.p_normal:.3f}**\n\n"
             f"advice **{s.advice_count}** ({per_100:.1f} per 100 decisions), "
-            f"cost **{s.total_cost:.2f}** at kappa {s.kappa:g}"
+            f"cost **{s.total_cost:.2f}** at kappa {s.kappa:g}, strategy `{s.strategy}`"
+            + goal_lines(s)
         )
         history = np.asarray(s.p_normal_history, dtype=np.float64)
         if history.size == 0:
@@ -112,6 +113,18 @@ class Controls:
         steps = np.arange(s.steps - history.size + 1, s.steps + 1, dtype=np.float64)
         self.plot.data = (steps, history)
         self.plot.visible = True
+
+
+def goal_lines(s: SessionView) -> str:
+    """goal_aware sessions: P(goal | H) per goal of the map (G0.. in the scene's order), and
+    which goals are ruled out (the explorer stood there and went on)."""
+    if s.goals is None:
+        return ""
+    rows = [
+        f"G{i} {list(cell)}: " + ("~~ruled out~~" if out else f"**{p:.2f}**")
+        for i, (cell, p, out) in enumerate(s.goals)
+    ]
+    return "\n\nGoal posterior: " + ", ".join(rows)
 
 
 def set_options(dropdown: viser.GuiDropdownHandle[str], options: tuple[str, ...]) -> None:

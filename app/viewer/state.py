@@ -67,6 +67,9 @@ class SessionView:
     p_normal_history: Sequence[float] = ()
     advice: Sequence[tuple[int, Cell, Probabilities]] = ()
     agent_type: str | None = None
+    strategy: str = "paper"
+    # goal_aware: (goal cell, P(goal | H), ruled out) for each goal of the map
+    goals: Sequence[tuple[Cell, float, bool]] | None = None
 
     @property
     def version(self) -> tuple[int, int]:

@@ -17,12 +17,13 @@ def test_dashboard_lists_a_session_and_refreshes_its_figures(service: Service, p
     page.goto(service.base + "/")
     row = page.locator(f'tr[data-session-id="{sid}"]')
     expect(row).to_be_visible()
-    expect(row.locator("td").nth(4)).to_have_text("3")  # steps
+    expect(row.locator("td").nth(3)).to_have_text("paper")  # strategy
+    expect(row.locator("td").nth(5)).to_have_text("3")  # steps
     expect(page.locator('tr[data-domain="default"]')).to_contain_text("30×30")
     # the page polls: more moves show up without a reload
     service.move(sid, auth, [28, 3], "WW")
-    expect(row.locator("td").nth(4)).to_have_text("5")
-    expect(row.locator("td").nth(5)).to_have_text("[28, 1]")
+    expect(row.locator("td").nth(5)).to_have_text("5")
+    expect(row.locator("td").nth(6)).to_have_text("[28, 1]")
     link = page.locator("#viewer-link")
     expect(link).to_be_visible()
     expect(link).to_have_attribute("href", re.compile(rf":{service.viewer.port}/$"))

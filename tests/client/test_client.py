@@ -54,6 +54,9 @@ def test_client_rest_calls(server: Server) -> None:
         assert client.sessions()["total"] >= 1
         assert any(s["session_id"] == session.session_id for s in client.overview()["sessions"])
         assert client.end_session(session)["steps"] == 3
+        aware = client.create_session("tiny-rest", strategy="goal_aware", params={"beta": 0.5})
+        assert client.session(aware)["strategy"] == "goal_aware"
+        assert len(client.session(aware)["goals"]) == 2
         client.delete_domain("tiny-rest")
 
 

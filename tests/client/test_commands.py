@@ -23,7 +23,7 @@ def test_simulate_drives_explorers_and_prints_outcomes(server: Server) -> None:
     assert run.returncode == 0, run.stderr
     lines = run.stdout.strip().splitlines()
     assert sum("episode" in line for line in lines) == 3
-    assert lines[-1].startswith("random-avoid, advice on, kappa 0.5: ")
+    assert lines[-1].startswith("random-avoid, advice on (paper), kappa 0.5: ")
     assert "reached their goal" in lines[-1] and "advice per 100 decisions" in lines[-1]
     with AdvisorClient(server.url) as client:  # each episode's session was ended
         assert client.overview()["total_sessions"] == before
@@ -36,9 +36,18 @@ def test_simulate_optimal_explorers_reach_their_goals(server: Server) -> None:
     assert "2/2 reached their goal (mean reward 1000)" in run.stdout
 
 
+def test_simulate_takes_an_advising_strategy(server: Server) -> None:
+    run = simulate("--server", server.url, "--strategy", "goal_aware", "--episodes", "1",
+                   "--steps", "40")  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    assert "random, advice on (goal_aware), kappa 0.5: " in run.stdout
+
+
 def test_simulate_explains_bad_options_and_unreachable_servers() -> None:
     run = simulate("--explorer", "teleporter")
     assert run.returncode == 2 and "--explorer must be one of" in run.stderr
+    run = simulate("--strategy", "oracle")
+    assert run.returncode == 2 and "--strategy must be one of" in run.stderr
     run = simulate("--server", "http://127.0.0.1:9", "--episodes", "1")
     assert run.returncode == 2 and "cannot reach" in run.stderr
 

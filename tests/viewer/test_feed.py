@@ -121,3 +121,25 @@ def test_service_starts_and_stops_the_viewer_when_enabled(tmp_path: Path) -> Non
         wait_until(lambda: c.get("/viewer").json()["ticks"] > status["ticks"])
     assert app.state.viewer is None
     assert viewer._thread is not None and not viewer._thread.is_alive()
+
+
+def test_feed_carries_a_goal_aware_sessions_goal_posterior(client: TestClient) -> None:
+    grid = client.app.state.service.catalog.get("default").domain  # type: ignore[attr-defined]
+    goal = grid.goals[0]
+    move = next(a for a in range(4) if grid.next_state[goal, a] != goal)
+    body = {"strategy": "goal_aware", "params": {"beta": 0.5}, "start": grid.cell(goal)}
+    created = client.post("/domains/default/sessions", json=body).json()
+    auth = {"Authorization": f"Bearer {created['token']}"}
+    event = {"state": grid.cell(goal), "action": "NESW"[move]}
+    assert client.post(f"/sessions/{created['session_id']}/events", json=event, headers=auth)
+    snap = ServiceFeed(client.app.state.service)()  # type: ignore[attr-defined]
+    mine = next(s for s in snap.sessions if s.session_id == created["session_id"])
+    assert mine.strategy == "goal_aware" and mine.goals is not None
+    summary = client.get(f"/sessions/{created['session_id']}", headers=auth).json()
+    assert [[list(c), p, out] for c, p, out in mine.goals] == [
+        [g["goal"], g["p"], g["ruled_out"]] for g in summary["goals"]
+    ]
+    assert mine.goals[0][2] and not any(out for _, _, out in mine.goals[1:])
+    sid, _ = walk(client, "E")
+    paper = next(s for s in ServiceFeed(client.app.state.service)().sessions if s.session_id == sid)  # type: ignore[attr-defined]
+    assert paper.strategy == "paper" and paper.goals is None

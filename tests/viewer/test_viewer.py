@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import threading
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -168,3 +169,25 @@ def test_pump_wait_keeps_the_rate_and_caps_the_share(
         assert elapsed / (elapsed + wait) <= share + 1e-9  # never more than the share
     if elapsed <= share * period:  # a cheap tick: the plain fixed rate
         assert elapsed + wait == pytest.approx(period)
+
+
+def test_viewer_shows_a_goal_aware_sessions_goal_posterior(
+    viewer: Viewer, feed: FakeFeed, domain: GridDomain, theta: np.ndarray
+) -> None:
+    snap = snapshot(domain, theta, 1)
+    cells = [domain.cell(g) for g in domain.goals]
+    p = [0.0] + [1.0 / (len(cells) - 1)] * (len(cells) - 1)
+    goals = [(c, q, i == 0) for i, (c, q) in enumerate(zip(cells, p, strict=True))]
+    aware = replace(snap.sessions[0], session_id="g", strategy="goal_aware", goals=goals)
+    feed.snapshot = Snapshot(snap.domains, [*snap.sessions, aware])
+    viewer.tick()
+    assert viewer.controls is not None
+    viewer.controls.session.value = "g"
+    viewer.tick()
+    text = viewer.controls.stats.content
+    assert "strategy `goal_aware`" in text and "Goal posterior" in text
+    assert f"G0 {list(cells[0])}: ~~ruled out~~" in text
+    assert f"G1 {list(cells[1])}: **{p[1]:.2f}**" in text
+    viewer.controls.session.value = "w0"
+    viewer.tick()
+    assert "Goal posterior" not in viewer.controls.stats.content

@@ -3,6 +3,7 @@ from __future__ import annotations
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, FastAPI, Query, Request, Response
+from starlette.concurrency import run_in_threadpool
 
 from app.service import ops
 from app.service.deps import (
@@ -44,7 +45,10 @@ async def create_session(
 ) -> SessionCreated:
     """Start watching an explorer: returns its id, its token (keep it: every session route
     needs it) and the decision for its start cell."""
-    session, decision = ops.create_session(state, domain, body or SessionCreate())
+    body = body or SessionCreate()
+    if body.strategy == "goal_aware" and domain.goal_priors is None:
+        await run_in_threadpool(state.catalog.goal_priors, domain)  # first one: reads the store
+    session, decision = ops.create_session(state, domain, body)
     return session_created(session, decision)
 
 

@@ -1,0 +1,234 @@
+"""Sessions with an advising strategy decide exactly as the core's advisor for that strategy.
+
+The reference is rebuilt independently from what the database holds: the pooled prior from the
+stored trajectories (ActionPrior.fit) and, for goal_aware, the per-goal counts from the goal each
+stored trajectory ended at (GoalPriors.add). New expert trajectories arrive mid-stream, and live
+sessions must follow them (the core reference is given the new tables and goal priors).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from app.advice.goals import GoalPriors
+from app.advice.strategies import STRATEGIES, StrategyParams, make_advisor
+from app.agents.experts import expert_trajectory
+from app.domain.grid import ACTIONS, GridDomain
+from app.service.main import create_app
+from app.service.state import ServiceState
+from tests.service.conftest import make_settings, open_session
+from tests.service.test_decisions_property import core_tables, expected_json
+
+
+@pytest.fixture(scope="module")
+def live(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[TestClient, ServiceState]]:
+    with TestClient(create_app(make_settings(Path(tmp_path_factory.mktemp("data"))))) as client:
+        yield client, client.app.state.service  # type: ignore[attr-defined]
+
+
+def core_goal_priors(service: ServiceState) -> GoalPriors:
+    state = service.catalog.get("default")
+    grid = state.domain
+    stored = service.store.trajectories("default")
+    index = [grid.goals.index(t.goal) if t.goal in grid.goals else None for t in stored]
+    priors = GoalPriors(grid.n_states, grid.goals, state.view.alpha0)
+    return priors.add([t.pairs for t in stored], index)
+
+
+def add_expert(
+    client: TestClient, service: ServiceState, grid: GridDomain, rng: np.random.Generator
+) -> None:
+    """One expert trajectory to a random goal, from a random cell, with its goal stated."""
+    goal = grid.goals[int(rng.integers(len(grid.goals)))]
+    pairs = expert_trajectory(grid, int(rng.integers(grid.n_states)), goal, rng)
+    steps = [{"state": grid.cell(p), "action": ACTIONS[q]} for p, q in pairs.tolist()]
+    if not steps:
+        return
+    body = {"trajectories": [{"steps": steps, "goal": grid.cell(goal)}]}
+    headers = {"X-API-Key": service.admin_key}
+    r = client.post("/domains/default/trajectories", json=body, headers=headers)
+    assert r.status_code == 201, r.text
+
+
+def moves(grid: GridDomain, s: int, rng: np.random.Generator) -> list[int]:
+    """Up to 80 moves from ``s``: random ones, or an expert's path to a random goal (where the
+    goals' priors disagree, so a goal posterior moves), with a few random moves mixed in."""
+    n = int(rng.integers(0, 80))
+    if rng.random() < 0.5:
+        return rng.integers(0, 4, n).tolist()
+    goal = grid.goals[int(rng.integers(len(grid.goals)))]
+    path = [int(a) for a in expert_trajectory(grid, s, goal, rng)[:, 1].tolist()]
+    noise = rng.random(len(path)) < 0.1
+    return [int(rng.integers(4)) if k else a for a, k in zip(path, noise, strict=True)][:n]
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    strategy=st.sampled_from([*STRATEGIES, "goal_aware", "goal_aware"]),
+    kappa=st.sampled_from([0.0, 0.3, 0.5, 1.0]),
+    window=st.sampled_from([1, 7, 60, 300]),
+    params=st.fixed_dictionaries(
+        {
+            "n_steps": st.integers(0, 50),
+            "threshold": st.sampled_from([0.0, 0.1, 0.3, 0.6]),
+            "rate": st.sampled_from([0.0, 0.2, 1.0]),
+            "beta": st.sampled_from([0.0, 0.5, 1.0]),
+            "seed": st.integers(0, 1000),
+        }
+    ),
+    over_websocket=st.booleans(),
+)
+def test_strategy_sessions_decide_as_the_core(
+    live: tuple[TestClient, ServiceState],
+    seed: int,
+    strategy: str,
+    kappa: float,
+    window: int,
+    params: dict[str, Any],
+    over_websocket: bool,
+) -> None:
+    client, service = live
+    grid = service.catalog.get("default").domain
+    rng = np.random.default_rng(seed)
+    start = grid.start if rng.random() < 0.5 else int(rng.integers(grid.n_states))
+    sid, auth, created = open_session(
+        client, kappa=kappa, window=window, start=grid.cell(start), strategy=strategy,
+        params=params,
+    )  # fmt: skip
+    assert created["strategy"] == strategy
+    core = make_advisor(
+        strategy, core_tables(service), kappa, window, StrategyParams(**params),
+        core_goal_priors(service),
+    )  # fmt: skip
+    assert created["decision"] == expected_json(core.start(start), service)
+    token = auth["Authorization"].removeprefix("Bearer ")
+    url = f"/sessions/{sid}/stream?token={token}"
+    ws = client.websocket_connect(url) if over_websocket else None
+    s = start
+    with ws or _Nothing():
+        for _ in range(int(rng.integers(1, 5))):
+            if rng.random() < 0.3:  # new expert data: the session follows it from now on
+                add_expert(client, service, grid, rng)
+                core.tables = core_tables(service)
+                if hasattr(core, "use_priors"):
+                    core.use_priors(core_goal_priors(service))
+            events, expected = [], []
+            for a in moves(grid, s, rng):
+                s2 = int(grid.next_state[s, a])
+                events.append({"state": grid.cell(s), "action": ACTIONS[a]})
+                expected.append(expected_json(core.observe(s, a, s2), service))
+                s = s2
+            if ws is not None:
+                ws.send_text(json.dumps(events))
+                got = json.loads(ws.receive_text())
+            else:
+                r = client.post(f"/sessions/{sid}/events", json=events, headers=auth)
+                assert r.status_code == 200, r.text
+                got = r.json()
+            assert got == expected
+    summary = client.get(f"/sessions/{sid}", headers=auth).json()
+    assert summary["strategy"] == strategy and summary["steps"] == core.steps
+    assert client.delete(f"/sessions/{sid}", headers=auth).status_code == 200
+
+
+def test_goal_aware_session_rules_out_a_goal_it_walked_past(
+    live: tuple[TestClient, ServiceState],
+) -> None:
+    client, service = live
+    grid = service.catalog.get("default").domain
+    goal = grid.goals[0]
+    step = next(a for a in range(4) if grid.next_state[goal, a] != goal)
+    sid, auth, _ = open_session(client, start=grid.cell(goal), strategy="goal_aware")
+    before = client.get(f"/sessions/{sid}", headers=auth).json()["goals"]
+    assert [g["goal"] for g in before] == [list(grid.cell(g)) for g in grid.goals]
+    assert not any(g["ruled_out"] for g in before)
+    assert all(math.isclose(g["p"], 1 / len(grid.goals)) for g in before)
+    r = client.post(
+        f"/sessions/{sid}/events", json={"state": grid.cell(goal), "action": ACTIONS[step]},
+        headers=auth,
+    )  # fmt: skip
+    assert r.status_code == 200, r.text
+    after = client.get(f"/sessions/{sid}", headers=auth).json()["goals"]
+    assert after[0]["ruled_out"] and after[0]["p"] == 0.0
+    assert not any(g["ruled_out"] for g in after[1:])
+    assert math.isclose(sum(g["p"] for g in after), 1.0)
+    listed = client.get("/overview").json()["sessions"]
+    mine = next(x for x in listed if x["session_id"] == sid)
+    assert mine["strategy"] == "goal_aware" and mine["goals"] == after
+
+
+def test_sessions_default_to_the_papers_rule(live: tuple[TestClient, ServiceState]) -> None:
+    client, _ = live
+    sid, auth, created = open_session(client)
+    assert created["strategy"] == "paper"
+    assert created["params"] == StrategyParams().__dict__
+    summary = client.get(f"/sessions/{sid}", headers=auth).json()
+    assert summary["strategy"] == "paper" and summary["goals"] is None
+
+
+@pytest.mark.parametrize(
+    ("body", "named"),
+    [
+        ({"strategy": "oracle"}, "strategy"),
+        ({"strategy": "random", "params": {"rate": 1.5}}, "rate"),
+        ({"strategy": "goal_aware", "params": {"beta": -0.1}}, "beta"),
+        ({"strategy": "early", "params": {"n_steps": -1}}, "n_steps"),
+        ({"strategy": "early", "params": {"n_steps": 2.5}}, "n_steps"),
+        ({"strategy": "mistake", "params": {"threshold": "high"}}, "threshold"),
+        ({"strategy": "random", "params": {"speed": 3}}, "speed"),
+        ({"params": []}, "params"),
+    ],
+)
+def test_bad_strategy_or_parameters_are_refused_with_the_reason(
+    live: tuple[TestClient, ServiceState], body: dict[str, Any], named: str
+) -> None:
+    client, _ = live
+    r = client.post("/domains/default/sessions", json=body)
+    assert r.status_code == 422, r.text
+    assert named in r.text
+
+
+def test_non_finite_parameters_are_refused(live: tuple[TestClient, ServiceState]) -> None:
+    client, _ = live
+    raw = '{"strategy": "importance", "params": {"threshold": NaN}}'
+    r = client.post(
+        "/domains/default/sessions", content=raw, headers={"Content-Type": "application/json"}
+    )
+    assert r.status_code == 422, r.text
+
+
+class _Nothing:
+    def __enter__(self) -> None:
+        return None
+
+    def __exit__(self, *exc: object) -> None:
+        return None
+
+
+def test_goal_aware_advice_shown_is_the_advice_given(live: tuple[TestClient, ServiceState]) -> None:
+    client, service = live
+    grid = service.catalog.get("default").domain
+    sid, auth, _ = open_session(client, kappa=0.0, strategy="goal_aware", params={"beta": 1.0})
+    path = expert_trajectory(grid, grid.start, grid.goals[-1], np.random.default_rng(5))
+    events = [{"state": grid.cell(s), "action": ACTIONS[a]} for s, a in path[:40].tolist()]
+    got = client.post(f"/sessions/{sid}/events", json=events, headers=auth).json()
+    pooled = client.get("/domains/default/prior").json()["theta"]
+    r, c = got[-1]["state"]
+    assert got[-1]["advise"] and list(got[-1]["advice"].values()) != pooled[r][c]
+    mine = next(x for x in client.get("/overview").json()["sessions"] if x["session_id"] == sid)
+    assert mine["last_advice"] == {
+        "step": got[-1]["step"],
+        "state": got[-1]["state"],
+        "advice": got[-1]["advice"],
+    }
