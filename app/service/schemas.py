@@ -163,19 +163,24 @@ class StrategyParams(Strict):
         20, strict=True, ge=0, lt=2**31, description="early: advise at the first n_steps decisions."
     )
     threshold: float = Field(
-        0.5, ge=0.0, allow_inf_nan=False,
+        0.5, strict=True, ge=0.0, allow_inf_nan=False,
         description="importance: KL[theta_s || uniform] >= threshold (nats); mistake: "
         "theta_s(a) < threshold.",
     )  # fmt: skip
     rate: float = Field(
-        0.1, ge=0.0, le=1.0, allow_inf_nan=False, description="random: P(advise) per decision."
+        0.1,
+        strict=True,
+        ge=0.0,
+        le=1.0,
+        allow_inf_nan=False,
+        description="random: P(advise) per decision.",
     )
     beta: float = Field(
-        0.0, ge=0.0, le=1.0, allow_inf_nan=False,
+        0.0, strict=True, ge=0.0, le=1.0, allow_inf_nan=False,
         description="goal_aware: weight of each goal's likelihood of the window (0: ruling "
         "goals out only).",
     )  # fmt: skip
-    seed: int = Field(0, strict=True, ge=0, lt=2**63, description="random: seed of its draws.")
+    seed: int = Field(0, strict=True, ge=0, le=2**32 - 1, description="random: seed of its draws.")
 
 
 class SessionCreate(Strict):

@@ -232,3 +232,12 @@ def test_goal_aware_advice_shown_is_the_advice_given(live: tuple[TestClient, Ser
         "state": got[-1]["state"],
         "advice": got[-1]["advice"],
     }
+
+
+@pytest.mark.parametrize("name", ["threshold", "rate", "beta"])
+def test_parameters_are_numbers_not_booleans(
+    live: tuple[TestClient, ServiceState], name: str
+) -> None:
+    client, _ = live
+    r = client.post("/domains/default/sessions", json={"params": {name: False}})
+    assert r.status_code == 422 and name in r.text
