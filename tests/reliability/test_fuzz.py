@@ -16,7 +16,7 @@ by :func:`check_refusal_is_semantic`, which allows such a 422 only when its deta
 those reasons, so a validator stricter than the schema still fails the test.
 
 Generated cases and HTTP requests (cases plus the probes some checks send) are counted per
-operation; ``test_every_operation_was_fuzzed`` asserts at least ``MIN_REQUESTS`` generated
+operation; ``test_every_operation_was_fuzzed`` asserts at least ``MIN_CASES`` generated
 cases, every operation reached, and no unhandled exception in the server's log.
 """
 
@@ -44,7 +44,7 @@ from app.service.main import create_app
 from app.service.schemas import ACTION_RULE
 from tests.reliability.conftest import Live, server_errors
 
-MIN_REQUESTS = 1000
+MIN_CASES = 1000
 EXAMPLES_PER_OPERATION = 50
 #: Why a schema-valid request may still get a 422: the parts of the contract no schema states.
 SEMANTIC = (
@@ -211,7 +211,7 @@ def test_every_operation_was_fuzzed(target: Target) -> None:
     print(f"\nschemathesis: {sum(target.cases.values())} cases, {total} requests")
     for label in sorted(target.requests):
         print(f"  {label}: {target.cases[label]} cases, {target.requests[label]} requests")
-    assert sum(target.cases.values()) >= MIN_REQUESTS
+    assert sum(target.cases.values()) >= MIN_CASES
     assert server_errors(target.live) == []
 
 
