@@ -15,7 +15,7 @@ from app.advice.models import AdviceTables
 from app.advice.strategies import StrategyParams
 from app.domain.grid import ACTIONS, GridDomain, MapError
 from app.service.domains import DomainState
-from app.service.encode import encode_decisions, fragments, packed
+from app.service.encode import SMALL, encode_decisions, fragments, packed
 from app.service.events import SMALL_EVENTS, BadInput, read_moves
 from app.service.ingest import parse_trajectories, to_trajectories
 from app.service.registry import LiveSession, TooManySessions
@@ -61,8 +61,8 @@ def apply_events(state: ServiceState, session: LiveSession, raw: bytes | str) ->
     tables = session.advisor.tables
     cols = state.registry.observe(session, moves)
     cell_json = session.domain.cell_json
-    parts, pack = fragments(tables, cell_json), packed(tables, cell_json)
-    return encode_decisions(cols, parts, single, pack)
+    pack = packed(tables, cell_json) if len(cols) > SMALL else None
+    return encode_decisions(cols, fragments(tables, cell_json), single, pack)
 
 
 def put_domain(state: ServiceState, name: str, body: DomainPut) -> tuple[DomainState, bool, bool]:
