@@ -6,7 +6,7 @@ STAMP := $(VENV)/.installed-stamp
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 SRC := app tests benchmarks
 
-.PHONY: run test venv chromium lint format bench clean
+.PHONY: run test venv chromium wrk lint format bench clean
 
 $(STAMP): pyproject.toml
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -21,6 +21,12 @@ chromium:
 	@command -v chromium >/dev/null 2>&1 || { \
 		$(SUDO) apt-get update -qq && \
 		DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq chromium >/dev/null; }
+
+## Debian's wrk drives the HTTP benchmarks (installed the same way when missing).
+wrk:
+	@command -v wrk >/dev/null 2>&1 || { \
+		$(SUDO) apt-get update -qq && \
+		DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq wrk >/dev/null; }
 
 lint: venv
 	$(BIN)/ruff check $(SRC)
@@ -39,8 +45,15 @@ test: venv chromium lint
 run: venv
 	$(BIN)/python -m app serve
 
-bench: venv
+## Every benchmark under benchmarks/ (never part of `make test`), about 15 minutes on 2 cores;
+## each rewrites its own section of docs/PERFORMANCE.md (and bench_scaling/bench_service the
+## curves in docs/figures/).
+bench: venv wrk
 	$(BIN)/python benchmarks/bench_core.py --write docs/PERFORMANCE.md
+	$(BIN)/python benchmarks/bench_scaling.py --write docs/PERFORMANCE.md
+	$(BIN)/python benchmarks/bench_experiments.py --write docs/PERFORMANCE.md
+	$(BIN)/python benchmarks/bench_viewer.py --write docs/PERFORMANCE.md
+	$(BIN)/python benchmarks/bench_service.py --write docs/PERFORMANCE.md
 
 clean:
 	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache .hypothesis
