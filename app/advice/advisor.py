@@ -193,24 +193,38 @@ class Advisor:
         t = self.tables
         if not 0 <= state < t.n_states:
             raise ValueError(f"state {state} out of range 0..{t.n_states - 1}")
-        # posterior P(M | H), eq. (5), in log space
-        z = [ll + lw for ll, lw in zip(self._loglik, t.log_weight_list, strict=True)]
-        mx = max(z)
-        e = [math.exp(v - mx) for v in z]
-        tot = sum(e)
-        post = [v / tot for v in e]
-        # mixture P(A | s, H), eq. (4), and KL[theta_s || mixture], eq. (6)
         b = state * N_ACTIONS
         probs = t.probs_flat
-        p0 = post[0]
-        m0, m1, m2, m3 = (p0 * probs[0][b], p0 * probs[0][b + 1],
-                          p0 * probs[0][b + 2], p0 * probs[0][b + 3])  # fmt: skip
-        for m in range(1, len(post)):
-            pm, pr = post[m], probs[m]
-            m0 += pm * pr[b]
-            m1 += pm * pr[b + 1]
-            m2 += pm * pr[b + 2]
-            m3 += pm * pr[b + 3]
+        loglik, weights = self._loglik, t.log_weight_list
+        if len(loglik) == 2:
+            # the two models of the paper: the general code below, unrolled (the same
+            # operations on the same numbers in the same order, so the same bits)
+            z0, z1 = loglik[0] + weights[0], loglik[1] + weights[1]
+            mx = z0 if z0 >= z1 else z1
+            e0, e1 = math.exp(z0 - mx), math.exp(z1 - mx)
+            tot = e0 + e1
+            p0, p1 = e0 / tot, e1 / tot
+            q0, q1 = probs[0], probs[1]
+            m0, m1 = p0 * q0[b] + p1 * q1[b], p0 * q0[b + 1] + p1 * q1[b + 1]
+            m2, m3 = p0 * q0[b + 2] + p1 * q1[b + 2], p0 * q0[b + 3] + p1 * q1[b + 3]
+        else:
+            # posterior P(M | H), eq. (5), in log space
+            z = [ll + lw for ll, lw in zip(loglik, weights, strict=True)]
+            mx = max(z)
+            e = [math.exp(v - mx) for v in z]
+            tot = sum(e)
+            post = [v / tot for v in e]
+            # mixture P(A | s, H), eq. (4)
+            p0 = post[0]
+            m0, m1, m2, m3 = (p0 * probs[0][b], p0 * probs[0][b + 1],
+                              p0 * probs[0][b + 2], p0 * probs[0][b + 3])  # fmt: skip
+            for m in range(1, len(post)):
+                pm, pr = post[m], probs[m]
+                m0 += pm * pr[b]
+                m1 += pm * pr[b + 1]
+                m2 += pm * pr[b + 2]
+                m3 += pm * pr[b + 3]
+        # KL[theta_s || mixture], eq. (6)
         th = t.theta_flat
         t0, t1, t2, t3 = th[b], th[b + 1], th[b + 2], th[b + 3]
         log = math.log
