@@ -50,11 +50,16 @@ async def get_domain(name: DomainName, state: StateDep) -> DomainState:
 
 
 def bearer_token(conn: HTTPConnection) -> str | None:
-    """The token of an ``Authorization: Bearer <token>`` header, if there is one."""
-    scheme, _, token = conn.headers.get("authorization", "").partition(" ")
-    if scheme.lower() != "bearer":
-        return None
-    return token.strip() or None
+    """The token of an ``Authorization: Bearer <token>`` header, if there is one (the first
+    such header, as ``conn.headers.get`` gives it; read from the raw ASGI headers, which
+    skips building a ``Headers`` object on the event route)."""
+    for key, value in conn.scope["headers"]:
+        if key == b"authorization":
+            scheme, _, token = value.decode("latin-1").partition(" ")
+            if scheme.lower() != "bearer":
+                return None
+            return token.strip() or None
+    return None
 
 
 async def get_session(conn: HTTPConnection, session_id: SessionId) -> LiveSession:

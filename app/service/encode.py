@@ -225,6 +225,20 @@ def encode_decisions(
     return "[" + ",".join(texts) + "]"
 
 
+def encode_one(d: Decision, parts: tuple[list[str], list[str]], own_advice: bool) -> str:
+    """One decision as JSON: ``encode_decisions(DecisionColumns.of([d], own_advice), parts,
+    True)``, the same bytes (``tests/service/test_encode.py``), without building columns.
+    ``own_advice``: the advice is ``d.advice`` (goal_aware), not theta_s of the tables."""
+    kl, p, total, benefit = (
+        pydantic_core.to_json((d.kl, d.p_normal, d.total_cost, d.benefit)).decode()[1:-1].split(",")
+    )
+    frag = _with_advice(parts[0][d.state], d.advice) if own_advice else parts[d.advise][d.state]
+    return (
+        f'{{"step":{d.step}{frag}{kl},"p_normal":{p},'
+        f'"cost":{{"advice_count":{d.advice_count},"total":{total},"benefit":{benefit}}}}}'
+    )
+
+
 def _with_advice(fragment: str, advice: tuple[float, float, float, float] | None) -> str:
     """A state's fragment without advice turned into one with ``advice`` (if not None)."""
     if advice is None:

@@ -86,16 +86,32 @@ def parse_events(raw: bytes | str, max_events: int) -> tuple[list[EventIn], bool
         adapter = EVENT_LIST
     else:
         raise BadInput('send JSON: an event {"state": [r, c], "action": "N"} or a list of them')
-    root = "event" if adapter is EVENT else "events"
-    try:
-        parsed = adapter.validate_json(raw)
-    except ValidationError as exc:
-        errors = [{**e, "loc": (root, *e["loc"])} for e in exc.errors(include_input=False)]
-        raise BadInput(describe_errors(errors)) from None
+    parsed = _validate(adapter, raw)
     events = [parsed] if adapter is EVENT else parsed
     if len(events) > max_events:
         raise BadInput(f"too many events: {len(events)} in one batch, at most {max_events}", 413)
     return events, adapter is EVENT
+
+
+def read_move(domain: GridDomain, raw: bytes | str) -> tuple[int, int, int] | None:
+    """One event object (JSON text) -> its checked (s, a, s') as plain ints, or None when
+    ``raw`` does not start as an object (a list, or not JSON: :func:`read_moves` says why).
+    The same checks and errors as :func:`read_moves` gives for it, without arrays: one
+    event per request is the REST route's common case."""
+    head = raw.lstrip()[:1]
+    if head not in (b"{", "{"):
+        return None
+    return _one_move(_tables(domain), 0, _validate(EVENT, raw))
+
+
+def _validate(adapter: TypeAdapter[Any], raw: bytes | str) -> Any:
+    """``adapter.validate_json(raw)``; errors as BadInput, located under ``event(s)``."""
+    root = "event" if adapter is EVENT else "events"
+    try:
+        return adapter.validate_json(raw)
+    except ValidationError as exc:
+        errors = [{**e, "loc": (root, *e["loc"])} for e in exc.errors(include_input=False)]
+        raise BadInput(describe_errors(errors)) from None
 
 
 def read_moves(

@@ -11,12 +11,13 @@ import json
 import numpy as np
 
 from app.advice.advisor import Decision
+from app.advice.goals import GoalAwareAdvisor
 from app.advice.models import AdviceTables
 from app.advice.strategies import StrategyParams
 from app.domain.grid import ACTIONS, GridDomain, MapError
 from app.service.domains import DomainState
-from app.service.encode import SMALL, encode_decisions, fragments, packed
-from app.service.events import SMALL_EVENTS, BadInput, read_moves
+from app.service.encode import SMALL, encode_decisions, encode_one, fragments, packed
+from app.service.events import SMALL_EVENTS, BadInput, read_move, read_moves
 from app.service.ingest import parse_trajectories, to_trajectories
 from app.service.registry import LiveSession, TooManySessions
 from app.service.schemas import Cell, DomainPut, SessionCreate, TrajectoriesAccepted
@@ -57,6 +58,11 @@ def create_session(
 
 def apply_events(state: ServiceState, session: LiveSession, raw: bytes | str) -> str:
     """Events (JSON text: one or a list) -> decisions (JSON text: one or a list, in order)."""
+    move = read_move(session.domain.domain, raw)
+    if move is not None:  # one event: plain ints and one decision, no arrays or columns
+        d, tables = state.registry.observe_one(session, *move)
+        own = isinstance(session.advisor, GoalAwareAdvisor)
+        return encode_one(d, fragments(tables, session.domain.cell_json), own)
     moves, single = read_moves(session.domain.domain, raw, state.settings.max_batch_events)
     tables = session.advisor.tables
     cols = state.registry.observe(session, moves)

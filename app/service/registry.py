@@ -51,11 +51,14 @@ class Recent:
         self._buf[0] = first
         self._count = 1
 
+    def push(self, value: float) -> None:
+        self._buf[self._count % self._buf.shape[0]] = value
+        self._count += 1
+
     def extend(self, values: list[int] | list[float]) -> None:
         size, k = self._buf.shape[0], len(values)
         if k == 1:  # one event per request: no index arrays
-            self._buf[self._count % size] = values[0]
-            self._count += 1
+            self.push(values[0])
             return
         m = min(k, size)
         self._buf[np.arange(self._count + k - m, self._count + k) % size] = values[k - m :]
@@ -109,6 +112,21 @@ class AdviceLog:
             rows = [np.nan] * 4
             self._own[at] = [rows if a is None else a for a in advice[k - m :]] if advice else rows
         self._count += k
+
+    def add(self, step: int, state: int, tables: AdviceTables, advice: Advice | None) -> None:
+        """:meth:`extend` for one piece of advice (``advice`` None: theta_s of ``tables``;
+        pass it only for advisors whose advice is not theta_s), without index arrays."""
+        if not self._tables or self._tables[-1] is not tables:
+            self._compact()
+            self._tables.append(tables)
+        at = self._count % self._buf.shape[1]
+        buf = self._buf
+        buf[0, at], buf[1, at], buf[2, at] = step, state, len(self._tables) - 1
+        if advice is not None and self._own is None:
+            self._own = np.full((buf.shape[1], 4), np.nan)
+        if self._own is not None:  # NaN row: theta_s of the tables
+            self._own[at] = np.nan if advice is None else advice
+        self._count += 1
 
     def _compact(self) -> None:
         """Forget tables no entry refers to any more (so the list stays short)."""
@@ -177,6 +195,22 @@ class LiveSession:
         self.p_history.extend(cols.p_normal)
         if cols.advice_count[-1] != cols.advice_count[0] or cols.advise[0]:
             self.log_advice(cols.step, cols.state, cols.advise, cols.advice)
+
+    def record_one(self, d: Decision, own_advice: bool) -> None:
+        """:meth:`record` for one decision (``own_advice``: log ``d.advice`` itself, for
+        advisors whose advice is not theta_s), without building columns."""
+        if self.path is None or self.p_history is None:
+            self.path = Recent(self.sizes[0], np.int32, self.position)
+            self.p_history = Recent(self.sizes[1], np.float32, self.p_normal)
+        self.position = d.state
+        self.p_normal = d.p_normal
+        self.path.push(d.state)
+        self.p_history.push(d.p_normal)
+        if d.advise:
+            if self.advice_log is None:
+                self.advice_log = AdviceLog(RECENT_ADVICE)
+            own = d.advice if own_advice else None
+            self.advice_log.add(d.step, d.state, self.advisor.tables, own)
 
     def log_advice(
         self,
@@ -307,6 +341,21 @@ class SessionRegistry:
             session.record(cols)
             session.last_seen = time.monotonic()
         return cols
+
+    def observe_one(
+        self, session: LiveSession, state: int, action: int, next_state: int
+    ) -> tuple[Decision, AdviceTables]:
+        """Advance ``session`` by one checked (s, a, s'): :meth:`observe` for one event,
+        without arrays or columns. Returns the decision and the tables that made it."""
+        adv = session.advisor
+        with self.lock:
+            if session.closed:
+                raise SessionNotFound(session.id)
+            tables = adv.tables
+            d = adv.observe(state, action, next_state)
+            session.record_one(d, isinstance(adv, GoalAwareAdvisor))
+            session.last_seen = time.monotonic()
+        return d, tables
 
     def touch(self, session: LiveSession) -> None:
         session.last_seen = time.monotonic()

@@ -15,14 +15,21 @@ from app.service.registry import AdviceLog, Recent
 @given(
     size=st.integers(1, 20),
     first=st.integers(0, 1000),
-    batches=st.lists(st.lists(st.integers(0, 1000), max_size=45), max_size=10),
+    batches=st.lists(
+        st.tuples(st.lists(st.integers(0, 1000), max_size=45), st.booleans()), max_size=10
+    ),
 )
 def test_recent_keeps_what_a_bounded_deque_keeps(
-    size: int, first: int, batches: list[list[int]]
+    size: int, first: int, batches: list[tuple[list[int], bool]]
 ) -> None:
+    """Numbers pushed in batches, or one at a time (``push``, the single-event path)."""
     ring, reference = Recent(size, np.int32, first), deque([first], maxlen=size)
-    for batch in batches:
-        ring.extend(batch)
+    for batch, one_by_one in batches:
+        if one_by_one:
+            for value in batch:
+                ring.push(value)
+        else:
+            ring.extend(batch)
         reference.extend(batch)
         assert ring.tolist() == list(reference)
 
@@ -33,16 +40,22 @@ TABLES = [AdviceTables.paper(np.full((2, 4), 0.25)) for _ in range(6)]
 @given(
     size=st.integers(1, 12),
     batches=st.lists(
-        st.tuples(st.lists(st.integers(0, 10**6), max_size=30), st.integers(0, 5)), max_size=12
+        st.tuples(st.lists(st.integers(0, 10**6), max_size=30), st.integers(0, 5), st.booleans()),
+        max_size=12,
     ),
 )
 def test_advice_log_keeps_what_a_bounded_deque_keeps(
-    size: int, batches: list[tuple[list[int], int]]
+    size: int, batches: list[tuple[list[int], int, bool]]
 ) -> None:
+    """Advice logged in batches, or one at a time (``add``, the single-event path)."""
     log, reference = AdviceLog(size), deque(maxlen=size)
-    for steps, which in batches:
+    for steps, which, one_by_one in batches:
         states = [s % 97 for s in steps]
-        log.extend(steps, states, TABLES[which])
+        if one_by_one:
+            for a, s in zip(steps, states, strict=True):
+                log.add(a, s, TABLES[which], None)
+        else:
+            log.extend(steps, states, TABLES[which])
         reference.extend((a, s, TABLES[which]) for a, s in zip(steps, states, strict=True))
         got = log.items()
         assert [(a, s) for a, s, _ in got] == [(a, s) for a, s, _ in reference]
