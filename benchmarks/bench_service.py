@@ -151,14 +151,18 @@ def bench_ws(tmp: Path, root: Path, repeats: int, seconds: float, conns: int) ->
     with start_advisor(tmp, root) as advisor:
         sessions = create_sessions(advisor, conns, tmp)
         urls = stream_urls(advisor, sessions)
+        binary_urls = [f"{u}&format=binary" for u in urls]
         probe = stream_load(urls[:1], frames, FRAME, 1.0, max_messages=len(frames))
         size = probe.answer_bytes
         with start_baseline(tmp, 64, size) as bare:
             targets: dict[str, tuple[Server, list[str]]] = {
                 "service": (advisor, urls),
+                "binary": (advisor, binary_urls),
                 "echo": (bare, stream_urls(bare, sessions, "stream")),
                 "sized": (bare, stream_urls(bare, sessions, "answer")),
             }
+            if root != ROOT:  # an older tree may not have binary answers
+                del targets["binary"]
             out: dict[str, list[float]] = {}
             for _ in range(repeats):
                 for name, (server, target) in targets.items():
@@ -167,7 +171,8 @@ def bench_ws(tmp: Path, root: Path, repeats: int, seconds: float, conns: int) ->
                     cpu = server.cpu_seconds() - cpu
                     for key, v in (("rate", r.rate), ("p50", r.latency_ms(50)),
                                    ("p99", r.latency_ms(99)),
-                                   ("cpu_us", cpu / r.events * 1e6)):  # fmt: skip
+                                   ("cpu_us", cpu / r.events * 1e6),
+                                   ("answer_bytes", r.answer_bytes)):  # fmt: skip
                         out.setdefault(f"{name} {key}", []).append(v)
     res: dict[str, Any] = {k: med(v) for k, v in out.items()}
     res["runs"] = out
@@ -175,6 +180,10 @@ def bench_ws(tmp: Path, root: Path, repeats: int, seconds: float, conns: int) ->
     res["answer_bytes"] = size
     res["ratio_echo"] = res["service rate"] / res["echo rate"]
     res["ratio_sized"] = res["service rate"] / res["sized rate"]
+    if "binary rate" in res:
+        res["ratio_binary_echo"] = res["binary rate"] / res["echo rate"]
+        pairs = zip(out["binary rate"], out["echo rate"], strict=True)
+        res["binary_pair_ratios"] = [a / b for a, b in pairs]
     return res
 
 
@@ -406,10 +415,23 @@ def report(args: argparse.Namespace, res: dict[str, Any], loads: list[float]) ->
              f"{w['echo rate']:,.0f} events/s", ""),
             (f"websocket, bare: each frame answered with {w['answer_bytes']:,} B (the size of "
              "the service's answer)", f"{w['sized rate']:,.0f} events/s", ""),
-            ("websocket ratio service / echo", f"{w['ratio_echo']:.2f}",
-             f">= 0.7: {verdict(w['ratio_echo'] >= 0.7)}"),
-            ("websocket ratio service / same-size answers", f"{w['ratio_sized']:.2f}", ""),
+            ("websocket ratio service / echo, JSON answers", f"{w['ratio_echo']:.2f}",
+             "" if "binary rate" in w else f">= 0.7: {verdict(w['ratio_echo'] >= 0.7)}"),
+            ("websocket ratio service / same-size answers, JSON answers",
+             f"{w['ratio_sized']:.2f}", ""),
         ]  # fmt: skip
+        if "binary rate" in w:
+            rows += [
+                (f"websocket, {FRAME} events per message, service, binary answers "
+                 f"(`?format=binary`, {w['binary answer_bytes']:,.0f} B a message)",
+                 f"{w['binary rate']:,.0f} decisions/s (p50 {w['binary p50']:.1f} ms, "
+                 f"p99 {w['binary p99']:.1f} ms a message; {w['binary cpu_us']:.2f} us "
+                 "CPU/decision)", f">= 200,000/s: {verdict(w['binary rate'] >= 200_000)}"),
+                ("websocket ratio service / echo, binary answers (median rates; per pair: "
+                 + ", ".join(f"{x:.2f}" for x in w["binary_pair_ratios"]) + ")",
+                 f"{w['ratio_binary_echo']:.2f}",
+                 f">= 0.7: {verdict(w['ratio_binary_echo'] >= 0.7)}"),
+            ]  # fmt: skip
     if "sessions" in res:
         s = res["sessions"]
         n = s["sessions"]

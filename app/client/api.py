@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import json
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 from urllib.parse import quote, urlencode, urlsplit, urlunsplit
 
 from app.client.types import Cell, Decision, EventLike
+from app.protocol import unpack
 
 
 class AdvisorError(Exception):
@@ -126,12 +128,14 @@ def overview(limit: int = 100) -> Call:
     return Call("GET", "/overview", params={"limit": limit})
 
 
-def stream_url(base_url: str, session: Session) -> str:
-    """``ws(s)://.../sessions/{id}/stream?token=...`` for an ``http(s)://`` base URL."""
+def stream_url(base_url: str, session: Session, binary: bool = False) -> str:
+    """``ws(s)://.../sessions/{id}/stream?token=...`` for an ``http(s)://`` base URL (with
+    ``&format=binary`` for binary answers, :mod:`app.protocol`)."""
     parts = urlsplit(base_url)
     scheme = "wss" if parts.scheme == "https" else "ws"
     path = parts.path.rstrip("/") + f"/sessions/{session.session_id}/stream"
-    return urlunsplit((scheme, parts.netloc, path, urlencode({"token": session.token}), ""))
+    query = {"token": session.token} | ({"format": "binary"} if binary else {})
+    return urlunsplit((scheme, parts.netloc, path, urlencode(query), ""))
 
 
 def result(status: int, body: Any, text: str) -> Any:
@@ -140,6 +144,14 @@ def result(status: int, body: Any, text: str) -> Any:
         detail = body.get("detail") if isinstance(body, dict) else None
         raise AdvisorError(status, str(detail) if detail is not None else text[:500])
     return body
+
+
+def frame_answer(message: str | bytes) -> Any:
+    """A websocket answer frame: a binary frame's decisions (a :class:`DecisionFrame`), a
+    JSON frame's decisions, or :class:`AdvisorError` for an error frame (always JSON)."""
+    if isinstance(message, bytes):
+        return unpack(message)
+    return frame_result(json.loads(message))
 
 
 def frame_result(body: Any) -> Any:

@@ -68,12 +68,13 @@ class Stream:
         self.connection = connection
 
     def send(self, events: EventLike | Sequence[EventLike]) -> Any:
-        """One event -> one decision; a list -> a list. AdvisorError for a refused batch
+        """One event -> one decision; a list -> a list (a binary stream: a
+        :class:`~app.protocol.DecisionFrame` either way). AdvisorError for a refused batch
         (the stream stays usable) or a closed stream."""
         body = dict(events) if isinstance(events, Mapping) else [dict(e) for e in events]
         try:
             self.connection.send(json.dumps(body))
-            return api.frame_result(json.loads(self.connection.recv()))
+            return api.frame_answer(self.connection.recv())
         except ConnectionClosed as exc:
             raise _closed(exc) from None
 
@@ -171,9 +172,10 @@ class AdvisorClient(_Base):
     def overview(self, limit: int = 100) -> dict[str, Any]:
         return cast(dict[str, Any], self.call(api.overview(limit)))
 
-    def stream(self, session: Session) -> Stream:
-        """The session's websocket (use as a context manager)."""
-        url = api.stream_url(self.base_url, session)
+    def stream(self, session: Session, binary: bool = False) -> Stream:
+        """The session's websocket (use as a context manager); ``binary``: decisions come as
+        :class:`~app.protocol.DecisionFrame` arrays, about a tenth of the bytes of JSON."""
+        url = api.stream_url(self.base_url, session, binary)
         try:
             return Stream(connect(url, compression=None, max_size=None))
         except ConnectionClosed as exc:
@@ -190,7 +192,7 @@ class AsyncStream:
         body = dict(events) if isinstance(events, Mapping) else [dict(e) for e in events]
         try:
             await self.connection.send(json.dumps(body))
-            return api.frame_result(json.loads(await self.connection.recv()))
+            return api.frame_answer(await self.connection.recv())
         except ConnectionClosed as exc:
             raise _closed(exc) from None
 
@@ -283,9 +285,10 @@ class AsyncAdvisorClient(_Base):
     async def overview(self, limit: int = 100) -> dict[str, Any]:
         return cast(dict[str, Any], await self.call(api.overview(limit)))
 
-    async def stream(self, session: Session) -> AsyncStream:
-        """The session's websocket (``async with await client.stream(s) as stream``)."""
-        url = api.stream_url(self.base_url, session)
+    async def stream(self, session: Session, binary: bool = False) -> AsyncStream:
+        """The session's websocket (``async with await client.stream(s) as stream``);
+        ``binary`` as in :meth:`AdvisorClient.stream`."""
+        url = api.stream_url(self.base_url, session, binary)
         try:
             return AsyncStream(await async_connect(url, compression=None, max_size=None))
         except ConnectionClosed as exc:

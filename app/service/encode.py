@@ -20,10 +20,11 @@ import numpy.typing as npt
 import pydantic_core
 from numba import njit
 
+from app import protocol
 from app.advice.advisor import Decision
 from app.advice.models import AdviceTables
 from app.domain.grid import GridDomain
-from app.service.stream_advisor import DecisionColumns
+from app.service.stream_advisor import DecisionArrays, DecisionColumns
 
 _FRAGMENTS: weakref.WeakKeyDictionary[AdviceTables, tuple[list[str], list[str]]] = (
     weakref.WeakKeyDictionary()
@@ -237,6 +238,23 @@ def encode_one(d: Decision, parts: tuple[list[str], list[str]], own_advice: bool
         f'{{"step":{d.step}{frag}{kl},"p_normal":{p},'
         f'"cost":{{"advice_count":{d.advice_count},"total":{total},"benefit":{benefit}}}}}'
     )
+
+
+_CELLS: weakref.WeakKeyDictionary[GridDomain, npt.NDArray[np.int32]] = weakref.WeakKeyDictionary()
+
+
+def encode_binary(out: DecisionArrays, domain: GridDomain) -> bytes:
+    """Decisions as one binary frame (:mod:`app.protocol`): the advice of each advising
+    decision is theta_s of the tables that decided, or its own (goal_aware)."""
+    cells = _CELLS.get(domain)
+    if cells is None:
+        cells = _CELLS[domain] = domain.cells.astype(np.int32)
+    advise = out.advise
+    advice = out.advice if out.advice is not None else out.tables.theta[out.state[advise]]
+    return protocol.pack(
+        out.first_step, out.kappa, out.count_before, out.benefit_before, out.kl, out.p_normal,
+        advice, cells[out.state], advise,
+    )  # fmt: skip
 
 
 def _with_advice(fragment: str, advice: tuple[float, float, float, float] | None) -> str:

@@ -16,7 +16,14 @@ from app.advice.models import AdviceTables
 from app.advice.strategies import StrategyParams
 from app.domain.grid import ACTIONS, GridDomain, MapError
 from app.service.domains import DomainState
-from app.service.encode import SMALL, encode_decisions, encode_one, fragments, packed
+from app.service.encode import (
+    SMALL,
+    encode_binary,
+    encode_decisions,
+    encode_one,
+    fragments,
+    packed,
+)
 from app.service.events import SMALL_EVENTS, BadInput, read_move, read_moves
 from app.service.ingest import parse_trajectories, to_trajectories
 from app.service.registry import LiveSession, TooManySessions
@@ -69,6 +76,13 @@ def apply_events(state: ServiceState, session: LiveSession, raw: bytes | str) ->
     cell_json = session.domain.cell_json
     pack = packed(tables, cell_json) if len(cols) > SMALL else None
     return encode_decisions(cols, fragments(tables, cell_json), single, pack)
+
+
+def apply_events_binary(state: ServiceState, session: LiveSession, raw: bytes | str) -> bytes:
+    """Events (JSON text: one or a list) -> decisions as one binary frame
+    (:mod:`app.protocol`), the same decisions as :func:`apply_events` gives."""
+    moves, _ = read_moves(session.domain.domain, raw, state.settings.max_batch_events)
+    return encode_binary(state.registry.observe_arrays(session, moves), session.domain.domain)
 
 
 def put_domain(state: ServiceState, name: str, body: DomainPut) -> tuple[DomainState, bool, bool]:

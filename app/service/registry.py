@@ -13,6 +13,7 @@ import secrets
 import threading
 import time
 from collections import Counter
+from collections.abc import Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from typing import Any
@@ -25,7 +26,7 @@ from app.advice.goals import GoalAwareAdvisor, GoalPriors
 from app.advice.models import AdviceTables
 from app.advice.strategies import StrategyParams, make_advisor
 from app.service.domains import DomainState
-from app.service.stream_advisor import DecisionColumns, StreamAdvisor
+from app.service.stream_advisor import DecisionArrays, DecisionColumns, StreamAdvisor
 
 IntArray = npt.NDArray[np.int64]
 Advice = tuple[float, float, float, float]
@@ -55,7 +56,7 @@ class Recent:
         self._buf[self._count % self._buf.shape[0]] = value
         self._count += 1
 
-    def extend(self, values: list[int] | list[float]) -> None:
+    def extend(self, values: Sequence[float] | npt.NDArray[Any]) -> None:
         size, k = self._buf.shape[0], len(values)
         if k == 1:  # one event per request: no index arrays
             self.push(values[0])
@@ -89,10 +90,10 @@ class AdviceLog:
 
     def extend(
         self,
-        steps: list[int],
-        states: list[int],
+        steps: Sequence[int] | IntArray,
+        states: Sequence[int] | IntArray,
         tables: AdviceTables,
-        advice: list[Advice | None] | None = None,
+        advice: Sequence[Advice | None] | npt.NDArray[np.float64] | None = None,
     ) -> None:
         """Log advice given at ``states``: theta_s of ``tables``, or ``advice`` when given."""
         k, size = len(steps), self._buf.shape[1]
@@ -109,8 +110,11 @@ class AdviceLog:
         if advice is not None and self._own is None:
             self._own = np.full((size, 4), np.nan)
         if self._own is not None:  # NaN rows: theta_s of the tables
-            rows = [np.nan] * 4
-            self._own[at] = [rows if a is None else a for a in advice[k - m :]] if advice else rows
+            if advice is None or len(advice) == 0:
+                self._own[at] = np.nan
+            else:
+                nan = (np.nan,) * 4
+                self._own[at] = [nan if a is None else a for a in advice[k - m :]]
         self._count += k
 
     def add(self, step: int, state: int, tables: AdviceTables, advice: Advice | None) -> None:
@@ -195,6 +199,27 @@ class LiveSession:
         self.p_history.extend(cols.p_normal)
         if cols.advice_count[-1] != cols.advice_count[0] or cols.advise[0]:
             self.log_advice(cols.step, cols.state, cols.advise, cols.advice)
+
+    def record_arrays(self, out: DecisionArrays) -> None:
+        """:meth:`record` for a batch as arrays (the binary answer's path)."""
+        n = len(out)
+        if not n:
+            return
+        if self.path is None or self.p_history is None:
+            self.path = Recent(self.sizes[0], np.int32, self.position)
+            self.p_history = Recent(self.sizes[1], np.float32, self.p_normal)
+        self.position = int(out.state[-1])
+        self.p_normal = float(out.p_normal[-1])
+        self.path.extend(out.state)
+        self.p_history.extend(out.p_normal)
+        advised = np.flatnonzero(out.advise)[-RECENT_ADVICE:]
+        if len(advised):
+            if self.advice_log is None:
+                self.advice_log = AdviceLog(RECENT_ADVICE)
+            own = None if out.advice is None else out.advice[-len(advised) :]
+            self.advice_log.extend(
+                advised + out.first_step, out.state[advised], self.advisor.tables, own
+            )
 
     def record_one(self, d: Decision, own_advice: bool) -> None:
         """:meth:`record` for one decision (``own_advice``: log ``d.advice`` itself, for
@@ -341,6 +366,26 @@ class SessionRegistry:
             session.record(cols)
             session.last_seen = time.monotonic()
         return cols
+
+    def observe_arrays(
+        self, session: LiveSession, moves: tuple[IntArray, IntArray, IntArray]
+    ) -> DecisionArrays:
+        """:meth:`observe` with the decisions as arrays (for the binary answer)."""
+        adv = session.advisor
+        with self.lock:
+            if session.closed:
+                raise SessionNotFound(session.id)
+            if isinstance(adv, StreamAdvisor):
+                out = adv.observe_arrays(*moves)
+            else:
+                tables, count, benefit = adv.tables, adv.advice_count, adv.benefit
+                triples = zip(*(m.tolist() for m in moves), strict=True)
+                decisions = [adv.observe(s, a, s2) for s, a, s2 in triples]
+                own = isinstance(adv, GoalAwareAdvisor)
+                out = DecisionArrays.of(adv, decisions, count, benefit, tables, own)
+            session.record_arrays(out)
+            session.last_seen = time.monotonic()
+        return out
 
     def observe_one(
         self, session: LiveSession, state: int, action: int, next_state: int

@@ -74,6 +74,49 @@ class DecisionColumns:
 
 
 @dataclass(frozen=True, slots=True)
+class DecisionArrays:
+    """Decisions for a batch as arrays, for the binary answer (:mod:`app.protocol`):
+    decision i is step ``first_step + i``; ``count_before`` and ``benefit_before`` are the
+    advisor's figures before the batch. ``advice`` holds the rows of the advising decisions
+    when they are not theta_s of ``tables`` (goal_aware), else None."""
+
+    first_step: int
+    state: IntArray
+    advise: BoolArray
+    kl: FloatArray
+    p_normal: FloatArray
+    advice_count: IntArray
+    benefit: FloatArray
+    kappa: float
+    count_before: int
+    benefit_before: float
+    tables: AdviceTables
+    advice: FloatArray | None = None
+
+    @classmethod
+    def of(
+        cls, advisor: Advisor, decisions: list[Decision], count_before: int,
+        benefit_before: float, tables: AdviceTables, with_advice: bool = False,
+    ) -> DecisionArrays:  # fmt: skip
+        """From one core call per event (the strategies other than the paper's rule)."""
+        n = len(decisions)
+        c = list(zip(*decisions, strict=True)) if n else [()] * 9
+        advice = None
+        if with_advice:
+            rows = [a for a, on in zip(c[3], c[2], strict=True) if on]
+            advice = np.array(rows, dtype=np.float64).reshape(len(rows), 4)
+        return cls(
+            advisor.steps - n + 1, np.array(c[1], dtype=np.int64), np.array(c[2], dtype=bool),
+            np.array(c[4], dtype=np.float64), np.array(c[5], dtype=np.float64),
+            np.array(c[6], dtype=np.int64), np.array(c[8], dtype=np.float64), advisor.kappa,
+            count_before, benefit_before, tables, advice,
+        )  # fmt: skip
+
+    def __len__(self) -> int:
+        return len(self.state)
+
+
+@dataclass(frozen=True, slots=True)
 class _Flat:
     """The arrays the compiled loop reads, flattened as ``advisor_decide`` expects."""
 
@@ -120,7 +163,8 @@ def _decide(
             mx = z[m]
     tot = 0.0
     for m in range(n_models):
-        z[m] = math.exp(z[m] - mx)
+        d = z[m] - mx
+        z[m] = 1.0 if d == 0.0 else math.exp(d)  # exp(0) is exactly 1 (C99 F.9.3.1): one exp less
         tot += z[m]
     b = s * 4
     p0 = z[0] / tot
@@ -328,7 +372,30 @@ class StreamAdvisor(Advisor):
         if n < SMALL_BATCH:
             moves = zip(states.tolist(), actions.tolist(), next_states.tolist(), strict=True)
             return DecisionColumns.of([self.observe(s, a, s2) for s, a, s2 in moves])
-        f = _flat(self.tables)
+        out = self._run(states, actions, next_states)
+        return DecisionColumns(
+            list(range(self.steps - n + 1, self.steps + 1)),
+            next_states.tolist(),
+            out.advise.tolist(),
+            out.kl.tolist(),
+            out.p_normal.tolist(),
+            out.advice_count.tolist(),
+            (self.kappa * out.advice_count).tolist(),
+            out.benefit.tolist(),
+            (next_states, out.advise, out.advice_count),
+        )
+
+    def observe_arrays(
+        self, states: IntArray, actions: IntArray, next_states: IntArray
+    ) -> DecisionArrays:
+        """:meth:`observe_many` as arrays (for the binary answer): no Python lists."""
+        return self._run(states, actions, next_states)
+
+    def _run(self, states: IntArray, actions: IntArray, next_states: IntArray) -> DecisionArrays:
+        """The compiled loop over a batch (any size, checked inputs)."""
+        n = len(states)
+        tables, count_before, benefit_before = self.tables, self.advice_count, self.benefit
+        f = _flat(tables)
         self._sync_tables()
         keys = states * 4 + actions
         period = resync_period(self.window)
@@ -350,17 +417,10 @@ class StreamAdvisor(Advisor):
             self._left(gone)
         self.steps += n
         self.decisions += n
-        return DecisionColumns(
-            list(range(self.steps - n + 1, self.steps + 1)),
-            next_states.tolist(),
-            advise.tolist(),
-            kl.tolist(),
-            p_normal.tolist(),
-            count.tolist(),
-            (self.kappa * count).tolist(),
-            benefit.tolist(),
-            (next_states, advise, count),
-        )
+        return DecisionArrays(
+            self.steps - n + 1, next_states, advise, kl, p_normal, count, benefit, self.kappa,
+            count_before, benefit_before, tables,
+        )  # fmt: skip
 
 
 _NO_RING = np.zeros((0, 0))

@@ -12,7 +12,7 @@ import pytest
 
 from app.advice.advisor import Advisor
 from app.advice.models import AdviceTables
-from app.client import AdvisorClient, AdvisorError, AsyncAdvisorClient
+from app.client import AdvisorClient, AdvisorError, AsyncAdvisorClient, DecisionFrame
 from tests.client.conftest import Server
 
 TINY = ["#######", "#G..#G#", "#.#.#.#", "#...#.#", "###...#", "#S....#", "#######"]
@@ -125,6 +125,31 @@ def test_decisions_over_the_wire_equal_the_core(server: Server) -> None:
     assert [d["kl"] for d in got] == [d.kl for d in expected]
     assert [d["p_normal"] for d in got] == [d.p_normal for d in expected]
     assert [d["advise"] for d in got] == [d.advise for d in expected]
+
+
+def test_binary_stream_gives_the_json_streams_decisions(server: Server) -> None:
+    """Two sessions alike, one streaming JSON answers, one binary (``DecisionFrame``)."""
+    with AdvisorClient(server.url) as client:
+        a, b = client.create_session(window=30), client.create_session(window=30)
+        with client.stream(a) as text, client.stream(b, binary=True) as binary:
+            for batch in ([W, E] * 200, [E], E, []):
+                want = text.send(batch)
+                got = binary.send(batch)
+                assert isinstance(got, DecisionFrame)
+                assert got.to_dicts() == (want if isinstance(want, list) else [want])
+            with pytest.raises(AdvisorError) as err:  # errors: JSON text frames
+                binary.send({"state": [28, 0], "action": "up"})
+            assert err.value.status == 422
+        assert client.session(b)["steps"] == client.session(a)["steps"] == 402
+
+    async def scenario() -> list[int]:
+        async with AsyncAdvisorClient(server.url) as client:
+            session = await client.create_session()
+            async with await client.stream(session, binary=True) as stream:
+                frame = await stream.send([E, W])
+            return [int(x) for x in frame.step]
+
+    assert run_async(scenario()) == [1, 2]
 
 
 def test_async_client_rest_and_stream(server: Server) -> None:

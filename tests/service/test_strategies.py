@@ -24,6 +24,7 @@ from app.advice.goals import GoalPriors
 from app.advice.strategies import STRATEGIES, StrategyParams, make_advisor
 from app.agents.experts import expert_trajectory
 from app.domain.grid import ACTIONS, GridDomain
+from app.protocol import unpack
 from app.service.main import create_app
 from app.service.state import ServiceState
 from tests.service.conftest import make_settings, open_session
@@ -87,7 +88,7 @@ def moves(grid: GridDomain, s: int, rng: np.random.Generator) -> list[int]:
             "seed": st.integers(0, 1000),
         }
     ),
-    over_websocket=st.booleans(),
+    transport=st.sampled_from(["rest", "websocket", "binary"]),
 )
 def test_strategy_sessions_decide_as_the_core(
     live: tuple[TestClient, ServiceState],
@@ -96,7 +97,7 @@ def test_strategy_sessions_decide_as_the_core(
     kappa: float,
     window: int,
     params: dict[str, Any],
-    over_websocket: bool,
+    transport: str,
 ) -> None:
     client, service = live
     grid = service.catalog.get("default").domain
@@ -113,8 +114,8 @@ def test_strategy_sessions_decide_as_the_core(
     )  # fmt: skip
     assert created["decision"] == expected_json(core.start(start), service)
     token = auth["Authorization"].removeprefix("Bearer ")
-    url = f"/sessions/{sid}/stream?token={token}"
-    ws = client.websocket_connect(url) if over_websocket else None
+    url = f"/sessions/{sid}/stream?token={token}" + ("&format=binary" * (transport == "binary"))
+    ws = client.websocket_connect(url) if transport != "rest" else None
     s = start
     with ws or _Nothing():
         for _ in range(int(rng.integers(1, 5))):
@@ -129,7 +130,10 @@ def test_strategy_sessions_decide_as_the_core(
                 events.append({"state": grid.cell(s), "action": ACTIONS[a]})
                 expected.append(expected_json(core.observe(s, a, s2), service))
                 s = s2
-            if ws is not None:
+            if ws is not None and transport == "binary":
+                ws.send_text(json.dumps(events))
+                got = unpack(ws.receive_bytes()).to_dicts()
+            elif ws is not None:
                 ws.send_text(json.dumps(events))
                 got = json.loads(ws.receive_text())
             else:
