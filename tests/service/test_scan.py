@@ -110,6 +110,38 @@ def test_a_large_plain_batch_is_read_by_the_compiled_reader() -> None:
     text = json.dumps(batch)
     scanned = scan_events(text)
     assert scanned is not None and len(scanned[0]) == 500
-    assert outcome(fast, text) == outcome(slow, text)
+    moves = outcome(lambda raw: read_moves(DOMAIN, raw, 500), text)
+    assert moves[0] != "refused"
+    events, single = parse_events(text, 500)
+    assert moves == ([a.tolist() for a in to_moves(DOMAIN, events)], single)
     too_many = outcome(lambda raw: read_moves(DOMAIN, raw, 499), text)
     assert too_many == ("refused", 413, "too many events: 500 in one batch, at most 499")
+
+
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    n=st.integers(SMALL_EVENTS + 1, 300),
+    layout=st.sampled_from([(None, (",", ":")), (None, None), (1, None)]),
+    with_next=st.floats(0, 1),
+)
+def test_walks_are_read_as_the_full_parser_reads_them(
+    seed: int, n: int, layout: tuple[int | None, tuple[str, str] | None], with_next: float
+) -> None:
+    """Valid batches (random walks, some events with a next_state), in the layouts clients
+    write: the compiled reader's moves, its fast path for the common event included, are the
+    full parser's."""
+    rng = np.random.default_rng(seed)
+    s, batch = DOMAIN.start, []
+    for a in rng.integers(0, 4, n).tolist():
+        s2 = DOMAIN.step(s, a)
+        event: dict[str, Any] = {"state": list(DOMAIN.cell(s)), "action": ACTIONS[a]}
+        if rng.random() < with_next:
+            event["next_state"] = list(DOMAIN.cell(s2))
+        batch.append(event)
+        s = s2
+    indent, separators = layout
+    text = json.dumps(batch, indent=indent, separators=separators)
+    assert scan_events(text) is not None
+    got = outcome(lambda raw: read_moves(DOMAIN, raw, 300), text)
+    events, single = parse_events(text, 300)
+    assert got == ([a.tolist() for a in to_moves(DOMAIN, events)], single)
