@@ -200,8 +200,11 @@ class Advisor:
             # the two models of the paper: the general code below, unrolled (the same
             # operations on the same numbers in the same order, so the same bits)
             z0, z1 = loglik[0] + weights[0], loglik[1] + weights[1]
-            mx = z0 if z0 >= z1 else z1
-            e0, e1 = math.exp(z0 - mx), math.exp(z1 - mx)
+            # exp(0) is exactly 1 (C99 F.9.3.1), so the larger term needs no call
+            if z0 >= z1:
+                e0, e1 = 1.0, math.exp(z1 - z0)
+            else:
+                e0, e1 = math.exp(z0 - z1), 1.0
             tot = e0 + e1
             p0, p1 = e0 / tot, e1 / tot
             q0, q1 = probs[0], probs[1]

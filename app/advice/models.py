@@ -64,6 +64,7 @@ class AdviceTables:
     theta_flat: list[float] = field(init=False, repr=False)
     neg_entropy_list: list[float] = field(init=False, repr=False)
     log_weight_list: list[float] = field(init=False, repr=False)
+    n_states: int = field(init=False, repr=False)  # a plain attribute: read on every decision
 
     def __post_init__(self) -> None:
         theta = np.ascontiguousarray(self.theta, dtype=np.float64)
@@ -97,6 +98,7 @@ class AdviceTables:
             "theta_flat": theta.ravel().tolist(),
             "neg_entropy_list": neg_entropy.tolist(),
             "log_weight_list": [math.log(w) for w in weights.tolist()],
+            "n_states": int(theta.shape[0]),
         }
         for name, value in setters.items():
             if isinstance(value, np.ndarray):
@@ -113,10 +115,6 @@ class AdviceTables:
     def with_models(cls, theta: npt.ArrayLike, extra: Sequence[BehaviourModel]) -> AdviceTables:
         th = np.asarray(theta, dtype=np.float64)
         return cls(th, (normal_model(th), uniform_model(th.shape[0]), *extra))
-
-    @property
-    def n_states(self) -> int:
-        return int(self.theta.shape[0])
 
     @property
     def n_models(self) -> int:

@@ -67,12 +67,15 @@ async def get_session(conn: HTTPConnection, session_id: SessionId) -> LiveSessio
     return session_for(conn, session_id)
 
 
-def session_for(conn: HTTPConnection, session_id: str) -> LiveSession:
+def session_for(
+    conn: HTTPConnection, session_id: str, state: ServiceState | None = None
+) -> LiveSession:
     """:func:`get_session` as a plain call, for the event route: it runs on every event, and
     a nested dependency costs FastAPI another resolution step on every request. It reads the
     header itself rather than through security sub-dependencies; routes using it declare the
-    bearer scheme in OpenAPI with :data:`BEARER`."""
-    state = service_of(conn)
+    bearer scheme in OpenAPI with :data:`BEARER`. ``state``: the service, if the caller has
+    it already."""
+    state = state or service_of(conn)
     token = bearer_token(conn)
     if not token:
         check_session_token(None, "", session_id)  # raises 401

@@ -27,6 +27,10 @@ class AuthError(Exception):
 
 
 def same_secret(given: str, expected: str) -> bool:
+    """Constant-time comparison (``compare_digest`` takes ASCII text as it is; other text,
+    which no key or token is, is compared as UTF-8)."""
+    if given.isascii() and expected.isascii():
+        return hmac.compare_digest(given, expected)
     return hmac.compare_digest(given.encode(), expected.encode())
 
 

@@ -310,7 +310,8 @@ class StreamAdvisor(Advisor):
         t = self.tables
         if not (0 <= state < t.n_states and 0 <= action < N_ACTIONS):
             self._check(state, action)
-        self._sync_tables()
+        if self._keys_tables is not t:
+            self._sync_tables()
         k = state * N_ACTIONS + action
         pos, loglik = self._pos, self._loglik
         leaving = int(self._keys[pos])

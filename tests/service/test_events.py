@@ -17,6 +17,7 @@ from app.service.events import (
     _many_moves,
     describe_errors,
     parse_events,
+    read_move,
     to_moves,
 )
 from tests.service.conftest import TINY
@@ -161,3 +162,78 @@ def test_small_batches_are_checked_as_large_ones_are(batch: list[dict[str, Any]]
         except BadInput as exc:
             outcomes.append([exc.detail, exc.status])
     assert outcomes[0] == outcomes[1]
+
+
+def _single(raw: str | bytes) -> Any:
+    """read_move's answer: the move, or the refusal."""
+    try:
+        return read_move(DOMAIN, raw)
+    except BadInput as exc:
+        return ("refused", exc.status, exc.detail)
+
+
+def _parsed(raw: str | bytes) -> Any:
+    """The full parser's answer for one event object, through the batch path."""
+    try:
+        events, single = parse_events(raw, 1)
+        assert single
+        return tuple(int(x[0]) for x in to_moves(DOMAIN, events))
+    except BadInput as exc:
+        return ("refused", exc.status, exc.detail)
+
+
+single_texts = st.builds(
+    lambda r, c, a, sep, pad, as_bytes: (lambda t: t.encode() if as_bytes else t)(
+        pad + json.dumps({"state": [r, c], "action": a}, separators=sep) + pad
+    ),
+    st.integers(0, ROWS + 1)
+    | st.sampled_from([999_999_999, 1_000_000_000, 2**31 - 1, 2**31, 10**12])
+    | st.integers(0, 2**31 + 5),
+    st.integers(0, COLS + 1),
+    st.sampled_from(ACTIONS),
+    st.sampled_from([(",", ":"), (", ", ": "), (",", ": "), (", ", ":")]),
+    st.sampled_from(["", " ", "\n", "\t ", "\r\n"]),
+    st.booleans(),
+)
+
+
+@given(single_texts, st.data())
+def test_one_event_is_read_as_the_parser_reads_it(raw: str | bytes, data: Any) -> None:
+    """read_move (the single-event path: plain ints, no arrays) against the batch path, on
+    texts of one event (cells on and off the map, walls) and on mutated ones."""
+    assert _single(raw) == _parsed(raw)
+    text = raw.decode() if isinstance(raw, bytes) else raw
+    for at, piece in data.draw(st.lists(st.tuples(st.integers(0, len(text)), st.sampled_from(
+        ['"', ",", ":", "[", "]", "{", "}", " ", "\f", "-", ".", "e", "0", "00", "7", "x",
+         "null", '"N"', "\u00e9", "1e3", "99999999999", ""]
+    )), max_size=2)):  # fmt: skip
+        text = text[:at] + piece + text[at + data.draw(st.integers(0, 2)) :]
+    mutated = text.encode() if isinstance(raw, bytes) else text
+    if mutated.lstrip()[:1] in (b"{", "{"):
+        assert _single(mutated) == _parsed(mutated)
+
+
+@pytest.mark.parametrize(
+    "raw",
+    [
+        '{"state":[05,1],"action":"E"}',
+        '{"state":[5,01],"action":"E"}',
+        '{"state":[999999999,1],"action":"E"}',
+        '{"state":[2147483648,1],"action":"E"}',
+        '{"state":[1000000000,1],"action":"E"}',
+        '{"state":[5,2147483648],"action":"E"}',
+        '{"state":[5,1],"action":"e"}',
+        '{"state":[5,1],"action":"n"}',
+        '\f{"state":[5,1],"action":"E"}',
+        '{"state":[5,1],"action":"E"}\v',
+        '{"state":[5,1],"action":"E"}\r\n',
+        '{"state":  [5,1],"action":"E"}',
+        '{"state":[5,1],"action":"E","action":"W"}',
+        '{"state":[5,1],"action":"E"} {}',
+        '{"state":[1,0],"action":"E"}',
+        '{"state":[30,1],"action":"E"}',
+    ],
+)
+def test_one_event_edge_cases_are_read_as_the_parser_reads_them(raw: str) -> None:
+    assert _single(raw) == _parsed(raw)
+    assert _single(raw.encode()) == _parsed(raw.encode())

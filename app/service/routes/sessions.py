@@ -55,8 +55,9 @@ async def create_session(
 async def post_events(request: Request, session_id: SessionId) -> Response:
     """One event, or a list: the decision for each, in order (one object for one event). A
     batch with a bad event is refused whole and changes nothing."""
-    session = session_for(request, session_id)  # not a dependency: see session_for
-    text = ops.apply_events(service_of(request), session, await request.body())
+    state = service_of(request)
+    session = session_for(request, session_id, state)  # not a dependency: see session_for
+    text = ops.apply_events(state, session, await request.body())
     return Response(text, media_type="application/json")
 
 
