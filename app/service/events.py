@@ -14,6 +14,7 @@ Decisions go back as JSON text written by :mod:`app.service.encode`.
 
 from __future__ import annotations
 
+import re
 import weakref
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -101,7 +102,28 @@ def read_move(domain: GridDomain, raw: bytes | str) -> tuple[int, int, int] | No
     head = raw.lstrip()[:1]
     if head not in (b"{", "{"):
         return None
+    plain = (_PLAIN_BYTES if isinstance(raw, bytes) else _PLAIN_TEXT).fullmatch(raw)
+    if plain is not None:  # the common form: no parser, no dict
+        r, c, letter = plain.groups()
+        t = _tables(domain)
+        s = _cell_state(t, 0, "state", [int(r), int(c)])
+        a = _CODE[letter]
+        return s, a, t.next_state[s][a]
     return _one_move(_tables(domain), 0, _validate(EVENT, raw))
+
+
+# ``{"state": [r, c], "action": "E"}`` as json.dumps writes it, with or without its spaces,
+# and JSON whitespace around it: what the parser reads as that event (1-9 plain digits with
+# no leading zero make a valid coordinate, below 2**31). tests/service/test_events.py checks
+# read_move against the parser on such texts, mutated ones and edge cases.
+_PLAIN = (
+    r'[ \t\n\r]*\{"state": ?\[(0|[1-9][0-9]{0,8}), ?(0|[1-9][0-9]{0,8})\], ?'
+    r'"action": ?"([NESW])"\}[ \t\n\r]*'
+)
+_PLAIN_TEXT = re.compile(_PLAIN)
+_PLAIN_BYTES = re.compile(_PLAIN.encode())
+_CODE: dict[str | bytes, int] = {x: ACTION_CODE[x] for x in "NESW"}
+_CODE |= {x.encode(): ACTION_CODE[x] for x in "NESW"}
 
 
 def _validate(adapter: TypeAdapter[Any], raw: bytes | str) -> Any:
