@@ -102,7 +102,7 @@ def read_move(domain: GridDomain, raw: bytes | str) -> tuple[int, int, int] | No
     head = raw.lstrip()[:1]
     if head not in (b"{", "{"):
         return None
-    plain = (_PLAIN_BYTES if isinstance(raw, bytes) else _PLAIN_TEXT).fullmatch(raw)
+    plain = _PLAIN_BYTES.fullmatch(raw) if isinstance(raw, bytes) else _PLAIN_TEXT.fullmatch(raw)
     if plain is not None:  # the common form: no parser, no dict
         r, c, letter = plain.groups()
         t = _tables(domain)

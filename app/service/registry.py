@@ -10,9 +10,9 @@ is cheap and safe to call from another thread: every change and every snapshot h
 from __future__ import annotations
 
 import secrets
-from array import array
 import threading
 import time
+from array import array
 from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -51,7 +51,7 @@ class Recent:
 
     def __init__(self, size: int, dtype: type[np.generic], first: float):
         kind = np.dtype(dtype)
-        self._buf = array(kind.char, bytes(kind.itemsize * size))
+        self._buf: array[Any] = array(kind.char, bytes(kind.itemsize * size))
         self._buf[0] = first
         self._count = 1
 
