@@ -7,8 +7,11 @@ asyncio ``websockets`` driver (streams), bounded in time and count. Sections (``
 
 * ``rest``: one event per POST, service vs a bare endpoint that parses the same body and
   answers a text of the same size; runs interleaved, ``--repeats`` each; decisions/s, p50, p99.
-* ``ws``: 500 events per websocket message, service vs an echo of the same frames and vs a
-  bare endpoint answering each frame with a text the size of the service's answer.
+* ``ws``: 500 events per websocket message, service (JSON and binary answers) vs an echo of
+  the same frames and vs a bare endpoint answering each frame with a text the size of the
+  service's JSON answer.
+* ``parts``: the parts of one such message in this process (no server): reading, deciding,
+  writing, and the libm calls the decisions make; what any framework would add to.
 * ``sessions``: throughput with 1 to 100,000 live sessions (REST spread over every session,
   websocket on a few), resident memory; then every session given 200 more events (all its
   buffers full) and the memory measured again.
@@ -185,6 +188,61 @@ def bench_ws(tmp: Path, root: Path, repeats: int, seconds: float, conns: int) ->
         pairs = zip(out["binary rate"], out["echo rate"], strict=True)
         res["binary_pair_ratios"] = [a / b for a, b in pairs]
     return res
+
+
+# ---- parts of one message, in process --------------------------------------------------------
+def bench_parts(tmp: Path, repeats: int) -> dict[str, float]:
+    """Microseconds per 500-event message for each part of the websocket path, in this process
+    (no server, no socket): what the service must do for a message whatever the framework."""
+    from numba import njit
+
+    from app.service import ops
+    from app.service.config import Settings
+    from app.service.encode import encode_binary, encode_decisions, fragments, packed
+    from app.service.events import read_moves
+    from app.service.schemas import SessionCreate
+    from app.service.state import open_state
+
+    @njit(cache=False)
+    def libm_only(x: Any) -> float:  # pragma: no cover - compiled
+        """One exp and four logs per value: the calls each decision makes (eqs. 5 and 6)."""
+        total = 0.0
+        for v in x:
+            total += np.exp(-v) + np.log(v) + np.log(v + 1) + np.log(v + 2) + np.log(v + 3)
+        return total
+
+    state, _ = open_state(Settings(data_dir=tmp / "parts", viewer_enabled=False))
+    domain = state.catalog.get("default")
+    grid = domain.domain
+    frames = frames_for(grid, 7)
+    limit = state.settings.max_batch_events
+    session, _ = ops.create_session(state, domain, SessionCreate())
+    moves = [read_moves(grid, f, limit)[0] for f in frames]
+    ops.warm_up()
+    libm_only(np.random.default_rng(0).random(FRAME) + 0.5)
+    advisor = session.advisor
+    out = advisor.observe_arrays(*moves[0])
+    cols = advisor.observe_many(*moves[0])
+    parts = (fragments(advisor.tables, domain.cell_json), packed(advisor.tables, domain.cell_json))
+    values = np.random.default_rng(1).random(FRAME) + 0.5
+    cases: dict[str, Callable[[int], Any]] = {
+        "read": lambda i: read_moves(grid, frames[i % len(frames)], limit),
+        "decide": lambda i: advisor.observe_arrays(*moves[i % len(moves)]),
+        "libm": lambda i: libm_only(values),
+        "encode_binary": lambda i: encode_binary(out, grid),
+        "encode_json": lambda i: encode_decisions(cols, parts[0], False, parts[1]),
+        "all_binary": lambda i: ops.apply_events_binary(state, session, frames[i % len(frames)]),
+        "all_json": lambda i: ops.apply_events(state, session, frames[i % len(frames)]),
+    }
+    res: dict[str, list[float]] = {}
+    for _ in range(repeats):
+        for name, call in cases.items():
+            t0 = time.thread_time()
+            for i in range(200):
+                call(i)
+            res.setdefault(name, []).append((time.thread_time() - t0) / 200 * 1e6)
+    state.close()
+    return {name: med(v) for name, v in res.items()}
 
 
 # ---- live sessions and memory -----------------------------------------------------------------
@@ -490,6 +548,8 @@ def report(args: argparse.Namespace, res: dict[str, Any], loads: list[float]) ->
             f"{s['warm_errors']} failed): resident memory {s['rss_fresh'] / 2**20:,.0f} -> "
             f"{s['rss_warm'] / 2**20:,.0f} MiB.",
         ]  # fmt: skip
+    if "parts" in res:
+        parts += parts_report(res["parts"], res.get("ws"))
     if "curves" in res:
         c = res["curves"]
         parts += [
@@ -510,6 +570,40 @@ def report(args: argparse.Namespace, res: dict[str, Any], loads: list[float]) ->
             + " | ".join(f"{v:,.0f}" for v in c["maze"]) + " |",
         ]  # fmt: skip
     return "\n".join(parts) + "\n"
+
+
+def parts_report(p: dict[str, float], ws: dict[str, Any] | None) -> list[str]:
+    """The in-process parts of one message, and what they leave of 0.7 x the echo."""
+    out = [
+        "",
+        f"### One {FRAME}-event message, part by part (in process, no server)",
+        "",
+        "| part | us a message | us a decision |",
+        "|---|---|---|",
+    ]
+    names = [
+        ("read", "read and check the events (compiled reader)"),
+        ("decide", "decide (compiled loop over the session's advisor, with its bookkeeping)"),
+        ("libm", "of which the libm calls alone: one exp and four logs a decision"),
+        ("encode_binary", "write the binary answer"),
+        ("encode_json", "write the JSON answer (compiled, from per-state texts)"),
+        ("all_binary", "everything, binary answer (`ops.apply_events_binary`)"),
+        ("all_json", "everything, JSON answer (`ops.apply_events`)"),
+    ]
+    out += [f"| {label} | {p[k]:.1f} | {p[k] / FRAME * 1e3:.0f} ns |" for k, label in names]
+    if ws is not None:
+        echo_us = ws["echo cpu_us"] * FRAME  # the echo server's CPU for one message
+        budget = FRAME / (0.7 * ws["echo rate"]) * 1e6  # one message at 0.7 x the echo's rate
+        floor = echo_us + p["read"] + p["libm"]
+        out += [
+            "",
+            f"At 0.7 x the echo's rate ({0.7 * ws['echo rate']:,.0f} decisions/s) one worker "
+            f"has {budget:.0f} us for a message; the echo itself spends {echo_us:.0f} us of "
+            f"server CPU on one. Reading the events and the decisions' libm calls alone take "
+            f"{p['read'] + p['libm']:.0f} us, so with no other cost at all the service would "
+            f"reach {budget / floor * 0.7:.2f} x the echo.",
+        ]  # fmt: skip
+    return out
 
 
 def wrk_version() -> str:
@@ -535,7 +629,7 @@ def main() -> None:
     ap.add_argument("--explorer-rate", type=float, default=10.0, help="events/s per explorer")
     ap.add_argument("--batchings", type=int, nargs="+", default=[100, 1],
                     help="trajectories per ingestion request")  # fmt: skip
-    ap.add_argument("--only", default="rest,ws,sessions,curves,ingest")
+    ap.add_argument("--only", default="rest,ws,parts,sessions,curves,ingest")
     ap.add_argument("--root", type=Path, default=ROOT, help="source tree serving the advisor")
     ap.add_argument("--label", default="", help="what --root is (for the report)")
     ap.add_argument("--write", type=Path)
@@ -547,6 +641,7 @@ def main() -> None:
     steps: list[tuple[str, Callable[[Path], Any]]] = [
         ("rest", lambda t: bench_rest(t, args.root, args.repeats, args.seconds, args.rest_conns)),
         ("ws", lambda t: bench_ws(t, args.root, args.repeats, args.seconds, args.ws_conns)),
+        ("parts", lambda t: bench_parts(t, args.repeats)),
         ("sessions", lambda t: bench_sessions(t, args.root, args.sessions, 3.0, args.ws_conns)),
         ("curves", lambda t: bench_curves(t, args.root, args.windows, args.sizes,
                                           max(1, args.repeats // 2), 2.0, args.ws_conns)),
@@ -554,7 +649,7 @@ def main() -> None:
                                           args.batchings)),
     ]  # fmt: skip
     for name, step in steps:
-        if name not in only:
+        if name not in only or (name == "parts" and args.root != ROOT):
             continue
         t0 = time.perf_counter()
         with tempfile.TemporaryDirectory(prefix=f"bench-{name}-") as tmp:

@@ -68,7 +68,7 @@ def test_binary_frames_carry_the_json_decisions_and_leave_the_same_session(
             for a in list(walk):
                 events.append({"state": list(grid.cell(s)), "action": ACTIONS[a]})
                 s = int(grid.next_state[s, a])
-            frame = json.dumps(events[0] if single and n == 1 else events)
+            frame = json.dumps(events[0] if single and len(events) == 1 else events)
             text_ws.send_text(frame)
             binary_ws.send_text(frame)
             want = json.loads(text_ws.receive_text())
