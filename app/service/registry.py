@@ -42,6 +42,15 @@ class TooManySessions(RuntimeError):
     """The registry holds ``max_sessions`` live sessions already."""
 
 
+def _ring_spans(count: int, k: int, size: int) -> tuple[int, int, int]:
+    """Where the last ``m = min(k, size)`` of ``k`` values appended to a ring of ``size``
+    after ``count`` items go: ring[start:start + first] gets the first ``first`` of them and
+    ring[:m - first] the rest (two slices: no index arrays). Returns (m, start, first)."""
+    m = min(k, size)
+    start = (count + k - m) % size
+    return m, start, min(m, size - start)
+
+
 class Recent:
     """The last ``size`` numbers pushed, oldest first, in one ring (8 bytes or less a number,
     where a deque of Python numbers costs about 32). The ring is an ``array.array``, whose
@@ -67,8 +76,10 @@ class Recent:
         if k == 1:  # one event per request: no index arrays
             self.push(values[0])
             return
-        m = min(k, size)
-        self._view()[np.arange(self._count + k - m, self._count + k) % size] = values[k - m :]
+        m, start, first = _ring_spans(self._count, k, size)
+        view, tail = self._view(), values[k - m :]
+        view[start : start + first] = tail[:first]
+        view[: m - first] = tail[first:]
         self._count += k
 
     def tolist(self) -> list[Any]:
@@ -109,19 +120,26 @@ class AdviceLog:
         if not self._tables or self._tables[-1] is not tables:
             self._compact()
             self._tables.append(tables)
-        m = min(k, size)
-        at = np.arange(self._count + k - m, self._count + k) % size
-        buf[0, at] = steps[k - m :]
-        buf[1, at] = states[k - m :]
-        buf[2, at] = len(self._tables) - 1
+        m, start, first = _ring_spans(self._count, k, size)
+        spans = (
+            (slice(start, start + first), slice(0, first)),
+            (slice(0, m - first), slice(first, m)),
+        )
+        tail_steps, tail_states = steps[k - m :], states[k - m :]
+        for ring, part in spans:
+            buf[0, ring] = tail_steps[part]
+            buf[1, ring] = tail_states[part]
+            buf[2, ring] = len(self._tables) - 1
         if advice is not None and self._own is None:
             self._own = np.full((size, 4), np.nan)
         if self._own is not None:  # NaN rows: theta_s of the tables
             if advice is None or len(advice) == 0:
-                self._own[at] = np.nan
+                rows: Any = np.full((m, 4), np.nan)
             else:
                 nan = (np.nan,) * 4
-                self._own[at] = [nan if a is None else a for a in advice[k - m :]]
+                rows = np.array([nan if a is None else a for a in advice[k - m :]], dtype=float)
+            for ring, part in spans:
+                self._own[ring] = rows[part]
         self._count += k
 
     def add(self, step: int, state: int, tables: AdviceTables, advice: Advice | None) -> None:

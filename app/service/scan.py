@@ -192,26 +192,23 @@ def _common(buf: ByteArray, i: int, out: IntArray, count: int) -> int:  # pragma
     if buf[i] != _LBRACKET:
         return _BAD
     i += 1
-    r = c = 0
-    for part in range(2):  # row then col: 1-9 plain digits, no leading zero
-        start = i
-        v = 0
-        while i < n and _ZERO <= buf[i] <= _NINE and i - start < 9:
-            v = v * 10 + (buf[i] - _ZERO)
-            i += 1
-        if i == start or i >= n or (buf[start] == _ZERO and i - start > 1):
-            return _BAD
-        if part == 0:
-            if buf[i] != _COMMA:
-                return _BAD
-            r = v
-            i += 1
-            i += i < n and buf[i] == _SPACE
-        else:
-            if buf[i] != _RBRACKET:
-                return _BAD
-            c = v
-            i += 1
+    start = i  # the row: 1-9 plain digits, no leading zero, then ","
+    r = 0
+    while i < n and _ZERO <= buf[i] <= _NINE and i - start < 9:
+        r = r * 10 + (buf[i] - _ZERO)
+        i += 1
+    if i == start or i >= n or buf[i] != _COMMA or (buf[start] == _ZERO and i - start > 1):
+        return _BAD
+    i += 1
+    i += i < n and buf[i] == _SPACE
+    start = i  # the column, then "]"
+    c = 0
+    while i < n and _ZERO <= buf[i] <= _NINE and i - start < 9:
+        c = c * 10 + (buf[i] - _ZERO)
+        i += 1
+    if i == start or i >= n or buf[i] != _RBRACKET or (buf[start] == _ZERO and i - start > 1):
+        return _BAD
+    i += 1
     if i >= n or buf[i] != _COMMA:
         return _BAD
     i += 1
@@ -246,6 +243,31 @@ def _common(buf: ByteArray, i: int, out: IntArray, count: int) -> int:  # pragma
 
 
 @njit(cache=True)
+def _common_run(
+    buf: ByteArray, i: int, out: IntArray, count: int
+) -> tuple[int, int]:  # pragma: no cover - compiled
+    """Common events (:func:`_common`) from ``i`` on, as long as they follow one another the
+    way json.dumps writes them: (the index past the last one's ``}`` or -1 if there was
+    none, the new count). A function of its own, called once per run of such events: with
+    this loop inside :func:`_scan`, 500 events took 21 us instead of 16 (measured)."""
+    n = buf.shape[0]
+    after = _common(buf, i, out, count)
+    if after < 0:
+        return _BAD, count
+    while True:
+        count += 1
+        j = after + 1  # past ``,`` and json.dumps's optional space, to the next ``{``
+        if j + 1 < n and buf[after] == _COMMA and buf[j] == _SPACE:
+            j += 1
+        if j >= n or buf[after] != _COMMA or buf[j] != _LBRACE or count >= out.shape[0]:
+            return after, count
+        nxt = _common(buf, j, out, count)
+        if nxt < 0:
+            return after, count
+        after = nxt
+
+
+@njit(cache=True)
 def _scan(buf: ByteArray, out: IntArray) -> int:  # pragma: no cover - compiled
     """Fill ``out`` rows with (row, col, action, next row, next col) per event (-1 for an
     absent action or next state); the number of events, or -1 if the text is not of the
@@ -259,9 +281,8 @@ def _scan(buf: ByteArray, out: IntArray) -> int:  # pragma: no cover - compiled
     while True:
         if i >= n or buf[i] != _LBRACE or count >= out.shape[0]:
             return _BAD
-        after = _common(buf, i, out, count)
+        after, count = _common_run(buf, i, out, count)
         if after >= 0:  # read by the fast path
-            count += 1
             i = _skip(buf, after)
             if i >= n:
                 return _BAD
