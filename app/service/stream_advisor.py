@@ -401,7 +401,7 @@ class StreamAdvisor(Advisor):
         keys = states * 4 + actions
         period = resync_period(self.window)
         needs_resync = (self.steps % period) + n >= period
-        resync = self._resyncs(self._window if needs_resync else _NO_RING, f.log_probs, keys)
+        resync = self._resyncs(self._window, f.log_probs, keys) if needs_resync else _NO_RESYNC
         loglik = np.array(self._loglik, dtype=np.float64)
         kl, p_normal, benefit = np.empty(n), np.empty(n), np.empty(n)
         advise, count = np.empty(n, dtype=np.bool_), np.empty(n, dtype=np.int64)
@@ -425,6 +425,7 @@ class StreamAdvisor(Advisor):
 
 
 _NO_RING = np.zeros((0, 0))
+_NO_RESYNC = (np.zeros(0, dtype=np.int64), np.zeros((0, 0)))  # no exact re-sum in this batch
 
 
 def warm_up() -> None:
