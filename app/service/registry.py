@@ -162,16 +162,20 @@ class AdviceLog:
         return np.frombuffer(self._buf, dtype=np.int64).reshape(3, -1)
 
     def _compact(self) -> None:
-        """Forget tables no entry refers to any more (so the list stays short)."""
+        """Forget tables no entry refers to any more (so the list stays short).
+
+        Entries are written oldest first and each table of the list got entries when it was
+        appended, so the tables in use are those from the oldest entry's to the last: the
+        unused ones are a prefix. (This runs at nearly every piece of advice while the prior
+        changes often, e.g. one trajectory per ingest request: O(1), not a set.)"""
         if len(self._tables) < 4:
             return
-        live = self._order()
-        buf = self._rows()
-        used = sorted(set(buf[2, live].tolist()))
-        remap = np.zeros(len(self._tables), dtype=np.int64)
-        remap[used] = np.arange(len(used))
-        buf[2, live] = remap[buf[2, live]]
-        self._tables = [self._tables[i] for i in used]
+        size = len(self._buf) // 3
+        oldest = (self._count - min(self._count, size)) % size
+        first = self._buf[2 * size + oldest]
+        if first:
+            self._rows()[2] -= first  # slots not yet written are never read
+            del self._tables[:first]
 
     def _order(self) -> npt.NDArray[np.int64]:
         size = len(self._buf) // 3

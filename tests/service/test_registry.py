@@ -60,3 +60,5 @@ def test_advice_log_keeps_what_a_bounded_deque_keeps(
         got = log.items()
         assert [(a, s) for a, s, _ in got] == [(a, s) for a, s, _ in reference]
         assert all(t is r for (_, _, t), (_, _, r) in zip(got, reference, strict=True))
+        # tables no entry refers to are let go (each kept one has an entry, but the newest)
+        assert len(log._tables) <= max(size + 1, 4)
