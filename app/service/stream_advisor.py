@@ -248,6 +248,23 @@ def _observe_stream(
     return pos, count, benefit, gone
 
 
+@njit(cache=True)
+def _keep_values(
+    keys: KeyArray, kept: FlagArray, old: FloatArray, log_probs: FloatArray
+) -> int:  # pragma: no cover - compiled
+    """For each pair of the window whose value is not kept yet, keep its value in each
+    model's ``log_probs`` (the tables it was added with) in ``old``; returns how many."""
+    n = 0
+    for p in range(keys.shape[0]):
+        k = keys[p]
+        if k >= 0 and kept[p] == 0:
+            for m in range(log_probs.shape[0]):
+                old[m, p] = log_probs[m, k]
+            kept[p] = 1
+            n += 1
+    return n
+
+
 class StreamAdvisor(Advisor):
     """An :class:`Advisor` with :meth:`observe_many` for a batch of one explorer's moves.
 
@@ -274,17 +291,17 @@ class StreamAdvisor(Advisor):
         self._keys_tables = self.tables  # the tables giving the values of the other pairs
 
     def _sync_tables(self) -> None:
-        """After a change of tables, keep the values of the pairs added with the old ones."""
+        """After a change of tables, keep the values of the pairs added with the old ones.
+
+        This runs at the first event after each prior update, so with one trajectory per
+        ingest request nearly every event of every session pays it: one compiled call."""
         if self._keys_tables is self.tables:
             return
-        moved = np.flatnonzero((self._keys >= 0) & (self._kept == 0))
-        if len(moved):
+        if self.steps:  # the window holds pairs
             before = _flat(self._keys_tables).log_probs
-            if self._old is None:
+            if self._old is None:  # then no value is kept yet: every pair moves
                 self._old = np.zeros((before.shape[0], self.window))
-            self._old[:, moved] = before[:, self._keys[moved]]
-            self._kept[moved] = 1
-            self._n_kept += len(moved)
+            self._n_kept += _keep_values(self._keys, self._kept, self._old, before)
         self._keys_tables = self.tables
 
     def _left(self, gone: int) -> None:
@@ -429,7 +446,10 @@ _NO_RESYNC = (np.zeros(0, dtype=np.int64), np.zeros((0, 0)))  # no exact re-sum 
 
 
 def warm_up() -> None:
-    """Load (or compile, the first time) the numba loop, so no request waits for it."""
+    """Load (or compile, the first time) the numba loops, so no request waits for them."""
     tables = AdviceTables.paper(np.full((2, 4), 0.25))
     moves = np.zeros(SMALL_BATCH, dtype=np.int64)
-    StreamAdvisor(tables, window=4).observe_many(moves, moves, moves)
+    advisor = StreamAdvisor(tables, window=4)
+    advisor.observe_many(moves, moves, moves)
+    advisor.tables = AdviceTables.paper(np.full((2, 4), 0.25))  # a prior update
+    advisor.observe_many(moves, moves, moves)
