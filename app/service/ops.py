@@ -107,7 +107,16 @@ def ingest(state: ServiceState, domain: DomainState, raw: bytes) -> Trajectories
     body = parse_trajectories(raw)
     items = to_trajectories(domain.domain, body, state.settings.max_trajectory_steps)
     state.catalog.add_trajectories(domain, items)
+    prepare_answers(domain)
     return TrajectoriesAccepted(accepted=len(items), pairs=sum(len(t.pairs) for t in items))
+
+
+def prepare_answers(domain: DomainState) -> None:
+    """Build the per-state answer texts of the domain's current tables now (ingestion runs in a
+    worker thread) rather than at the first event after the update, on the event loop: about
+    1 ms for the default maze, at every ingest."""
+    for tables in domain.view.tables.values():
+        packed(tables, domain.cell_json)  # builds fragments() too
 
 
 def warm_up() -> None:
