@@ -92,7 +92,12 @@ def soak(data_dir: Path, idle: float = 2.0, max_sessions: int = 8 * PER_CYCLE) -
     async def cycles(n: int) -> None:
         async with httpx.AsyncClient(base_url=live.url, timeout=30) as http:
             for _ in range(n):
+                # paced: a cycle lasts idle / 4 at least, so that at most about 5 cycles'
+                # sessions are live at once however fast the service is (unpaced, a faster
+                # service fitted more than max_sessions into one idle period: 503)
+                started = time.monotonic()
                 await cycle(http, ws_base, PER_CYCLE)
+                await asyncio.sleep(max(0.0, idle / 4 - (time.monotonic() - started)))
 
     def drained() -> bool:
         sessions: int = httpx.get(f"{live.url}/health").json()["sessions"]
