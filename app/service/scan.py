@@ -281,61 +281,53 @@ def _scan(buf: ByteArray, out: IntArray) -> int:  # pragma: no cover - compiled
     while True:
         if i >= n or buf[i] != _LBRACE or count >= out.shape[0]:
             return _BAD
-        after, count = _common_run(buf, i, out, count)
-        if after >= 0:  # read by the fast path
-            i = _skip(buf, after)
-            if i >= n:
-                return _BAD
-            if buf[i] == _COMMA:
-                i = _skip(buf, i + 1)
-                continue
-            if buf[i] == _RBRACKET:
-                break
-            return _BAD
-        i = _skip(buf, i + 1)
-        seen = 0
-        r = c = nr = nc = a = -1
-        while True:
-            key, i = _key(buf, i)
-            if key < 0 or seen & (1 << key):
-                return _BAD
-            seen |= 1 << key
-            i = _skip(buf, i)
-            if i >= n or buf[i] != _COLON:
-                return _BAD
+        after, count = _common_run(buf, i, out, count)  # the fast path, for common events
+        if after < 0:  # an event written another way: the general reader
             i = _skip(buf, i + 1)
-            if key == 0:
-                r, c, i = _cell(buf, i)
-                if r < 0:
+            seen = 0
+            r = c = nr = nc = a = -1
+            while True:
+                key, i = _key(buf, i)
+                if key < 0 or seen & (1 << key):
                     return _BAD
-            elif key == 1:
-                a, i = _action(buf, i)
-                if a == -2:
+                seen |= 1 << key
+                i = _skip(buf, i)
+                if i >= n or buf[i] != _COLON:
                     return _BAD
-            elif _null(buf, i):
-                i += 4
-            else:
-                nr, nc, i = _cell(buf, i)
-                if nr < 0:
-                    return _BAD
-            i = _skip(buf, i)
-            if i >= n:
-                return _BAD
-            if buf[i] == _COMMA:
                 i = _skip(buf, i + 1)
-                continue
-            if buf[i] == _RBRACE:
-                break
-            return _BAD
-        if not seen & 1:
-            return _BAD
-        out[count, 0] = r
-        out[count, 1] = c
-        out[count, 2] = a
-        out[count, 3] = nr
-        out[count, 4] = nc
-        count += 1
-        i = _skip(buf, i + 1)
+                if key == 0:
+                    r, c, i = _cell(buf, i)
+                    if r < 0:
+                        return _BAD
+                elif key == 1:
+                    a, i = _action(buf, i)
+                    if a == -2:
+                        return _BAD
+                elif _null(buf, i):
+                    i += 4
+                else:
+                    nr, nc, i = _cell(buf, i)
+                    if nr < 0:
+                        return _BAD
+                i = _skip(buf, i)
+                if i >= n:
+                    return _BAD
+                if buf[i] == _COMMA:
+                    i = _skip(buf, i + 1)
+                    continue
+                if buf[i] == _RBRACE:
+                    break
+                return _BAD
+            if not seen & 1:
+                return _BAD
+            out[count, 0] = r
+            out[count, 1] = c
+            out[count, 2] = a
+            out[count, 3] = nr
+            out[count, 4] = nc
+            count += 1
+            after = i + 1
+        i = _skip(buf, after)
         if i >= n:
             return _BAD
         if buf[i] == _COMMA:
