@@ -114,12 +114,9 @@ class AdviceLog:
     ) -> None:
         """Log advice given at ``states``: theta_s of ``tables``, or ``advice`` when given."""
         k, size = len(steps), len(self._buf) // 3
-        buf = self._rows()
         if not k:
             return
-        if not self._tables or self._tables[-1] is not tables:
-            self._compact()
-            self._tables.append(tables)
+        which, buf = self._index(tables), self._rows()
         m, start, first = _ring_spans(self._count, k, size)
         spans = (
             (slice(start, start + first), slice(0, first)),
@@ -129,7 +126,7 @@ class AdviceLog:
         for ring, part in spans:
             buf[0, ring] = tail_steps[part]
             buf[1, ring] = tail_states[part]
-            buf[2, ring] = len(self._tables) - 1
+            buf[2, ring] = which
         if advice is not None and self._own is None:
             self._own = np.full((size, 4), np.nan)
         if self._own is not None:  # NaN rows: theta_s of the tables
@@ -145,17 +142,22 @@ class AdviceLog:
     def add(self, step: int, state: int, tables: AdviceTables, advice: Advice | None) -> None:
         """:meth:`extend` for one piece of advice (``advice`` None: theta_s of ``tables``;
         pass it only for advisors whose advice is not theta_s), without index arrays."""
-        if not self._tables or self._tables[-1] is not tables:
-            self._compact()
-            self._tables.append(tables)
-        buf, size = self._buf, len(self._buf) // 3
+        which, buf, size = self._index(tables), self._buf, len(self._buf) // 3
         at = self._count % size
-        buf[at], buf[size + at], buf[2 * size + at] = step, state, len(self._tables) - 1
+        buf[at], buf[size + at], buf[2 * size + at] = step, state, which
         if advice is not None and self._own is None:
             self._own = np.full((size, 4), np.nan)
         if self._own is not None:  # NaN row: theta_s of the tables
             self._own[at] = np.nan if advice is None else advice
         self._count += 1
+
+    def _index(self, tables: AdviceTables) -> int:
+        """The index of ``tables`` in the list: the last one, appended (after a compaction)
+        when it is not already."""
+        if not self._tables or self._tables[-1] is not tables:
+            self._compact()
+            self._tables.append(tables)
+        return len(self._tables) - 1
 
     def _rows(self) -> npt.NDArray[np.int64]:
         """The ring as a (3, size) numpy view."""
@@ -223,53 +225,57 @@ class LiveSession:
         """Remember a batch of decisions (recent path, posterior, advice given)."""
         if not cols.step:
             return
+        path, p_history = self._rings()
+        self.position = cols.state[-1]
+        self.p_normal = cols.p_normal[-1]
+        path.extend(cols.state)
+        p_history.extend(cols.p_normal)
+        if cols.advice_count[-1] != cols.advice_count[0] or cols.advise[0]:
+            self.log_advice(cols.step, cols.state, cols.advise, cols.advice)
+
+    def _rings(self) -> tuple[Recent, Recent]:
+        """The recent path and P(M1 | H) rings, made at the first batch (until then the
+        session's start alone is its history)."""
         if self.path is None or self.p_history is None:
             self.path = Recent(self.sizes[0], np.int32, self.position)
             # for plots only: 7 significant digits are plenty, at half the memory
             self.p_history = Recent(self.sizes[1], np.float32, self.p_normal)
-        self.position = cols.state[-1]
-        self.p_normal = cols.p_normal[-1]
-        self.path.extend(cols.state)
-        self.p_history.extend(cols.p_normal)
-        if cols.advice_count[-1] != cols.advice_count[0] or cols.advise[0]:
-            self.log_advice(cols.step, cols.state, cols.advise, cols.advice)
+        return self.path, self.p_history
+
+    def _log(self) -> AdviceLog:
+        """The advice log, made at the first piece of advice."""
+        if self.advice_log is None:
+            self.advice_log = AdviceLog(RECENT_ADVICE)
+        return self.advice_log
 
     def record_arrays(self, out: DecisionArrays) -> None:
         """:meth:`record` for a batch as arrays (the binary answer's path)."""
         n = len(out)
         if not n:
             return
-        if self.path is None or self.p_history is None:
-            self.path = Recent(self.sizes[0], np.int32, self.position)
-            self.p_history = Recent(self.sizes[1], np.float32, self.p_normal)
+        path, p_history = self._rings()
         self.position = int(out.state[-1])
         self.p_normal = float(out.p_normal[-1])
-        self.path.extend(out.state)
-        self.p_history.extend(out.p_normal)
+        path.extend(out.state)
+        p_history.extend(out.p_normal)
         advised = np.flatnonzero(out.advise)[-RECENT_ADVICE:]
         if len(advised):
-            if self.advice_log is None:
-                self.advice_log = AdviceLog(RECENT_ADVICE)
             own = None if out.advice is None else out.advice[-len(advised) :]
-            self.advice_log.extend(
+            self._log().extend(
                 advised + out.first_step, out.state[advised], self.advisor.tables, own
             )
 
     def record_one(self, d: Decision, own_advice: bool) -> None:
         """:meth:`record` for one decision (``own_advice``: log ``d.advice`` itself, for
         advisors whose advice is not theta_s), without building columns."""
-        if self.path is None or self.p_history is None:
-            self.path = Recent(self.sizes[0], np.int32, self.position)
-            self.p_history = Recent(self.sizes[1], np.float32, self.p_normal)
+        path, p_history = self._rings()
         self.position = d.state
         self.p_normal = d.p_normal
-        self.path.push(d.state)
-        self.p_history.push(d.p_normal)
+        path.push(d.state)
+        p_history.push(d.p_normal)
         if d.advise:
-            if self.advice_log is None:
-                self.advice_log = AdviceLog(RECENT_ADVICE)
             own = d.advice if own_advice else None
-            self.advice_log.add(d.step, d.state, self.advisor.tables, own)
+            self._log().add(d.step, d.state, self.advisor.tables, own)
 
     def log_advice(
         self,
@@ -278,10 +284,8 @@ class LiveSession:
         advise: list[bool],
         advice: list[Advice | None] | None = None,
     ) -> None:
-        if self.advice_log is None:
-            self.advice_log = AdviceLog(RECENT_ADVICE)
         advised = [i for i, a in enumerate(advise) if a][-RECENT_ADVICE:]
-        self.advice_log.extend(
+        self._log().extend(
             [steps[i] for i in advised],
             [states[i] for i in advised],
             self.advisor.tables,

@@ -390,7 +390,7 @@ class StreamAdvisor(Advisor):
         if n < SMALL_BATCH:
             moves = zip(states.tolist(), actions.tolist(), next_states.tolist(), strict=True)
             return DecisionColumns.of([self.observe(s, a, s2) for s, a, s2 in moves])
-        out = self._run(states, actions, next_states)
+        out = self.observe_arrays(states, actions, next_states)
         return DecisionColumns(
             list(range(self.steps - n + 1, self.steps + 1)),
             next_states.tolist(),
@@ -406,11 +406,8 @@ class StreamAdvisor(Advisor):
     def observe_arrays(
         self, states: IntArray, actions: IntArray, next_states: IntArray
     ) -> DecisionArrays:
-        """:meth:`observe_many` as arrays (for the binary answer): no Python lists."""
-        return self._run(states, actions, next_states)
-
-    def _run(self, states: IntArray, actions: IntArray, next_states: IntArray) -> DecisionArrays:
-        """The compiled loop over a batch (any size, checked inputs)."""
+        """:meth:`observe_many` as arrays, any size, in the compiled loop (for the binary
+        answer, and for :meth:`observe_many`'s larger batches): no Python lists."""
         n = len(states)
         tables, count_before, benefit_before = self.tables, self.advice_count, self.benefit
         f = _flat(tables)
