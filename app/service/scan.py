@@ -192,23 +192,22 @@ def _common(buf: ByteArray, i: int, out: IntArray, count: int) -> int:  # pragma
     if buf[i] != _LBRACKET:
         return _BAD
     i += 1
-    start = i  # the row: 1-9 plain digits, no leading zero, then ","
-    r = 0
-    while i < n and _ZERO <= buf[i] <= _NINE and i - start < 9:
-        r = r * 10 + (buf[i] - _ZERO)
+    r = c = 0
+    for part in range(2):  # the row then ",", the column then "]": 1-9 plain digits, no
+        start = i  # leading zero
+        v = 0
+        while i < n and _ZERO <= buf[i] <= _NINE and i - start < 9:
+            v = v * 10 + (buf[i] - _ZERO)
+            i += 1
+        end = _COMMA if part == 0 else _RBRACKET
+        if i == start or i >= n or buf[i] != end or (buf[start] == _ZERO and i - start > 1):
+            return _BAD
         i += 1
-    if i == start or i >= n or buf[i] != _COMMA or (buf[start] == _ZERO and i - start > 1):
-        return _BAD
-    i += 1
-    i += i < n and buf[i] == _SPACE
-    start = i  # the column, then "]"
-    c = 0
-    while i < n and _ZERO <= buf[i] <= _NINE and i - start < 9:
-        c = c * 10 + (buf[i] - _ZERO)
-        i += 1
-    if i == start or i >= n or buf[i] != _RBRACKET or (buf[start] == _ZERO and i - start > 1):
-        return _BAD
-    i += 1
+        if part == 0:
+            r = v
+            i += i < n and buf[i] == _SPACE
+        else:
+            c = v
     if i >= n or buf[i] != _COMMA:
         return _BAD
     i += 1
