@@ -46,8 +46,8 @@ run: venv
 	$(BIN)/python -m app serve
 
 ## Every benchmark under benchmarks/ (never part of `make test`): 8 minutes on 2 quiet cores,
-## about 16 on busy ones; each rewrites its own section of docs/PERFORMANCE.md (and bench_scaling/bench_service the
-## curves in docs/figures/).
+## about 16 on busy ones; each rewrites its own section of docs/PERFORMANCE.md (and
+## bench_scaling/bench_service the curves in docs/figures/).
 bench: venv wrk
 	$(BIN)/python benchmarks/bench_core.py --write docs/PERFORMANCE.md
 	$(BIN)/python benchmarks/bench_scaling.py --write docs/PERFORMANCE.md
