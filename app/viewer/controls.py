@@ -1,14 +1,16 @@
 """The viewer's control panel: pickers, the kappa slider, layer toggles, the picked session.
 
-There are no ``on_update`` callbacks: the pump reads the handles' values on each tick and
-applies them. That keeps GUI threads out of the scene and avoids feedback loops (assigning
-``.value`` or ``.options`` from code fires ``on_update`` at once in the assigning thread, and
-the pump assigns dropdown options whenever domains or sessions come and go).
+The pump reads the handles' values on each tick and applies them: GUI threads never touch the
+scene. A change of any control only wakes the pump (:meth:`Controls.on_change`), so a choice is
+applied at once rather than after the pump's paced wait (which can last several seconds after
+an expensive tick). Assigning ``.value`` or ``.options`` from code fires the same callbacks in
+the assigning thread; a wake-up is all they do, and the viewer ignores the pump's own.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 import viser
@@ -63,6 +65,19 @@ class Controls:
                 aspect=1.6,
                 visible=False,
             )
+
+    def on_change(self, callback: Callable[[], None]) -> None:
+        """Call ``callback`` (it must be quick: it runs in the changing thread) whenever a
+        control changes, from a browser or from code."""
+        inputs: tuple[viser.GuiInputHandle[Any], ...] = (
+            self.domain,
+            self.session,
+            self.kappa,
+            self.lost,
+            *self.layers.values(),
+        )
+        for handle in inputs:
+            handle.on_update(lambda _event: callback())
 
     # ---- reading the choices -------------------------------------------------------------
     @property

@@ -7,7 +7,9 @@ event, so however fast explorers report, the viewer costs the service one snapsh
 The pump shares the service's process (and its GIL), so it also paces itself: with no browser
 connected it ticks only ``idle_rate_hz`` times a second (enough to keep the pickers current),
 and after an expensive tick it waits long enough that ticking takes at most ``max_share`` of
-the time (many busy sessions then lower the frame rate, not the API's throughput).
+the time (many busy sessions then lower the frame rate, not the API's throughput). What a person
+does cuts the wait short: a browser connecting, or any control changing, wakes the pump for one
+tick at once, so a choice never waits for the pacing.
 """
 
 from __future__ import annotations
@@ -61,6 +63,7 @@ class Viewer:
         self.ticks = 0
         self._drawn: tuple[str, int] | None = None  # (domain name, prior version)
         self._stop = threading.Event()
+        self._wake = threading.Event()  # a control changed or a browser connected: tick now
         self._thread: threading.Thread | None = None
         self._lock = threading.Lock()
 
@@ -76,6 +79,7 @@ class Viewer:
         server.scene.configure_default_lights(enabled=True, cast_shadow=False)
         self.server = server
         self.controls = Controls(server)
+        self.controls.on_change(self._changed)
         server.on_client_connect(self._on_connect)
         log.info("viewer on http://%s:%d", self.host, self.port)
         if pump:
@@ -84,6 +88,7 @@ class Viewer:
 
     def stop(self) -> None:
         self._stop.set()
+        self._wake.set()
         if self._thread is not None:
             self._thread.join(timeout=5.0)
         if self.server is not None:
@@ -94,7 +99,17 @@ class Viewer:
         """The port actually bound (viser moves on if the requested one is busy)."""
         return self.server.get_port() if self.server else self.requested_port
 
+    def _changed(self) -> None:
+        """A control changed: tick now (a change the pump made itself needs no tick)."""
+        if threading.current_thread() is not self._thread:
+            self._wake.set()
+
     def _on_connect(self, client: viser.ClientHandle) -> None:
+        """A browser connected: aim its camera, and tick now (not after an idle wait)."""
+        self._aim(client)
+        self._wake.set()
+
+    def _aim(self, client: viser.ClientHandle) -> None:
         if self.scene is not None:
             position, look_at, up = top_down_camera(self.scene.domain)
             client.camera.up_direction = tuple(up)
@@ -103,7 +118,11 @@ class Viewer:
 
     def _run(self) -> None:
         wait = 0.0
-        while not self._stop.wait(wait):
+        while True:
+            self._wake.wait(wait)
+            if self._stop.is_set():
+                return
+            self._wake.clear()
             watched = self.server is not None and bool(self.server.get_clients())
             started = time.perf_counter()
             try:
@@ -162,7 +181,7 @@ class Viewer:
         cam = self.server.initial_camera
         cam.position, cam.look_at, cam.up = tuple(position), tuple(look_at), tuple(up)
         for client in self.server.get_clients().values():
-            self._on_connect(client)
+            self._aim(client)
 
     def _clear(self) -> None:
         if self.scene is not None:

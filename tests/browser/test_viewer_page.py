@@ -57,9 +57,16 @@ def test_viewer_page_connects_and_shows_maze_prior_and_sessions(
     drawn = scene.session_nodes
     assert drawn["/markers/points"].points.shape[0] == len(scene.session_ids) >= 7
 
-    # pick a session in the GUI (server side: the browser's panel follows)
-    assert viewer.controls is not None
-    viewer.controls.session.value = sessions[2]
+    # pick a session in the GUI (server side: the browser's panel follows). The pick wakes the
+    # pump, which shows the session at once (not after its paced wait); then the browser
+    # renders what the pump sent
+    controls = viewer.controls
+    assert controls is not None
+    controls.session.value = sessions[2]
+    wait_until(
+        lambda: controls.plot.visible and f"**{sessions[2]}**" in controls.stats.content,
+        what="the pump to show the picked session",
+    )
     expect(page.get_by_text("p_normal over time")).to_be_visible()
     expect(page.get_by_text("steps 9", exact=False)).to_be_visible()
 

@@ -16,7 +16,7 @@ from app.viewer import geometry as geo
 from app.viewer.controls import LOST_PICKED, NONE
 from app.viewer.state import DomainView, Snapshot
 from app.viewer.viewer import Viewer, pump_wait
-from tests.viewer.conftest import FakeFeed, free_port, walk
+from tests.viewer.conftest import FakeFeed, free_port, wait_until, walk
 
 
 def snapshot(domain: GridDomain, theta: np.ndarray, n_sessions: int, version: int = 0) -> Snapshot:
@@ -146,6 +146,28 @@ def test_viewer_pump_ticks_by_itself_and_survives_a_failing_feed(
     finally:
         viewer.stop()
     assert viewer.scene is not None and viewer.scene.domain is domain
+
+
+def test_a_control_change_wakes_the_pump_from_its_paced_wait(
+    domain: GridDomain, theta: np.ndarray
+) -> None:
+    """A choice is applied at once, not after the pump's wait (here 1,000 s: as after a tick
+    that took 100 s at a 10 % share), so what a person picks shows without delay."""
+    feed = FakeFeed()
+    feed.snapshot = snapshot(domain, theta, 2)
+    viewer = Viewer(feed, port=free_port(), rate_hz=0.001, idle_rate_hz=0.001)
+    viewer.start()
+    try:
+        wait_until(lambda: viewer.ticks >= 1)  # the first tick, then a 1,000 s wait
+        assert viewer.ticks == 1  # its own choice of the domain did not wake it
+        assert viewer.controls is not None and viewer.controls.session.options[-1] == "w1"
+        ticks = viewer.ticks
+        viewer.controls.session.value = "w1"  # from code, as a browser's change arrives
+        wait_until(lambda: viewer.ticks > ticks, timeout=10.0)
+        wait_until(lambda: viewer.controls is not None and viewer.controls.plot.visible)
+        assert "**w1**" in viewer.controls.stats.content
+    finally:
+        viewer.stop()
 
 
 @pytest.mark.parametrize(
