@@ -31,7 +31,7 @@ wrk:
 lint: venv
 	$(BIN)/ruff check $(SRC)
 	$(BIN)/ruff format --check $(SRC)
-	$(BIN)/mypy app
+	$(BIN)/mypy app tests
 
 format: venv
 	$(BIN)/ruff format $(SRC)

@@ -1,6 +1,6 @@
 """The framework's own limit: bare FastAPI endpoints on the service's routes, run by uvicorn
 exactly as ``python -m app serve`` runs the service (one worker, the same websocket options,
-from :func:`app.service.cli.uvicorn_options`).
+from :func:`app.cli.serve.uvicorn_options`).
 
 * ``POST /sessions/{session_id}/events``: reads the body, parses it as JSON and answers a fixed
   JSON text of ``BASELINE_ANSWER_BYTES`` bytes (the size of the service's answer to the same
@@ -26,7 +26,7 @@ from fastapi import FastAPI, Request, Response, WebSocket, WebSocketDisconnect
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from app.service.cli import uvicorn_options
+from app.cli.serve import uvicorn_options
 from app.service.config import Settings
 
 

@@ -129,7 +129,7 @@ def main() -> None:
             "x 5,000 episodes x <= 200 steps, advised and not) + Table I (reuses Figure 6's "
             "Q-learning runs) + Figure 5 + Figure 7; kernel rates are medians of "
             f"{args.repeats} runs. The kernels make the same draws and decisions as the "
-            "reference loop (tests/agents/test_fast.py), so the speed-up changes no number.",
+            "reference loop (tests/agents/test_simulate.py), so the speed-up changes no number.",
         ]
     )
     print(body)

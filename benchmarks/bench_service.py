@@ -43,6 +43,7 @@ from typing import Any
 
 import httpx
 import matplotlib
+import orjson
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
@@ -51,10 +52,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from app.agents.experts import expert_trajectories  # noqa: E402
 from app.domain.generate import generate_domain  # noqa: E402
 from app.domain.grid import ACTIONS, GridDomain  # noqa: E402
 from app.domain.maps import DEFAULT_MAP  # noqa: E402
+from app.domain.paths import expert_trajectories  # noqa: E402
 from benchmarks._load import (  # noqa: E402
     COUNTED_LUA,
     EVENTS_LUA,
@@ -198,10 +199,10 @@ def bench_parts(tmp: Path, repeats: int) -> dict[str, float]:
 
     from app.service import ops
     from app.service.config import Settings
-    from app.service.encode import encode_binary, encode_decisions, fragments, packed
-    from app.service.events import read_moves
     from app.service.schemas import SessionCreate
     from app.service.state import open_state
+    from app.service.wire.encode import batch_binary, batch_json, decision_dict
+    from app.service.wire.events import read_moves
 
     @njit(cache=False)
     def libm_only(x: Any) -> float:  # pragma: no cover - compiled
@@ -221,16 +222,18 @@ def bench_parts(tmp: Path, repeats: int) -> dict[str, float]:
     ops.warm_up()
     libm_only(np.random.default_rng(0).random(FRAME) + 0.5)
     advisor = session.advisor
-    out = advisor.observe_arrays(*moves[0])
-    cols = advisor.observe_many(*moves[0])
-    parts = (fragments(advisor.tables, domain.cell_json), packed(advisor.tables, domain.cell_json))
+    out = advisor.observe_batch(*moves[0])
     values = np.random.default_rng(1).random(FRAME) + 0.5
     cases: dict[str, Callable[[int], Any]] = {
         "read": lambda i: read_moves(grid, frames[i % len(frames)], limit),
-        "decide": lambda i: advisor.observe_arrays(*moves[i % len(moves)]),
+        "decide": lambda i: advisor.observe_batch(*moves[i % len(moves)]),
         "libm": lambda i: libm_only(values),
-        "encode_binary": lambda i: encode_binary(out, grid),
-        "encode_json": lambda i: encode_decisions(cols, parts[0], False, parts[1]),
+        "encode_binary": lambda i: batch_binary(out, grid),
+        "encode_json": lambda i: batch_json(out, grid),
+        # the JSON writer as a library alone: orjson over the decisions as dicts
+        "encode_json_orjson": lambda i: orjson.dumps(
+            [decision_dict(d, grid) for d in out.decisions()]
+        ),
         "all_binary": lambda i: ops.apply_events_binary(state, session, frames[i % len(frames)]),
         "all_json": lambda i: ops.apply_events(state, session, frames[i % len(frames)]),
     }
@@ -311,7 +314,8 @@ def bench_curves(
             r = http.put(f"/domains/{name}", json={"map": list(maze.rows_text)}, headers=ADMIN,
                          timeout=120)  # fmt: skip
             r.raise_for_status()
-            trajs = expert_trajectories(maze, np.random.default_rng(0), "anywhere", per_goal=2)
+            experts = expert_trajectories(maze, np.random.default_rng(0), "anywhere", per_goal=2)
+            trajs = [e.pairs for e in experts]
             post_trajectories(http, name, maze, trajs)
             made = create_sessions(advisor, conns, tmp, domain=name)
             targets[name] = (stream_urls(advisor, made), frames_for(maze, 6))
@@ -363,8 +367,10 @@ def bench_ingest(
     tmp: Path, root: Path, explorers: int, rate: float, batchings: list[int]
 ) -> list[dict[str, float]]:
     grid = GridDomain.from_file(DEFAULT_MAP)
-    trajs = expert_trajectories(grid, np.random.default_rng(7), "anywhere", per_goal=130)
-    trajs = [t for t in trajs if len(t)][:1000]  # an expert starting on its goal walks nothing
+    experts = expert_trajectories(grid, np.random.default_rng(7), "anywhere", per_goal=130)
+    trajs = [e.pairs for e in experts if len(e.pairs)][
+        :1000
+    ]  # an expert starting on its goal walks nothing
     results = []
     for per_request in batchings:
         bodies = trajectory_bodies(grid, trajs, per_request)
@@ -586,7 +592,8 @@ def parts_report(p: dict[str, float], ws: dict[str, Any] | None) -> list[str]:
         ("decide", "decide (compiled loop over the session's advisor, with its bookkeeping)"),
         ("libm", "of which the libm calls alone: one exp and four logs a decision"),
         ("encode_binary", "write the binary answer"),
-        ("encode_json", "write the JSON answer (compiled, from per-state texts)"),
+        ("encode_json", "write the JSON answer (orjson's numbers, laid out by a compiled loop)"),
+        ("encode_json_orjson", "the same JSON written by orjson from a list of dicts alone"),
         ("all_binary", "everything, binary answer (`ops.apply_events_binary`)"),
         ("all_json", "everything, JSON answer (`ops.apply_events`)"),
     ]

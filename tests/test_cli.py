@@ -5,8 +5,8 @@ from pathlib import Path
 import numpy as np
 from typer.testing import CliRunner
 
-from app.__main__ import cli
 from app.advice.priors import ActionPrior
+from app.cli import cli
 from app.domain.grid import GridDomain
 
 runner = CliRunner()

@@ -19,13 +19,20 @@ This single-explorer form is plain Python on flat lists (a few microseconds per 
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import ClassVar, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
 
 from app.advice.models import AdviceTables
+from app.advice.priors import GoalPriors
 from app.domain.grid import N_ACTIONS
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+BoolArray = npt.NDArray[np.bool_]
 
 DEFAULT_KAPPA = 0.5
 DEFAULT_WINDOW = 300
@@ -53,6 +60,64 @@ class Decision(NamedTuple):
     benefit: float  # sum of KL at advised states (eq. 3: Delta U(s) ~ KL)
 
 
+@dataclass(frozen=True, slots=True)
+class DecisionBatch:
+    """The decisions for a batch of one explorer's moves, as columns: decision ``i`` is step
+    ``first_step + i``. ``advice`` holds the advice of the advising decisions, in order (k, 4).
+    The running figures follow from the columns: ``total_cost = kappa * advice_count``."""
+
+    first_step: int
+    state: IntArray
+    advise: BoolArray
+    kl: FloatArray
+    p_normal: FloatArray
+    advice_count: IntArray
+    benefit: FloatArray
+    advice: FloatArray
+    kappa: float
+    count_before: int  # the advisor's figures before the batch
+    benefit_before: float
+
+    def __len__(self) -> int:
+        return len(self.state)
+
+    @property
+    def total_cost(self) -> FloatArray:
+        return np.multiply(self.kappa, self.advice_count, dtype=np.float64)
+
+    @classmethod
+    def of(
+        cls, decisions: Sequence[Decision], kappa: float, count_before: int,
+        benefit_before: float,
+    ) -> DecisionBatch:  # fmt: skip
+        """Columns of decisions made one at a time (``first_step`` 0 when there are none)."""
+        rows = [d.advice for d in decisions if d.advise]
+        return cls(
+            decisions[0].step if decisions else 0,
+            np.array([d.state for d in decisions], dtype=np.int64),
+            np.array([d.advise for d in decisions], dtype=np.bool_),
+            np.array([d.kl for d in decisions], dtype=np.float64),
+            np.array([d.p_normal for d in decisions], dtype=np.float64),
+            np.array([d.advice_count for d in decisions], dtype=np.int64),
+            np.array([d.benefit for d in decisions], dtype=np.float64),
+            np.array(rows, dtype=np.float64).reshape(len(rows), N_ACTIONS),
+            kappa, count_before, benefit_before,
+        )  # fmt: skip
+
+    def decisions(self) -> list[Decision]:
+        """The same decisions one by one, as :meth:`Advisor.observe` returns them."""
+        rows = iter(self.advice.tolist())
+        columns = zip(
+            self.state.tolist(), self.advise.tolist(), self.kl.tolist(), self.p_normal.tolist(),
+            self.advice_count.tolist(), self.total_cost.tolist(), self.benefit.tolist(),
+            strict=True,
+        )  # fmt: skip
+        return [
+            Decision(self.first_step + i, s, on, tuple(next(rows)) if on else None, kl, p, n, c, b)
+            for i, (s, on, kl, p, n, c, b) in enumerate(columns)
+        ]
+
+
 def check_kappa_window(kappa: float, window: int) -> None:
     if not (isinstance(kappa, int | float) and math.isfinite(kappa) and kappa >= 0):
         raise ValueError(f"kappa must be a finite number >= 0, got {kappa!r}")
@@ -69,7 +134,16 @@ def kl_divergence(p: npt.ArrayLike, q: npt.ArrayLike) -> float:
 
 
 class Advisor:
-    """Watches one explorer and decides, step by step, whether advice is worth ``kappa``."""
+    """Watches one explorer and decides, step by step, whether advice is worth ``kappa``.
+
+    What every advisor of :mod:`app.advice.strategies` declares, so that a caller (the service,
+    the experiments) never asks for its type: :attr:`strategy`, whether its advice is its own
+    (:attr:`own_advice`; else theta_s of :attr:`tables`), the parameters in force
+    (:meth:`params`), what it believes of the explorer's goal (:meth:`goal_beliefs`).
+    """
+
+    #: True when the advice is not theta_s of the tables (goal-aware advice narrows it)
+    own_advice: ClassVar[bool] = False
 
     __slots__ = (
         "_loglik",
@@ -92,6 +166,26 @@ class Advisor:
         self.kappa = float(kappa)
         self.window = int(window)
         self.reset()
+
+    @property
+    def strategy(self) -> str:
+        """The advising strategy this advisor follows (app.advice.strategies.STRATEGIES)."""
+        return "paper"
+
+    def params(self) -> dict[str, int | float]:
+        """The strategy's parameters in force (the paper's rule has none besides kappa)."""
+        return {}
+
+    def goal_beliefs(self) -> list[tuple[int, float, bool]] | None:
+        """(goal state, P(goal | H), ruled out) per goal, for advisors that keep a goal
+        posterior; None for the others."""
+        return None
+
+    def use_tables(self, tables: AdviceTables, goals: GoalPriors | None = None) -> None:
+        """Advise from new tables (the prior was updated) from the next event on; the window
+        keeps the log-probabilities it added, so removing them stays exact. ``goals``: new
+        per-goal counts, for the advisors that read them."""
+        self.tables = tables
 
     def reset(self) -> None:
         """Forget the history and the cost (a new explorer)."""
@@ -147,7 +241,8 @@ class Advisor:
         """P(M | H) for each model (eq. 5); the prior weights when H is empty."""
         z = [ll + lw for ll, lw in zip(self._loglik, self.tables.log_weight_list, strict=True)]
         mx = max(z)
-        e = [math.exp(v - mx) for v in z]
+        # exp(0) is exactly 1 (C99 F.9.3.1): the largest term needs no call
+        e = [1.0 if v == mx else math.exp(v - mx) for v in z]
         tot = sum(e)
         return [v / tot for v in e]
 
@@ -175,24 +270,13 @@ class Advisor:
     def divergence(self, state: int) -> tuple[float, float]:
         """(KL[theta_s || P(A | s, H)], P(M1 | H)) without counting a decision."""
         self._check(state)
-        t = self.tables
-        post = self.posterior()
-        mix = self._mixture(post, state)
-        th = t.theta_flat
-        base = state * N_ACTIONS
-        cross = th[base] * math.log(mix[0]) + th[base + 1] * math.log(mix[1])
-        cross += th[base + 2] * math.log(mix[2])
-        cross += th[base + 3] * math.log(mix[3])
-        return max(0.0, t.neg_entropy_list[state] - cross), post[0]
+        return self._divergence(state)
 
-    def decide(self, state: int) -> Decision:
-        """Decide for the explorer now at ``state`` and account for the cost.
-
-        The same arithmetic as :meth:`divergence`, inlined: this is the hot path.
-        """
+    def _divergence(self, state: int) -> tuple[float, float]:
+        """The paper's decision for a valid ``state``: eqs. (4)-(6). The hot path, so the
+        posterior and the mixture are inlined; app/kernels.py:decide is the same arithmetic
+        in the same order, compiled."""
         t = self.tables
-        if not 0 <= state < t.n_states:
-            raise ValueError(f"state {state} out of range 0..{t.n_states - 1}")
         b = state * N_ACTIONS
         probs = t.probs_flat
         loglik, weights = self._loglik, t.log_weight_list
@@ -200,9 +284,8 @@ class Advisor:
             # the two models of the paper: the general code below, unrolled (the same
             # operations on the same numbers in the same order, so the same bits)
             z0, z1 = loglik[0] + weights[0], loglik[1] + weights[1]
-            # exp(0) is exactly 1 (C99 F.9.3.1), so the larger term needs no call
             if z0 >= z1:
-                e0, e1 = 1.0, math.exp(z1 - z0)
+                e0, e1 = 1.0, math.exp(z1 - z0)  # exp(0) is exactly 1: one call
             else:
                 e0, e1 = math.exp(z0 - z1), 1.0
             tot = e0 + e1
@@ -211,14 +294,8 @@ class Advisor:
             m0, m1 = p0 * q0[b] + p1 * q1[b], p0 * q0[b + 1] + p1 * q1[b + 1]
             m2, m3 = p0 * q0[b + 2] + p1 * q1[b + 2], p0 * q0[b + 3] + p1 * q1[b + 3]
         else:
-            # posterior P(M | H), eq. (5), in log space
-            z = [ll + lw for ll, lw in zip(loglik, weights, strict=True)]
-            mx = max(z)
-            e = [math.exp(v - mx) for v in z]
-            tot = sum(e)
-            post = [v / tot for v in e]
-            # mixture P(A | s, H), eq. (4)
-            p0 = post[0]
+            post = self.posterior()  # eq. (5)
+            p0 = post[0]  # the mixture P(A | s, H), eq. (4)
             m0, m1, m2, m3 = (p0 * probs[0][b], p0 * probs[0][b + 1],
                               p0 * probs[0][b + 2], p0 * probs[0][b + 3])  # fmt: skip
             for m in range(1, len(post)):
@@ -229,23 +306,29 @@ class Advisor:
                 m3 += pm * pr[b + 3]
         # KL[theta_s || mixture], eq. (6)
         th = t.theta_flat
-        t0, t1, t2, t3 = th[b], th[b + 1], th[b + 2], th[b + 3]
         log = math.log
-        cross = t0 * log(m0) + t1 * log(m1)
-        cross += t2 * log(m2)
-        cross += t3 * log(m3)
+        cross = th[b] * log(m0) + th[b + 1] * log(m1)
+        cross += th[b + 2] * log(m2)
+        cross += th[b + 3] * log(m3)
         kl = t.neg_entropy_list[state] - cross
-        if kl < 0.0:
-            kl = 0.0
+        return (kl if kl > 0.0 else 0.0), p0
+
+    def decide(self, state: int) -> Decision:
+        """Decide for the explorer now at ``state`` and account for the cost."""
+        t = self.tables
+        if not 0 <= state < t.n_states:
+            raise ValueError(f"state {state} out of range 0..{t.n_states - 1}")
+        kl, p0 = self._divergence(state)
         self.decisions += 1
-        advise = kl >= self.kappa
         advice = None
-        if advise:
+        if kl >= self.kappa:
             self.advice_count += 1
             self.benefit += kl
-            advice = (t0, t1, t2, t3)
+            b = state * N_ACTIONS
+            th = t.theta_flat
+            advice = (th[b], th[b + 1], th[b + 2], th[b + 3])
         return Decision(
-            self.steps, state, advise, advice, kl, p0,
+            self.steps, state, advice is not None, advice, kl, p0,
             self.advice_count, self.kappa * self.advice_count, self.benefit,
         )  # fmt: skip
 
@@ -272,6 +355,17 @@ class Advisor:
         """The explorer at ``state`` took ``action`` and reached ``next_state``."""
         self.append(state, action)
         return self.decide(next_state)
+
+    def observe_batch(
+        self, states: IntArray, actions: IntArray, next_states: IntArray
+    ) -> DecisionBatch:
+        """:meth:`observe` for each (s, a, s') in turn, as columns. Inputs must be valid
+        (states in range, actions 0..3): the caller checks them first. Advisors with a faster
+        way (the service's compiled one) override this with the same results."""
+        count, benefit = self.advice_count, self.benefit
+        moves = zip(states.tolist(), actions.tolist(), next_states.tolist(), strict=True)
+        decisions = [self.observe(s, a, s2) for s, a, s2 in moves]
+        return DecisionBatch.of(decisions, self.kappa, count, benefit)
 
     @property
     def total_cost(self) -> float:

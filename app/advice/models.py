@@ -3,8 +3,10 @@
 The paper uses two (Section IV-B): M1 normalcy, P(a | s, M1) = theta_s(a), and M2 uniformity,
 P(a | s, M2) = 1/|A|, with P(M1) = P(M2) = 1/2. More can be added: anything that gives a
 strictly positive (states x 4) table. :class:`AdviceTables` precomputes everything the advisor
-needs for a fixed theta and model set, as numpy arrays (batch form) and flat Python lists
-(single form, where list indexing is several times faster than numpy scalar access).
+needs for a fixed theta and model set, once: numpy arrays (the batch form, and flat views for the
+compiled kernels of :mod:`app.kernels`) and flat Python lists (the single form, where list
+indexing is several times faster than numpy scalar access). Every form holds the same numbers
+(the lists are the arrays' ``tolist()``), so every form of the advisor reads the same bits.
 """
 
 from __future__ import annotations
@@ -58,6 +60,11 @@ class AdviceTables:
     # action-major copies for the batch form: gathers give (4, n) rows with long inner loops
     probs_t: FloatArray = field(init=False, repr=False)  # (M, 4, S)
     theta_t: FloatArray = field(init=False, repr=False)  # (4, S)
+    # what the compiled kernels read (app/kernels.py), views of the arrays above:
+    # (log_probs (M, S*4), log_weights (M,), probs (M, S*4), theta (S*4,), neg_entropy (S,))
+    arrays: tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray] = field(
+        init=False, repr=False
+    )
     # flat Python lists for the single-explorer form: index s * 4 + a
     probs_flat: list[list[float]] = field(init=False, repr=False)
     log_probs_flat: list[list[float]] = field(init=False, repr=False)
@@ -83,13 +90,16 @@ class AdviceTables:
         if not np.all(np.isfinite(weights)) or weights.min() <= 0:
             raise ValueError("model weights P(M) must be positive")
         weights = weights / weights.sum()
+        # log P(M) with libm's log, once: every form of the advisor reads these same numbers
+        log_weights = np.array([math.log(w) for w in weights.tolist()])
         log_probs = np.log(probs)
         neg_entropy = (theta * np.log(theta)).sum(axis=1)
+        m = len(self.models)
         setters = {
             "theta": theta,
             "probs": probs,
             "log_probs": log_probs,
-            "log_weights": np.log(weights),
+            "log_weights": log_weights,
             "neg_entropy": neg_entropy,
             "probs_t": np.ascontiguousarray(probs.transpose(0, 2, 1)),
             "theta_t": np.ascontiguousarray(theta.T),
@@ -97,13 +107,15 @@ class AdviceTables:
             "log_probs_flat": [lp.ravel().tolist() for lp in log_probs],
             "theta_flat": theta.ravel().tolist(),
             "neg_entropy_list": neg_entropy.tolist(),
-            "log_weight_list": [math.log(w) for w in weights.tolist()],
+            "log_weight_list": log_weights.tolist(),
             "n_states": int(theta.shape[0]),
         }
         for name, value in setters.items():
             if isinstance(value, np.ndarray):
                 value.setflags(write=False)
             object.__setattr__(self, name, value)
+        flat = (log_probs.reshape(m, -1), log_weights, probs.reshape(m, -1), theta.reshape(-1))
+        object.__setattr__(self, "arrays", (*flat, neg_entropy))
 
     @classmethod
     def paper(cls, theta: npt.ArrayLike) -> AdviceTables:

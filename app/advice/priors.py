@@ -12,7 +12,9 @@ transitions of all trajectories at once (one sort, one bincount).
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+import math
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -186,11 +188,11 @@ class ActionPrior:
         self, policies: npt.ArrayLike, agent_type: str | None = None
     ) -> ActionPrior:
         pi = np.asarray(policies, dtype=np.float64)
+        if pi.ndim not in (2, 3):
+            raise ValueError(f"policies must have shape (k, states, 4), got {pi.shape}")
         k = 1 if pi.ndim == 2 else int(pi.shape[0])
-        n = self._ensure(int(pi.shape[-2]))
-        inc = policy_counts(pi, float(self.delta))
-        assert inc.shape[0] == n
-        self._add(inc, k, agent_type)
+        self._ensure(int(pi.shape[-2]))
+        self._add(policy_counts(pi, float(self.delta)), k, agent_type)
         return self
 
     # ---- reading ------------------------------------------------------------------------
@@ -273,18 +275,176 @@ class ActionPrior:
 
     @classmethod
     def load(cls, path: str | Path) -> ActionPrior:
+        """A prior written by :meth:`save`."""
         with np.load(Path(path), allow_pickle=False) as z:
-            alpha0 = z["alpha0"]
-            prior = cls(alpha0=alpha0, delta=float(z["delta"]))
-            prior._reset(int(alpha0.shape[0]))
-            prior.pooled_increments_ = z["pooled"].astype(np.float64)
-            prior.n_trajectories_[cls.POOLED] = int(z["n_traj_pooled"])
+            tables = {cls.POOLED: (int(z["n_traj_pooled"]), z["pooled"])}
             for t, inc, n in zip(z["types"].tolist(), z["typed"], z["n_traj_types"], strict=True):
-                prior.increments_[str(t)] = inc.astype(np.float64)
-                prior.n_trajectories_[str(t)] = int(n)
+                tables[str(t)] = (int(n), inc)
+            return cls.from_counts(z["alpha0"], tables, delta=float(z["delta"]))
+
+    @classmethod
+    def from_counts(
+        cls,
+        alpha0: float | npt.ArrayLike,
+        tables: Mapping[str, tuple[int, npt.ArrayLike]],
+        n_states: int | None = None,
+        delta: float = 0.0,
+    ) -> ActionPrior:
+        """A prior holding stored counts: ``tables`` maps the pooled key ``"*"`` and each agent
+        type to (trajectories, increments of shape (n_states, 4)); a missing pooled table is
+        the sum of the others. ``n_states`` defaults to the tables' (or alpha0's) size.
+        ValueError says what does not fit."""
+        shapes = {np.shape(inc) for _, inc in tables.values()}
+        if n_states is None:
+            sizes = {shape[0] for shape in shapes if len(shape) == 2}
+            sizes |= {np.shape(alpha0)[0]} if np.ndim(alpha0) == 2 else set()
+            if len(sizes) != 1:
+                raise ValueError("n_states is needed (no table or alpha0 gives it, or they differ)")
+            n_states = sizes.pop()
+        prior = cls(alpha0=alpha0, delta=delta)
+        prior._reset(n_states)
+        for key, (n, inc) in tables.items():
+            counts = np.asarray(inc, dtype=np.float64)
+            if counts.shape != (n_states, N_ACTIONS):
+                raise ValueError(
+                    f"table {key!r}: counts of shape {counts.shape}, expected ({n_states}, 4)"
+                )
+            if not np.all(np.isfinite(counts)) or counts.min(initial=0.0) < 0 or n < 0:
+                raise ValueError(f"table {key!r}: counts and trajectories must be >= 0")
+            if key == cls.POOLED:
+                prior.pooled_increments_ = counts.copy()
+            else:
+                prior.increments_[key] = counts.copy()
+            prior.n_trajectories_[key] = int(n)
+        if cls.POOLED not in tables:
+            for key, inc in prior.increments_.items():
+                prior.pooled_increments_ += inc
+                prior.n_trajectories_[cls.POOLED] += prior.n_trajectories_[key]
         return prior
+
+    def stored_counts(self) -> dict[str, tuple[int, FloatArray]]:
+        """(trajectories, increments) per table, pooled ``"*"`` included: what
+        :meth:`from_counts` takes back."""
+        self._check_fitted()
+        out = {self.POOLED: (self.n_trajectories_[self.POOLED], self.pooled_increments_)}
+        out |= {t: (self.n_trajectories_[t], inc) for t, inc in self.increments_.items()}
+        return out
 
 
 def iter_pairs(states: Iterable[int], actions: Iterable[int]) -> IntArray:
     """Zip parallel state and action sequences into a (T, 2) trajectory array."""
     return np.column_stack([np.fromiter(states, np.int64), np.fromiter(actions, np.int64)])
+
+
+class GoalPriors:
+    """Per-goal Dirichlet counts for the goal states ``goals`` of one domain (goal-aware
+    advice, :mod:`app.advice.goals`).
+
+    Counts are kept per goal, ``c^g``, plus ``c^?`` for trajectories of unknown goal. For a goal
+    posterior ``w`` over the G goals::
+
+        alpha^w_s = alpha0 + c^?_s + G * sum_g w_g c^g_s      theta^w_s = alpha^w_s / |alpha^w_s|
+
+    so a uniform ``w`` gives exactly the pooled prior (and the paper's rule). Counts change only
+    through :meth:`add`; readers share the flat lists of :meth:`rows`, made once per change.
+    """
+
+    def __init__(self, n_states: int, goals: Sequence[int], alpha0: float = 1.0):
+        if not (math.isfinite(alpha0) and alpha0 > 0):
+            raise ValueError("alpha0 must be finite and > 0")
+        if not goals:
+            raise ValueError("goal-aware advice needs at least one goal")
+        self.n_states = int(n_states)
+        self.goals = tuple(int(g) for g in goals)
+        self.goal_index = {g: i for i, g in enumerate(self.goals)}
+        self.alpha0 = float(alpha0)
+        self.goal_counts = np.zeros((len(self.goals), n_states, N_ACTIONS))
+        self.unknown_counts = np.zeros((n_states, N_ACTIONS))
+        self._rows: GoalRows | None = None
+
+    @property
+    def n_goals(self) -> int:
+        return len(self.goals)
+
+    def add(
+        self, trajectories: Sequence[TrajectoryLike], goal_index: Sequence[int | None]
+    ) -> GoalPriors:
+        """Add trajectories with the index (into ``goals``) of the goal each reached, or None."""
+        if len(trajectories) != len(goal_index):
+            raise ValueError("one goal index (or None) per trajectory is needed")
+        by_goal: dict[int | None, list[TrajectoryLike]] = {}
+        for t, g in zip(trajectories, goal_index, strict=True):
+            if g is not None and not 0 <= g < self.n_goals:
+                raise ValueError(f"goal index {g} out of range 0..{self.n_goals - 1}")
+            by_goal.setdefault(g, []).append(t)
+        for g, group in by_goal.items():
+            counts = trajectory_counts(group, self.n_states)
+            if g is None:
+                self.unknown_counts += counts
+            else:
+                self.goal_counts[g] += counts
+        self._rows = None
+        return self
+
+    def copy(self, alpha0: float | None = None) -> GoalPriors:
+        """The same counts (optionally under another ``alpha0``), in arrays of its own."""
+        out = GoalPriors(self.n_states, self.goals, self.alpha0 if alpha0 is None else alpha0)
+        out.goal_counts = self.goal_counts.copy()
+        out.unknown_counts = self.unknown_counts.copy()
+        return out
+
+    def pooled_theta(self) -> FloatArray:
+        """The paper's theta: alpha0 + all counts, normalised."""
+        return self.theta(np.full(self.n_goals, 1.0 / self.n_goals))
+
+    def theta(self, w: npt.ArrayLike) -> FloatArray:
+        """theta^w for every state, shape (S, 4)."""
+        wv = np.asarray(w, dtype=np.float64)
+        alpha = (
+            self.alpha0
+            + self.unknown_counts
+            + self.n_goals * np.tensordot(wv, self.goal_counts, axes=1)
+        )
+        out: FloatArray = alpha / alpha.sum(axis=1, keepdims=True)
+        return out
+
+    def theta_row(self, state: int, w: Sequence[float]) -> tuple[float, float, float, float]:
+        """theta^w_s for one state, summed in order (app/kernels.py:goal_decide does the same
+        operations on the same numbers, so the same bits)."""
+        rows = self.rows()
+        b, g = state * N_ACTIONS, self.n_goals
+        alpha = []
+        for a in range(N_ACTIONS):
+            dot = 0.0
+            for wg, cg in zip(w, rows.counts[b + a], strict=True):
+                dot += wg * cg
+            alpha.append(self.alpha0 + rows.unknown[b + a] + g * dot)
+        total = alpha[0] + alpha[1] + alpha[2] + alpha[3]
+        return (alpha[0] / total, alpha[1] / total, alpha[2] / total, alpha[3] / total)
+
+    def goal_log_theta(self) -> FloatArray:
+        """log theta^g: each goal's own prior (alpha0 + G c^g), shape (G, S, 4)."""
+        alpha = self.alpha0 + self.n_goals * self.goal_counts
+        out: FloatArray = np.log(alpha / alpha.sum(axis=2, keepdims=True))
+        return out
+
+    def rows(self) -> GoalRows:
+        """The counts and each goal's log theta as flat lists (index s * 4 + a), made once per
+        change of the counts and shared by every advisor that reads them."""
+        if self._rows is None:
+            g = self.n_goals
+            self._rows = GoalRows(
+                self.goal_counts.reshape(g, -1).T.tolist(),
+                self.unknown_counts.reshape(-1).tolist(),
+                self.goal_log_theta().reshape(g, -1).T.tolist(),
+            )
+        return self._rows
+
+
+@dataclass(frozen=True, slots=True)
+class GoalRows:
+    """:class:`GoalPriors` as lists for the single-explorer form: per (s, a), a number per goal."""
+
+    counts: list[list[float]]  # c^g_s(a)
+    unknown: list[float]  # c^?_s(a)
+    log_theta: list[list[float]]  # log theta^g_s(a)

@@ -4,48 +4,98 @@
 (early, importance, mistake correcting, random) and ``always``, plus ``goal_aware``
 (:mod:`app.advice.goals`). All give theta_s as advice, count kappa per piece of advice and report
 the paper's KL and P(M1 | H) for comparison, whatever rule decided.
+
+:class:`StrategyParams` is the one definition of the strategies' parameters: names, defaults,
+bounds, which strategy reads which (:data:`READS`) and what each means. The service's request
+schema is made from it.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields, replace
+from typing import Any
 
 import numpy as np
 
 from app.advice.advisor import DEFAULT_KAPPA, DEFAULT_WINDOW, Advisor, Decision
-from app.advice.goals import GoalAwareAdvisor, GoalPriors
+from app.advice.goals import GoalAwareAdvisor
 from app.advice.models import AdviceTables
+from app.advice.priors import GoalPriors
 from app.domain.grid import N_ACTIONS
 
 STRATEGIES = ("paper", "goal_aware", "early", "importance", "mistake", "random", "always")
+RULES = ("early", "importance", "mistake", "random", "always")
+
+
+def _param(default: float, low: float, high: float, read_by: tuple[str, ...], doc: str) -> Any:
+    return field(
+        default=default, metadata={"low": low, "high": high, "read_by": read_by, "doc": doc}
+    )
 
 
 @dataclass(frozen=True)
 class StrategyParams:
-    """Parameters of every strategy; each strategy reads only its own."""
+    """Parameters of every strategy; each strategy reads only its own (:data:`READS`)."""
 
-    n_steps: int = 20  # early: advise during the first n_steps decisions
-    threshold: float = 0.5  # importance: KL[theta_s || u] >= t; mistake: theta_s(a) < t
-    rate: float = 0.1  # random: probability of advising per step
-    beta: float = 0.0  # goal_aware: weight of per-goal likelihoods (0: ruling out only)
-    seed: int = 0  # random: seed of its generator
+    n_steps: int = _param(
+        20, 0, 2**31 - 1, ("early",), "early: advise at the first n_steps decisions."
+    )
+    threshold: float = _param(
+        0.5, 0.0, math.inf, ("importance", "mistake"),
+        "importance: advise where KL[theta_s || uniform] >= threshold (nats); mistake: after "
+        "an action with theta_s(a) < threshold.",
+    )  # fmt: skip
+    rate: float = _param(0.1, 0.0, 1.0, ("random",), "random: P(advise) per decision.")
+    beta: float = _param(
+        0.0, 0.0, 1.0, ("goal_aware",),
+        "goal_aware: weight of each goal's likelihood of the window (0: ruling goals out only).",
+    )  # fmt: skip
+    seed: int = _param(0, 0, 2**32 - 1, ("random",), "random: seed of its draws.")
 
     def check(self) -> None:
-        if self.n_steps < 0:
-            raise ValueError(f"n_steps must be >= 0, got {self.n_steps}")
-        for name in ("threshold", "rate", "beta"):
-            v = getattr(self, name)
-            if not math.isfinite(v) or v < 0:
-                raise ValueError(f"{name} must be a finite number >= 0, got {v!r}")
-        if self.rate > 1 or self.beta > 1:
-            raise ValueError("rate and beta must be at most 1")
+        """Raise ValueError naming the first parameter outside its bounds."""
+        for f in fields(self):
+            v, low, high = getattr(self, f.name), f.metadata["low"], f.metadata["high"]
+            whole = f.type == "int"
+            if whole and (isinstance(v, bool) or not isinstance(v, int | np.integer)):
+                raise ValueError(f"{f.name} must be a whole number, got {v!r}")
+            if not (math.isfinite(v) and low <= v <= high):
+                kind = "a whole number" if whole else "a finite number"
+                bounds = f">= {low}" if high == math.inf else f"from {low} to {high}"
+                raise ValueError(f"{f.name} must be {kind} {bounds}, got {v!r}")
+
+    def read_by(self, strategy: str) -> dict[str, int | float]:
+        """The parameters ``strategy`` reads, with their values (the parameters in force)."""
+        return {name: getattr(self, name) for name in READS[strategy]}
+
+
+#: The parameters each strategy reads.
+READS: dict[str, tuple[str, ...]] = {
+    s: tuple(f.name for f in fields(StrategyParams) if s in f.metadata["read_by"])
+    for s in STRATEGIES
+}
+
+
+def strategy_params(strategy: str, given: Mapping[str, int | float]) -> StrategyParams:
+    """The parameters of ``strategy`` with ``given`` set: ValueError names an unknown strategy,
+    a parameter the strategy does not read, or a value out of bounds."""
+    if strategy not in STRATEGIES:
+        raise ValueError(f"unknown strategy {strategy!r}: use one of {', '.join(STRATEGIES)}")
+    unread = sorted(set(given) - set(READS[strategy]))
+    if unread:
+        reads = ", ".join(READS[strategy]) or "no parameters"
+        raise ValueError(f"{strategy} does not read {', '.join(unread)} (it reads {reads})")
+    params = replace(StrategyParams(), **dict[str, Any](given))
+    params.check()
+    return params
 
 
 class RuleAdvisor(Advisor):
     """The paper's window and posterior, with another rule deciding when to advise."""
 
-    __slots__ = ("_last", "_rng", "params", "rule")
+    __slots__ = ("_last", "_params", "_rng", "_rule")
 
     def __init__(
         self,
@@ -55,21 +105,28 @@ class RuleAdvisor(Advisor):
         window: int = DEFAULT_WINDOW,
         params: StrategyParams | None = None,
     ):
-        if rule not in ("early", "importance", "mistake", "random", "always"):
-            raise ValueError(f"unknown rule {rule!r}")
-        self.rule = rule
-        self.params = params or StrategyParams()
-        self.params.check()
+        if rule not in RULES:
+            raise ValueError(f"unknown rule {rule!r}: use one of {', '.join(RULES)}")
+        self._rule = rule
+        self._params = params or StrategyParams()
+        self._params.check()
         self._last: tuple[int, int] | None = None
-        self._rng = np.random.default_rng(self.params.seed)
+        self._rng = np.random.default_rng(self._params.seed)
         super().__init__(tables, kappa, window)
+
+    @property
+    def strategy(self) -> str:
+        return self._rule
+
+    def params(self) -> dict[str, int | float]:
+        return self._params.read_by(self._rule)
 
     def reset(self) -> None:
         """Forget the history, the cost, the last move, and restart the random rule's draws
         (a new explorer is advised as a fresh advisor would advise it)."""
         super().reset()
         self._last = None
-        self._rng = np.random.default_rng(self.params.seed)
+        self._rng = np.random.default_rng(self._params.seed)
 
     def observe(self, state: int, action: int, next_state: int) -> Decision:
         self.append(state, action)
@@ -81,17 +138,17 @@ class RuleAdvisor(Advisor):
         th = self.tables.theta_flat
         b = state * N_ACTIONS
         row = (th[b], th[b + 1], th[b + 2], th[b + 3])
-        return self.record(state, self._says(state, row), row, kl, p_normal)
+        return self.record(state, self._says(state), row, kl, p_normal)
 
-    def _says(self, state: int, row: tuple[float, float, float, float]) -> bool:
-        p = self.params
-        if self.rule == "always":
+    def _says(self, state: int) -> bool:
+        p = self._params
+        if self._rule == "always":
             return True
-        if self.rule == "early":
+        if self._rule == "early":
             return self.decisions < p.n_steps
-        if self.rule == "random":
+        if self._rule == "random":
             return bool(self._rng.random() < p.rate)
-        if self.rule == "importance":  # KL[theta_s || uniform] = log 4 + sum theta log theta
+        if self._rule == "importance":  # KL[theta_s || uniform] = log 4 + sum theta log theta
             return math.log(N_ACTIONS) + self.tables.neg_entropy_list[state] >= p.threshold
         # mistake correcting: the action just taken was unlikely under the prior
         if self._last is None:
@@ -116,6 +173,6 @@ def make_advisor(
             raise ValueError("goal_aware advice needs the experts' goals (goal priors)")
         beta = (params or StrategyParams()).beta
         return GoalAwareAdvisor(tables, goal_priors, kappa, window, beta)
-    if strategy in STRATEGIES:
+    if strategy in RULES:
         return RuleAdvisor(tables, strategy, kappa, window, params)
     raise ValueError(f"unknown strategy {strategy!r}: use one of {', '.join(STRATEGIES)}")

@@ -1,7 +1,7 @@
 """Reference episode loops: an explorer, the core :class:`~app.advice.advisor.Advisor`, a goal.
 
 Plain Python, one step at a time: the obvious version the compiled kernels in
-:mod:`app.agents.fast` are tested against, and readable documentation of the protocol.
+:mod:`app.kernels` are tested against, and readable documentation of the protocol.
 
 One step (METHOD.md): the advisor has decided for the explorer's state ``s``; the explorer
 acts (sampling the advice, ``decision.advice``, if advised and ``advised`` is on), moves to

@@ -13,7 +13,7 @@ Every explorer moves on a :class:`~app.domain.grid.GridDomain` with the four com
 
 **Randomness.** Every random choice draws exactly one ``rng.random()`` (a uniform ``u`` in
 [0, 1)) and turns it into a choice with :func:`sample_action` or :func:`uniform_choice`, only
-when a choice is needed. The compiled kernels in :mod:`app.agents.fast` make the same draws in
+when a choice is needed. The compiled kernels in :mod:`app.kernels` make the same draws in
 the same order, so from the same ``np.random.Generator`` they follow the same trajectory.
 
 =============  ===========================================================================
@@ -40,8 +40,8 @@ from typing import ClassVar
 import numpy as np
 import numpy.typing as npt
 
-from app.agents.experts import optimal_actions
 from app.domain.grid import N_ACTIONS, GridDomain
+from app.domain.paths import optimal_actions
 
 FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]

@@ -1,8 +1,13 @@
-"""Typed wrappers around the compiled kernels: one call runs one task of one explorer.
+"""Typed wrappers around the compiled kernels (:mod:`app.kernels`): one call, one task.
 
 >>> sim = Simulator(domain, AdviceTables.paper(prior.theta()))
 >>> run = sim.fixed("random", goal, np.random.default_rng(0), advised=True, kappa=0.5)
 >>> run.success, run.steps, run.advice_count
+
+Every advising strategy of :func:`app.advice.strategies.make_advisor` runs in the same kernel
+(``strategy=``); ``goal_aware`` needs the per-goal counts (``goal_priors``). From equal
+generators a run makes the draws, moves and decisions of the reference loop
+(:func:`app.agents.episodes.run_episode`), which ``tests/agents/test_simulate.py`` checks.
 """
 
 from __future__ import annotations
@@ -12,18 +17,31 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from app.advice.advisor import DEFAULT_KAPPA, DEFAULT_WINDOW, check_kappa_window
+from app import kernels
+from app.advice.advisor import DEFAULT_KAPPA, DEFAULT_WINDOW, check_kappa_window, resync_period
 from app.advice.models import AdviceTables
-from app.agents.experts import optimal_actions
+from app.advice.priors import GoalPriors
+from app.advice.strategies import STRATEGIES, StrategyParams
 from app.agents.explorers import FIXED_EXPLORERS
-from app.agents.fast import fixed_episode, q_learning
-from app.agents.fast_advisor import FlatTables
 from app.agents.qlearning import TIE_RULES
 from app.domain.grid import GridDomain
+from app.domain.paths import optimal_actions
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 BoolArray = npt.NDArray[np.bool_]
+
+#: the kernels' codes for the explorers and the strategies, by name
+EXPLORER_CODES = {
+    "random": kernels.RANDOM, "random-avoid": kernels.RANDOM_AVOID, "left": kernels.LEFT,
+    "bug": kernels.BUG, "optimal": kernels.OPTIMAL,
+}  # fmt: skip
+STRATEGY_CODES = {
+    "paper": kernels.PAPER, "goal_aware": kernels.GOAL_AWARE, "early": kernels.EARLY,
+    "importance": kernels.IMPORTANCE, "mistake": kernels.MISTAKE,
+    "random": kernels.RANDOM_RULE, "always": kernels.ALWAYS,
+}  # fmt: skip
+_NOTHING = np.zeros(0)
 
 
 @dataclass(frozen=True)
@@ -33,10 +51,15 @@ class FixedRun:
     success: bool
     steps: int
     advice_count: int
-    benefit: float
+    benefit: float  # sum of the deciding KL at advised states (the paper's KL for peer rules)
+    goals_ruled_out: int  # goal_aware only (0 otherwise)
     states: IntArray  # state before each move
-    p_normal: FloatArray  # P(M1 | H) at each decision the explorer acted on
+    p_normal: FloatArray  # P(M1 | H) at each decision the explorer acted on (if recorded)
     advise: BoolArray  # the advisor's decision there (given to the explorer only if advised)
+
+    @property
+    def advice_per_100(self) -> float:
+        return 100.0 * self.advice_count / max(1, self.steps)
 
 
 @dataclass(frozen=True)
@@ -75,14 +98,39 @@ class LearningRun:
         return out
 
 
-class Simulator:
-    """A domain and the advisor's tables, prepared once for many compiled runs."""
+def goal_tables(domain: GridDomain, priors: GoalPriors | None) -> kernels.GoalTables:
+    """The per-goal counts as the kernels read them (no goals when ``priors`` is None)."""
+    s = domain.n_states
+    of_state = np.full(s, -1, dtype=np.int64)
+    if priors is None:
+        empty = np.zeros((4 * s, 0))
+        return of_state, 1.0, np.zeros(4 * s), empty, empty
+    g = priors.n_goals
+    of_state[list(priors.goals)] = np.arange(g)
+    return (
+        of_state,
+        priors.alpha0,
+        np.ascontiguousarray(priors.unknown_counts.reshape(-1)),
+        np.ascontiguousarray(priors.goal_counts.reshape(g, -1).T),
+        np.ascontiguousarray(priors.goal_log_theta().reshape(g, -1).T),
+    )
 
-    def __init__(self, domain: GridDomain, tables: AdviceTables):
+
+class Simulator:
+    """A domain, the advisor's tables (and the per-goal counts goal-aware advice narrows theta
+    with), prepared once for many compiled runs."""
+
+    def __init__(
+        self, domain: GridDomain, tables: AdviceTables, goal_priors: GoalPriors | None = None
+    ):
         if tables.n_states != domain.n_states:
             raise ValueError(f"tables have {tables.n_states} states, the maze {domain.n_states}")
+        if goal_priors is not None and goal_priors.n_states != domain.n_states:
+            raise ValueError("goal priors and maze must have the same states")
         self.domain = domain
-        self.flat = FlatTables(tables)
+        self.tables = tables
+        self.goals = goal_tables(domain, goal_priors)
+        self.has_goals = goal_priors is not None
         self.next_state = np.ascontiguousarray(domain.next_state)
         self.open_moves = np.ascontiguousarray(domain.open_moves)
         self.cells = np.ascontiguousarray(domain.cells)
@@ -100,51 +148,53 @@ class Simulator:
         rng: np.random.Generator,
         *,
         advised: bool,
+        strategy: str = "paper",
         kappa: float = DEFAULT_KAPPA,
         window: int = DEFAULT_WINDOW,
+        params: StrategyParams | None = None,
+        rule_rng: np.random.Generator | None = None,
         max_steps: int = 5000,
+        record_p: bool = True,
     ) -> FixedRun:
-        """One task of ``explorer`` (a name in FIXED_EXPLORERS) from the start cell."""
+        """One task of ``explorer`` (a name in FIXED_EXPLORERS) from the start cell, watched
+        by the advisor of ``strategy``. ``rule_rng`` is the ``random`` rule's own generator
+        (default: seeded with ``params.seed``, as the reference advisor seeds its own)."""
         if explorer not in FIXED_EXPLORERS:
             raise ValueError(f"unknown explorer {explorer!r}: use {', '.join(FIXED_EXPLORERS)}")
+        if strategy not in STRATEGIES:
+            raise ValueError(f"unknown strategy {strategy!r}: use one of {', '.join(STRATEGIES)}")
+        if strategy == "goal_aware" and not self.has_goals:
+            raise ValueError("goal_aware advice needs the experts' goals (goal priors)")
         check_kappa_window(kappa, window)
+        p = params or StrategyParams()
+        p.check()
         if max_steps < 1:
             raise ValueError(f"max_steps must be at least 1, got {max_steps}")
         states = np.empty(max_steps, dtype=np.int64)
-        p_out = np.empty(max_steps)
+        p_out = np.empty(max_steps) if record_p else _NOTHING
         advise = np.empty(max_steps, dtype=np.bool_)
-        f = self.flat
-        steps, success, count, benefit = fixed_episode(
-            FIXED_EXPLORERS.index(explorer),
-            self.next_state,
-            self.open_moves,
-            self.cells,
-            self.optimal(goal),
+        steps, success, count, benefit, ruled_out = kernels.episode(
+            EXPLORER_CODES[explorer],
+            (self.next_state, self.open_moves, self.cells, self.optimal(goal)),
             self.domain.start,
             goal,
             max_steps,
             advised,
+            STRATEGY_CODES[strategy],
             float(kappa),
             int(window),
-            f.theta,
-            f.probs,
-            f.log_probs,
-            f.log_weights,
-            f.neg_entropy,
+            resync_period(int(window)),
+            (int(p.n_steps), float(p.threshold), float(p.rate), float(p.beta)),
+            self.tables.arrays,
+            self.goals,
             rng,
-            states,
-            p_out,
-            advise,
+            rule_rng if rule_rng is not None else np.random.default_rng(p.seed),
+            (states, p_out, advise),
         )
         return FixedRun(
-            bool(success),
-            int(steps),
-            int(count),
-            float(benefit),
-            states[:steps],
-            p_out[:steps],
-            advise[:steps],
-        )
+            bool(success), int(steps), int(count), float(benefit), int(ruled_out),
+            states[:steps], p_out[:steps], advise[:steps],
+        )  # fmt: skip
 
     def learning(
         self,
@@ -160,10 +210,8 @@ class Simulator:
         window: int = DEFAULT_WINDOW,
         step_budget: int = 0,
     ) -> LearningRun:
-        """``episodes`` episodes of one Q-learning task (a fresh Q-table).
-
-        ``step_budget`` > 0 stops after that many moves in total (Figure 7).
-        """
+        """``episodes`` episodes of one Q-learning task (a fresh Q-table), advised by the
+        paper's rule. ``step_budget`` > 0 stops after that many moves in total (Figure 7)."""
         check_kappa_window(kappa, window)
         if episodes < 1 or max_steps < 1:
             raise ValueError("episodes and max_steps must be at least 1")
@@ -173,33 +221,22 @@ class Simulator:
         advice = np.zeros(episodes, dtype=np.int64)
         decisions = np.zeros(episodes, dtype=np.int64)
         p_mean = np.zeros(episodes)
-        f = self.flat
-        n = q_learning(
+        n = kernels.q_learning(
             self.next_state,
             self.domain.start,
             goal,
             episodes,
             max_steps,
             step_budget,
-            params.alpha,
-            params.gamma,
-            params.epsilon,
-            params.ties == "advice",
+            (params.alpha, params.gamma, params.epsilon, params.ties == "advice"),
             advised,
             keep_history,
             float(kappa),
             int(window),
-            f.theta,
-            f.probs,
-            f.log_probs,
-            f.log_weights,
-            f.neg_entropy,
+            resync_period(int(window)),
+            self.tables.arrays,
             rng,
             q,
-            steps,
-            success,
-            advice,
-            decisions,
-            p_mean,
+            (steps, success, advice, decisions, p_mean),
         )
         return LearningRun(steps[:n], success[:n], advice[:n], decisions[:n], p_mean[:n], q)

@@ -13,7 +13,7 @@ task has its own random stream), so their no-advice row is run once. Q-learning 
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass, replace
+from dataclasses import dataclass, replace
 from typing import Any
 
 from tqdm import tqdm
@@ -21,10 +21,10 @@ from tqdm import tqdm
 from app.agents.explorers import FIXED_EXPLORERS
 from app.experiments.common import prepare
 from app.experiments.difficulty import prior_reach
-from app.experiments.output import RunDir, environment, markdown_table
+from app.experiments.output import RunDir, header, markdown_table
 from app.experiments.runs import run_fixed_tasks, run_learning_tasks
-from app.experiments.table1 import LEARNING_STREAM, ONE_SHOT_STREAM, summarise
 from app.experiments.table1 import Args as Table1Args
+from app.experiments.table1 import summarise
 
 #: (setting, values) varied one at a time for the fixed-policy explorers.
 FIXED_GRID: tuple[tuple[str, tuple[Any, ...]], ...] = (
@@ -61,18 +61,7 @@ def fixed_rows(args: Args, bar: tqdm) -> list[dict[str, Any]]:
     rows = []
     base = prepare(args)
     for name in FIXED_EXPLORERS:
-        b = run_fixed_tasks(
-            base,
-            name,
-            False,
-            seed=args.seed,
-            stream=ONE_SHOT_STREAM,
-            kappa=args.kappa,
-            window=args.window,
-            max_steps=args.steps,
-            last_n=args.last_n,
-            progress=bar,
-        )
+        b = run_fixed_tasks(base, name, False, args, args.steps, last_n=args.last_n, progress=bar)
         rows.append({"setting": "no advice", "value": "", **summarise(name, False, b.success, b)})
     for setting, values in FIXED_GRID:
         for value in values:
@@ -80,18 +69,7 @@ def fixed_rows(args: Args, bar: tqdm) -> list[dict[str, Any]]:
             setup = prepare(a)
             reach = prior_reach(setup.tables.theta, setup.prior.summary()["states_with_data"], a)
             for name in FIXED_EXPLORERS:
-                b = run_fixed_tasks(
-                    setup,
-                    name,
-                    True,
-                    seed=a.seed,
-                    stream=ONE_SHOT_STREAM,
-                    kappa=a.kappa,
-                    window=a.window,
-                    max_steps=a.steps,
-                    last_n=a.last_n,
-                    progress=bar,
-                )
+                b = run_fixed_tasks(setup, name, True, a, a.steps, last_n=a.last_n, progress=bar)
                 rows.append(
                     {
                         "setting": setting,
@@ -116,19 +94,7 @@ def learning_rows(args: Args, bar: tqdm) -> list[dict[str, Any]]:
             first = setting == LEARNING_GRID[0][0] and value == LEARNING_GRID[0][1][0]
             conditions = (False, True) if new_unadvised or first else (True,)
             for advised in conditions:
-                lb = run_learning_tasks(
-                    setup,
-                    advised,
-                    seed=a.seed,
-                    stream=LEARNING_STREAM,
-                    params=a.q_params(),
-                    episodes=a.episodes,
-                    max_steps=a.episode_steps,
-                    keep_history=a.q_keep_history,
-                    kappa=a.kappa,
-                    window=a.window,
-                    progress=bar,
-                )
+                lb = run_learning_tasks(setup, advised, a, a, progress=bar)
                 default = setting == LEARNING_GRID[0][0]
                 rows.append(
                     {
@@ -154,10 +120,7 @@ def run(args: Args, out: RunDir) -> dict[str, Any]:
         fixed = fixed_rows(args, bar)
         learning = learning_rows(args, bar)
     result = {
-        "experiment": "ablations",
-        "settings": asdict(args),
-        "environment": environment(),
-        "elapsed_s": time.perf_counter() - started,
+        **header("ablations", args, time.perf_counter() - started),
         "fixed": fixed,
         "learning": learning,
     }

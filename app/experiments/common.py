@@ -63,6 +63,8 @@ class CommonArgs:
             raise ValueError(f"alpha0 must be > 0, got {self.alpha0}")
         if self.window < 1:
             raise ValueError(f"window must be at least 1, got {self.window}")
+        if isinstance(self, LearningArgs):
+            self.q_params()  # validates the Q-learner's settings
 
     def prior_settings(self) -> dict[str, object]:
         return {

@@ -15,7 +15,7 @@ Table I; the simulated Table I should agree within its intervals.
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -24,7 +24,7 @@ import numpy.typing as npt
 from app.agents.explorers import LeftExplorer
 from app.domain.grid import GridDomain
 from app.experiments.common import CommonArgs, prepare, rng_for
-from app.experiments.output import RunDir, environment, markdown_table
+from app.experiments.output import RunDir, header, markdown_table
 from app.experiments.traps import dead_end_masks
 
 FloatArray = npt.NDArray[np.float64]
@@ -142,10 +142,7 @@ def run(args: Args, out: RunDir) -> dict[str, Any]:
         for name in ("random", "random-avoid", "left", "bug")
     }
     result = {
-        "experiment": "difficulty",
-        "settings": asdict(args),
-        "environment": environment(),
-        "elapsed_s": time.perf_counter() - started,
+        **header("difficulty", args, time.perf_counter() - started),
         "maze": maze,
         "prior": prior,
         "expected_reward_without_advice": expected_rows,

@@ -12,7 +12,7 @@ moving average of ``--smooth`` steps (the paper also smooths); the CSV has the r
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -21,9 +21,8 @@ from tqdm import tqdm
 
 from app.agents.explorers import FIXED_EXPLORERS
 from app.experiments.common import CommonArgs, moving_average, prepare
-from app.experiments.output import RunDir, environment, markdown_table
+from app.experiments.output import RunDir, header, markdown_table
 from app.experiments.runs import FixedBatch, run_fixed_tasks
-from app.experiments.table1 import ONE_SHOT_STREAM
 
 
 @dataclass
@@ -51,17 +50,7 @@ def run(args: Args, out: RunDir) -> dict[str, Any]:
         total=2 * n * len(FIXED_EXPLORERS), desc="figure5", unit="task", disable=not args.progress
     ) as bar:
         batches = {
-            (name, advised): run_fixed_tasks(
-                setup,
-                name,
-                advised,
-                seed=args.seed,
-                stream=ONE_SHOT_STREAM,
-                kappa=args.kappa,
-                window=args.window,
-                max_steps=args.steps,
-                progress=bar,
-            )
+            (name, advised): run_fixed_tasks(setup, name, advised, args, args.steps, progress=bar)
             for name in FIXED_EXPLORERS
             for advised in (False, True)
         }
@@ -91,10 +80,7 @@ def run(args: Args, out: RunDir) -> dict[str, Any]:
         ]
     fig = plot(batches, args)
     result = {
-        "experiment": "figure5",
-        "settings": asdict(args),
-        "environment": environment(),
-        "elapsed_s": time.perf_counter() - started,
+        **header("figure5", args, time.perf_counter() - started),
         "summary": summary,
     }
     out.json("figure5", result)

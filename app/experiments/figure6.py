@@ -12,7 +12,7 @@ second panel shows how much advice it took (advice per 100 steps) and P(M1 | H).
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -20,7 +20,7 @@ from matplotlib.figure import Figure
 from tqdm import tqdm
 
 from app.experiments.common import CommonArgs, LearningArgs, moving_average, prepare
-from app.experiments.output import RunDir, environment, markdown_table
+from app.experiments.output import RunDir, header, markdown_table
 from app.experiments.runs import LearningBatch
 from app.experiments.table1 import learning_runs
 
@@ -89,10 +89,7 @@ def run(args: Args, out: RunDir) -> tuple[dict[str, Any], dict[bool, LearningBat
         for advised, b in batches.items()
     }
     result = {
-        "experiment": "figure6",
-        "settings": asdict(args),
-        "environment": environment(),
-        "elapsed_s": time.perf_counter() - started,
+        **header("figure6", args, time.perf_counter() - started),
         "summary": summary,
     }
     out.json("figure6", result)

@@ -14,7 +14,7 @@ kappa = 0 advises at every step; above log 4 = 1.386 nats nothing is ever advise
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -23,7 +23,7 @@ from tqdm import tqdm
 
 from app.agents.explorers import FIXED_EXPLORERS
 from app.experiments.common import CommonArgs, LearningArgs, prepare, rng_for
-from app.experiments.output import RunDir, environment, markdown_table
+from app.experiments.output import RunDir, header, markdown_table
 
 EXPLORERS = (*FIXED_EXPLORERS, "q-learning")
 
@@ -100,10 +100,7 @@ def run(args: Args, out: RunDir) -> dict[str, Any]:
         for k, kappa in enumerate(kappas.tolist())
     ]
     result = {
-        "experiment": "figure7",
-        "settings": asdict(args),
-        "environment": environment(),
-        "elapsed_s": time.perf_counter() - started,
+        **header("figure7", args, time.perf_counter() - started),
         "kappas": kappas,
         "advice_per_100_mean": {name: rate[e].mean(axis=1) for e, name in enumerate(EXPLORERS)},
     }

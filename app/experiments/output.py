@@ -47,6 +47,17 @@ def _plain(value: Any) -> Any:
     return value
 
 
+def header(experiment: str, args: Any, elapsed: float) -> dict[str, Any]:
+    """What every result file opens with: the experiment, its settings (an ``Args``
+    dataclass), the environment and the seconds it took."""
+    return {
+        "experiment": experiment,
+        "settings": asdict(args),
+        "environment": environment(),
+        "elapsed_s": elapsed,
+    }
+
+
 def environment() -> dict[str, str]:
     """Versions that affect the numbers or the speed."""
     return {

@@ -1,6 +1,8 @@
 """Batches of compiled runs shared by the experiments: many tasks of one explorer, summarised.
 
-Every task gets its own generator ``rng_for(seed, stream, explorer, advised, task)``.
+Every task gets its own generator ``rng_for(seed, stream, explorer, advised, task)``: one-shot
+tasks draw from :data:`ONE_SHOT_STREAM` (Table I and Figure 5 see the same runs), Q-learning from
+:data:`LEARNING_STREAM` (Table I's Q-learning row is Figure 6's).
 """
 
 from __future__ import annotations
@@ -12,10 +14,11 @@ import numpy.typing as npt
 from tqdm import tqdm
 
 from app.agents.qlearning import QLearningExplorer
-from app.agents.simulate import QParams
-from app.experiments.common import Setup, rng_for
+from app.experiments.common import CommonArgs, LearningArgs, Setup, rng_for
 from app.experiments.traps import LAST_N, dead_end_masks, other_dead_end_share, trap_goal
 
+ONE_SHOT_STREAM = "one-shot"
+LEARNING_STREAM = "learning"
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 BoolArray = npt.NDArray[np.bool_]
@@ -51,16 +54,14 @@ def run_fixed_tasks(
     setup: Setup,
     explorer: str,
     advised: bool,
-    *,
-    seed: int,
-    stream: str,
-    kappa: float,
-    window: int,
+    args: CommonArgs,
     max_steps: int,
+    *,
     last_n: int = LAST_N,
     progress: tqdm | None = None,
 ) -> FixedBatch:
-    """Every task of ``setup`` for one explorer; ``progress`` is advanced once per task."""
+    """Every task of ``setup`` for one explorer (seed, kappa and window from ``args``), from the
+    one-shot stream; ``progress`` is advanced once per task."""
     n = len(setup.goals)
     masks = dead_end_masks(setup.domain)
     without_data = setup.prior.pooled_increments_.sum(axis=1) == 0
@@ -81,10 +82,11 @@ def run_fixed_tasks(
         reached_by=np.zeros(max_steps, np.int64),
     )
     for i, goal in enumerate(setup.goals.tolist()):
-        rng = rng_for(seed, stream, explorer, advised, i)
+        rng = rng_for(args.seed, ONE_SHOT_STREAM, explorer, advised, i)
         run = setup.sim.fixed(
-            explorer, goal, rng, advised=advised, kappa=kappa, window=window, max_steps=max_steps
-        )
+            explorer, goal, rng, advised=advised, kappa=args.kappa, window=args.window,
+            max_steps=max_steps,
+        )  # fmt: skip
         gi = setup.goal_index(goal)
         out.success[i], out.steps[i] = run.success, run.steps
         out.advice_count[i], out.benefit[i] = run.advice_count, run.benefit
@@ -138,18 +140,14 @@ def greedy_reaches_goal(
 def run_learning_tasks(
     setup: Setup,
     advised: bool,
+    args: CommonArgs,
+    learner: LearningArgs,
     *,
-    seed: int,
-    stream: str,
-    params: QParams,
-    episodes: int,
-    max_steps: int,
-    keep_history: bool,
-    kappa: float,
-    window: int,
     progress: tqdm | None = None,
 ) -> LearningBatch:
-    """Every task of ``setup`` learned from scratch by a Q-learner for ``episodes`` episodes."""
+    """Every task of ``setup`` learned from scratch by a Q-learner (``learner``'s settings;
+    seed, kappa and window from ``args``), from the learning stream."""
+    episodes, max_steps = learner.episodes, learner.episode_steps
     n = len(setup.goals)
     shape = (n, episodes)
     out = LearningBatch(
@@ -163,18 +161,12 @@ def run_learning_tasks(
         greedy_success=np.zeros(n, bool),
     )
     for i, goal in enumerate(setup.goals.tolist()):
-        rng = rng_for(seed, stream, "q-learning", advised, i)
+        rng = rng_for(args.seed, LEARNING_STREAM, "q-learning", advised, i)
         run = setup.sim.learning(
-            goal,
-            rng,
-            advised=advised,
-            params=params,
-            episodes=episodes,
-            max_steps=max_steps,
-            keep_history=keep_history,
-            kappa=kappa,
-            window=window,
-        )
+            goal, rng, advised=advised, params=learner.q_params(), episodes=episodes,
+            max_steps=max_steps, keep_history=learner.q_keep_history, kappa=args.kappa,
+            window=args.window,
+        )  # fmt: skip
         out.success[i], out.steps[i] = run.success, run.steps
         out.advice_count[i], out.decisions[i] = run.advice_count, run.decisions
         out.p_normal_mean[i] = run.p_normal_mean

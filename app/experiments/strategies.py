@@ -19,313 +19,582 @@ shared by every strategy and level, so the differences between strategies (and w
 advice) are paired; the ``random`` rule draws from a stream of its own.
 
     python -m app experiment strategies [--tasks 50] [--maps 10] [--workers 2]
+
+The report: rates with intervals, paired changes, targets, plots.
+
+Success rates get 95% Wilson intervals. A change between two configurations (a strategy
+against no advice, goal-aware against the paper's rule) is paired task by task (the same goal
+and the same explorer stream): the mean of the per-task differences with a 95% normal
+interval. Advice per 100 steps is the mean over tasks of 100 x advice / moves, as in Table I.
 """
 
 from __future__ import annotations
 
 import math
-import multiprocessing
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import asdict, dataclass, field
-from typing import Any, Literal
+from dataclasses import asdict
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from tqdm import tqdm
+from matplotlib.figure import Figure
 
-from app.advice.models import AdviceTables
-from app.advice.strategies import StrategyParams
-from app.agents.experts import train_goal_priors
 from app.agents.explorers import FIXED_EXPLORERS
-from app.agents.fast_strategies import StrategySimulator
-from app.domain.generate import generate_domain
-from app.domain.grid import GridDomain
-from app.experiments.common import CommonArgs, rng_for
-from app.experiments.output import RunDir, environment
-from app.experiments.traps import dead_end_masks, other_dead_end_share, trap_goal
+from app.experiments.common import wilson
+from app.experiments.output import RunDir, header, markdown_table
+from app.experiments.strategy_suite import (
+    CURVES,
+    LEVEL_NAME,
+    Args,
+    Config,
+    Results,
+    map_info,
+    prepare_world,
+    run_all,
+)
 
 FloatArray = npt.NDArray[np.float64]
-#: Curves in the order of tables and plots (``none``: no advice given).
-CURVES = ("none", "paper", "goal_aware", "early", "importance", "mistake", "random", "always")
-#: The parameter each curve's cost level sets.
-LEVEL_NAME = {
-    "none": "",
-    "paper": "kappa",
-    "goal_aware": "kappa",
-    "early": "n_steps",
-    "importance": "threshold",
-    "mistake": "threshold",
-    "random": "rate",
-    "always": "",
-}
-MEASURES = ("success", "steps", "advice", "trapped", "other_dead_end_share", "ruled_out")
+SCOPES = ("suite", "file", "perfect", "braided")
+Z95 = 1.959963984540054
+#: The target explorers of the issue's first target.
+RANDOM_WALKERS = ("random", "random-avoid")
+#: An explorer is competent if it succeeds in at least this share of tasks without advice.
+COMPETENT = 0.5
 
 
-@dataclass
-class Args(CommonArgs):
-    """Strategies arguments (``--tasks``: tasks per map, explorer and configuration)."""
-
-    tasks: int = 50
-    """Random one-shot tasks per map; every strategy and level sees the same tasks."""
-    steps: int = 5000
-    """Step limit of a one-shot task."""
-    maps: int = 10
-    """Generated mazes besides ``--maze``: the first half perfect, the rest braided."""
-    map_size: int = 29
-    """Rows and columns of a generated maze (29: 449-465 free cells, as the shipped 455)."""
-    braid: float = 0.2
-    """Braid of the braided mazes (the shipped maze was generated with 0.2)."""
-    beta: float = 0.0
-    """Goal-aware advice: weight of the per-goal likelihood of H (0: ruling out only)."""
-    workers: int = 2
-    """Processes (1: run in this process)."""
-    last_n: int = 500
-    """A failure is 'trapped' if half of its last ``last_n`` steps were in another goal's
-    dead end (app/experiments/traps.py)."""
-    kappas: tuple[float, ...] = (0.25, 0.5, 0.75, 1.0)
-    """paper: kappa levels (kappa 0 is ``always``)."""
-    goal_kappas: tuple[float, ...] = (0.0, 0.25, 0.5, 0.75, 1.0)
-    """goal_aware: kappa levels (kappa 0: always advise theta^w)."""
-    betas: tuple[float, ...] = (0.1, 0.5, 1.0)
-    """goal_aware: other betas, at the default kappa only."""
-    early_steps: tuple[int, ...] = (20, 100, 500, 2000)
-    """early: advise during the first n_steps decisions."""
-    importance_thresholds: tuple[float, ...] = (0.25, 0.5, 0.75, 1.0)
-    """importance: advise where KL[theta_s || uniform] >= threshold."""
-    mistake_thresholds: tuple[float, ...] = (0.05, 0.15, 0.25, 0.5)
-    """mistake: advise after a move a with theta_s(a) < threshold."""
-    rates: tuple[float, ...] = (0.02, 0.05, 0.1, 0.2, 0.4)
-    """random: probability of advising per step."""
-
-    def check(self) -> None:
-        super().check()
-        if self.experts == "policy":
-            raise ValueError("strategies needs expert trajectories: experts start or anywhere")
-        if self.maps < 0 or self.map_size < 5 or self.workers < 1 or self.steps < 1:
-            raise ValueError("need maps >= 0, map-size >= 5, workers >= 1 and steps >= 1")
-        if not (0.0 <= self.braid <= 1.0 and 0.0 <= self.beta <= 1.0):
-            raise ValueError("braid and beta must be in [0, 1]")
+def scope_maps(results: Results, scope: str) -> list[int]:
+    if scope == "suite":
+        return [s.index for s in results.maps]
+    return [s.index for s in results.maps if s.kind == scope]
 
 
-@dataclass(frozen=True)
-class Config:
-    """One point of one curve: a strategy at one cost level."""
-
-    curve: str  # a name in CURVES, or "goal_aware beta=<b>"
-    strategy: str  # the kernel's strategy ("paper" for ``none``, which gives no advice)
-    level: float  # the curve's cost parameter (nan: none, always)
-    kappa: float
-    params: StrategyParams = field(default_factory=StrategyParams)
-    default: bool = False  # the curve's default level
-
-    @property
-    def key(self) -> str:
-        return self.curve if math.isnan(self.level) else f"{self.curve}@{self.level:g}"
-
-    @property
-    def advised(self) -> bool:
-        return self.curve != "none"
+def paired(a: FloatArray, b: FloatArray) -> tuple[float, float, float]:
+    """Mean of a - b over paired tasks (success 0/1), with a 95% normal interval clipped to
+    the possible range [-1, 1]."""
+    d = (np.asarray(a, dtype=np.float64) - b).ravel()
+    mean = float(d.mean())
+    se = float(d.std(ddof=1)) / math.sqrt(d.size) if d.size > 1 else math.inf
+    return mean, max(-1.0, mean - Z95 * se), min(1.0, mean + Z95 * se)
 
 
-def configs(args: Args) -> list[Config]:
-    """Every configuration run, in report order; each curve's levels ascending."""
-    base = StrategyParams(beta=args.beta)
-    k0 = args.kappa
-    out = [Config("none", "paper", math.nan, k0, base, True)]
-    for kappa in sorted({*args.kappas, k0}):
-        out.append(Config("paper", "paper", kappa, kappa, base, kappa == k0))
-    for kappa in sorted({*args.goal_kappas, k0}):
-        out.append(Config("goal_aware", "goal_aware", kappa, kappa, base, kappa == k0))
-    for n in sorted({*args.early_steps, base.n_steps}):
-        p = StrategyParams(n_steps=n, beta=args.beta)
-        out.append(Config("early", "early", n, k0, p, n == base.n_steps))
-    for rule, values in (
-        ("importance", args.importance_thresholds),
-        ("mistake", args.mistake_thresholds),
-    ):
-        for t in sorted({*values, base.threshold}):
-            p = StrategyParams(threshold=t, beta=args.beta)
-            out.append(Config(rule, rule, t, k0, p, t == base.threshold))
-    for r in sorted({*args.rates, base.rate}):
-        out.append(Config("random", "random", r, k0, StrategyParams(rate=r), r == base.rate))
-    out.append(Config("always", "always", math.nan, k0, base, True))
-    for b in sorted(set(args.betas) - {args.beta}):
-        out.append(Config(f"goal_aware beta={b:g}", "goal_aware", k0, k0, StrategyParams(beta=b)))
+def advice_per_100(m: dict[str, FloatArray]) -> FloatArray:
+    out: FloatArray = 100.0 * m["advice"] / np.maximum(m["steps"], 1)
     return out
 
 
-@dataclass(frozen=True)
-class MapSpec:
-    index: int
-    kind: str  # "file" (--maze), "perfect" or "braided"
-    seed: int  # the generator's seed (-1 for the file)
-    name: str
-
-
-def map_suite(args: Args) -> list[MapSpec]:
-    """The ``--maze`` map, then ``--maps`` generated ones (perfect first, then braided)."""
-    out = [MapSpec(0, "file", -1, args.maze.stem)]
-    n_perfect = (args.maps + 1) // 2
-    for i in range(1, args.maps + 1):
-        kind = "perfect" if i <= n_perfect else "braided"
-        seed = int(rng_for(args.seed, "strategies-maps", i).integers(2**31))
-        out.append(MapSpec(i, kind, seed, f"{kind}-{args.map_size}-s{seed}"))
-    return out
-
-
-def load_map(args: Args, spec: MapSpec) -> GridDomain:
-    if spec.kind == "file":
-        return GridDomain.from_file(args.maze)
-    braid = 0.0 if spec.kind == "perfect" else args.braid
-    return generate_domain(args.map_size, args.map_size, spec.seed, braid=braid)
-
-
-@dataclass
-class World:
-    """One map of the suite, ready to run: the maze, its priors, the simulator, the tasks."""
-
-    spec: MapSpec
-    domain: GridDomain
-    sim: StrategySimulator
-    goals: list[int]
-    masks: npt.NDArray[np.bool_]
-    states_with_data: int  # cells some expert passed through (elsewhere theta is uniform)
-
-
-def prepare_world(args: Args, spec: MapSpec) -> World:
-    domain = load_map(args, spec)
-    # the --maze map uses Table I's expert stream, so its pooled prior is Table I's
-    keys = ("experts",) if spec.kind == "file" else ("experts", spec.index)
-    source: Literal["start", "anywhere"] = "anywhere" if args.experts == "anywhere" else "start"
-    prior, goal_priors = train_goal_priors(
-        domain, rng_for(args.seed, *keys), source, args.per_goal, args.alpha0
-    )
-    sim = StrategySimulator(domain, AdviceTables.paper(prior.theta()), goal_priors)
-    goals = rng_for(args.seed, "strategies-tasks", spec.index).choice(
-        np.array(domain.goals, dtype=np.int64), size=args.tasks
-    )
-    with_data = int((prior.pooled_increments_.sum(axis=1) > 0).sum())
-    return World(spec, domain, sim, goals.tolist(), dead_end_masks(domain), with_data)
-
-
-def map_info(world: World) -> dict[str, Any]:
-    """What a map of the suite is like (for the report)."""
-    d = world.domain
-    degree = d.open_moves.sum(axis=1)
+def row(
+    results: Results, explorer: str, c: Config, maps: list[int], none: dict[str, FloatArray]
+) -> dict[str, Any]:
+    """Everything measured for one explorer and configuration over ``maps``."""
+    m = {k: v[maps] for k, v in results.data[explorer][c.key].items()}
+    n0 = {k: v[maps] for k, v in none.items()}
+    n, k = int(m["success"].size), int(m["success"].sum())
+    lo, hi = wilson(k, n)
+    failures = n - k
+    diff = paired(m["success"], n0["success"])
+    per_map = m["success"].mean(axis=1) - n0["success"].mean(axis=1)
     return {
-        **asdict(world.spec),
-        "states": d.n_states,
-        "dead_ends": int((degree == 1).sum()),
-        "junctions": int((degree >= 3).sum()),
-        "independent_loops": int(d.open_moves.sum()) // 2 - d.n_states + 1,
-        "mean_goal_distance": float(d.goal_distances[:, d.start].mean()),
-        "states_with_expert_data": world.states_with_data,
+        "explorer": explorer,
+        "curve": c.curve,
+        "key": c.key,
+        "level_name": LEVEL_NAME.get(c.curve, "kappa"),
+        "level": c.level,
+        "default": c.default,
+        "kappa": c.kappa,
+        "beta": c.params.beta,
+        "maps": len(maps),
+        "tasks": n,
+        "successes": k,
+        "success": k / n,
+        "success_ci_low": lo,
+        "success_ci_high": hi,
+        "advice_per_100_steps": float(advice_per_100(m).mean()),
+        "advice_per_task": float(m["advice"].mean()),
+        "mean_steps": float(m["steps"].mean()),
+        "failures": failures,
+        "trapped": int(m["trapped"].sum()),
+        "trapped_share_of_failures": float(m["trapped"].sum() / failures) if failures else 0.0,
+        "other_dead_end_share": float(m["other_dead_end_share"].mean()),
+        "goals_ruled_out": float(m["ruled_out"].mean()),
+        "change_vs_none": diff[0],
+        "change_vs_none_ci_low": diff[1],
+        "change_vs_none_ci_high": diff[2],
+        "maps_better": int((per_map > 0).sum()),
+        "maps_worse": int((per_map < 0).sum()),
     }
 
 
-_WORLDS: dict[tuple[Any, ...], World] = {}  # per process: a map's jobs come one after another
+def summarise(results: Results, args: Args) -> dict[str, Any]:
+    """Rows per scope and per map, the helps/hurts table and the targets."""
+    rows, map_rows = [], []
+    for explorer in FIXED_EXPLORERS:
+        none = results.data[explorer]["none"]
+        for c in results.configs:
+            for scope in SCOPES:
+                maps = scope_maps(results, scope)
+                if maps:
+                    rows.append({"scope": scope, **row(results, explorer, c, maps, none)})
+            for spec in results.maps:
+                r = row(results, explorer, c, [spec.index], none)
+                map_rows.append({"map": spec.index, "map_name": spec.name, "kind": spec.kind, **r})
+    return {
+        "rows": rows,
+        "map_rows": map_rows,
+        "versus": versus(results),
+        "targets": targets(results, rows, args),
+    }
 
 
-def cached_world(args: Args, spec: MapSpec) -> World:
-    """:func:`prepare_world`, kept for the next job on the same map (expert data takes a BFS
-    per trajectory, more than a job's short tasks)."""
-    key = (str(args.maze), args.seed, args.experts, args.per_goal, args.alpha0, args.tasks,
-           args.map_size, args.braid, spec)  # fmt: skip
-    if key not in _WORLDS:
-        _WORLDS.clear()
-        _WORLDS[key] = prepare_world(args, spec)
-    return _WORLDS[key]
-
-
-def run_job(
-    args: Args, spec: MapSpec, explorer: str, todo: list[Config]
-) -> dict[str, dict[str, FloatArray]]:
-    """Every task of one map for one explorer under every configuration: config key ->
-    measure -> one value per task."""
-    world = cached_world(args, spec)
-    out: dict[str, dict[str, FloatArray]] = {}
-    for c in todo:
-        m = {name: np.zeros(args.tasks) for name in MEASURES}
-        for i, goal in enumerate(world.goals):
-            run = world.sim.run(
-                explorer,
-                c.strategy,
-                goal,
-                rng_for(args.seed, "strategies", spec.index, explorer, i),
-                advised=c.advised,
-                kappa=c.kappa,
-                window=args.window,
-                params=c.params,
-                rule_rng=rng_for(args.seed, "strategies-rule", spec.index, explorer, c.key, i),
-                max_steps=args.steps,
+def versus(results: Results) -> list[dict[str, Any]]:
+    """goal_aware at its default level against every other curve's default, paired per task
+    over the suite (positive: goal-aware succeeds more often)."""
+    d = defaults(results)
+    ga = d["goal_aware"]
+    out = []
+    for explorer in FIXED_EXPLORERS:
+        data = results.data[explorer]
+        for name, c in d.items():
+            if name == "goal_aware":
+                continue
+            diff = paired(data[ga.key]["success"], data[c.key]["success"])
+            out.append(
+                {
+                    "explorer": explorer,
+                    "goal_aware": ga.key,
+                    "other": c.key,
+                    "difference": diff[0],
+                    "difference_ci_low": diff[1],
+                    "difference_ci_high": diff[2],
+                }
             )
-            gi = world.domain.goals.index(goal)
-            m["success"][i] = run.success
-            m["steps"][i] = run.steps
-            m["advice"][i] = run.advice_count if c.advised else 0
-            m["trapped"][i] = trap_goal(run.states, run.success, gi, world.masks, args.last_n) >= 0
-            m["other_dead_end_share"][i] = other_dead_end_share(run.states, gi, world.masks)
-            m["ruled_out"][i] = run.goals_ruled_out
-        out[c.key] = m
     return out
 
 
-@dataclass
-class Results:
-    """Per-task measures: ``data[explorer][config key][measure]`` has shape (maps, tasks)."""
-
-    maps: list[MapSpec]
-    configs: list[Config]
-    data: dict[str, dict[str, dict[str, FloatArray]]]
+def find(rows: list[dict[str, Any]], scope: str, explorer: str, key: str) -> dict[str, Any]:
+    for r in rows:
+        if r["scope"] == scope and r["explorer"] == explorer and r["key"] == key:
+            return r
+    raise KeyError((scope, explorer, key))
 
 
-def run_all(args: Args) -> Results:
-    """Every (map, explorer) job, in this process or in ``--workers`` processes."""
-    suite, todo = map_suite(args), configs(args)
-    jobs = [(spec, name) for spec in suite for name in FIXED_EXPLORERS]
-    data = {
-        name: {c.key: {m: np.zeros((len(suite), args.tasks)) for m in MEASURES} for c in todo}
-        for name in FIXED_EXPLORERS
+def defaults(results: Results) -> dict[str, Config]:
+    """The default configuration of each curve of CURVES."""
+    return {c.curve: c for c in results.configs if c.default and c.curve in CURVES}
+
+
+def targets(results: Results, rows: list[dict[str, Any]], args: Args) -> dict[str, Any]:
+    """The issue's targets, measured on the whole suite.
+
+    1. goal_aware at the default kappa succeeds more often than paper at the same kappa
+       (paired interval above 0) with no more advice (per 100 steps and per task), for the
+       random walkers; also: at how many of the paper's levels some goal_aware level gives
+       more success with no more advice per 100 steps.
+    2. the recommended default (goal_aware at the default kappa) does not lower the success
+       of a competent explorer (no-advice success >= COMPETENT) below its no-advice level.
+    """
+    d = defaults(results)
+    ga, pa = d["goal_aware"], d["paper"]
+    first = []
+    for explorer in RANDOM_WALKERS:
+        g, p = find(rows, "suite", explorer, ga.key), find(rows, "suite", explorer, pa.key)
+        data = results.data[explorer]
+        diff = paired(data[ga.key]["success"], data[pa.key]["success"])
+        curve = [c for c in results.configs if c.curve == "goal_aware"]
+        paper_levels = [c for c in results.configs if c.curve == "paper"]
+        dominated = 0
+        for c in paper_levels:
+            pr = find(rows, "suite", explorer, c.key)
+            dominated += any(
+                find(rows, "suite", explorer, x.key)["success"] > pr["success"]
+                and find(rows, "suite", explorer, x.key)["advice_per_100_steps"]
+                <= pr["advice_per_100_steps"]
+                for x in curve
+            )
+        less_advice = (
+            g["advice_per_100_steps"] <= p["advice_per_100_steps"]
+            and g["advice_per_task"] <= p["advice_per_task"]
+        )
+        first.append(
+            {
+                "explorer": explorer,
+                "goal_aware": g["success"],
+                "paper": p["success"],
+                "difference": diff[0],
+                "difference_ci_low": diff[1],
+                "difference_ci_high": diff[2],
+                "goal_aware_advice_per_100": g["advice_per_100_steps"],
+                "paper_advice_per_100": p["advice_per_100_steps"],
+                "goal_aware_advice_per_task": g["advice_per_task"],
+                "paper_advice_per_task": p["advice_per_task"],
+                "paper_levels_beaten": dominated,
+                "paper_levels": len(paper_levels),
+                "met": diff[1] > 0 and less_advice,
+            }
+        )
+    second = []
+    for explorer in FIXED_EXPLORERS:
+        none = find(rows, "suite", explorer, "none")
+        if none["success"] < COMPETENT:
+            continue
+        for name, c in d.items():
+            if name == "none":
+                continue
+            r = find(rows, "suite", explorer, c.key)
+            second.append(
+                {
+                    "explorer": explorer,
+                    "strategy": c.key,
+                    "recommended": name == "goal_aware",
+                    "no_advice": none["success"],
+                    "advised": r["success"],
+                    "change": r["change_vs_none"],
+                    "change_ci_low": r["change_vs_none_ci_low"],
+                    "change_ci_high": r["change_vs_none_ci_high"],
+                    "maps_worse": r["maps_worse"],
+                    "not_lowered": r["change_vs_none"] >= 0,
+                }
+            )
+    recommended = [x for x in second if x["recommended"]]
+    return {
+        "goal_aware_beats_paper": first,
+        "first_met": all(x["met"] for x in first),
+        "competent": second,
+        "recommended": ga.key,
+        "second_met": all(x["not_lowered"] for x in recommended),
+        "competent_threshold": COMPETENT,
     }
 
-    def store(spec: MapSpec, name: str, got: dict[str, dict[str, FloatArray]]) -> None:
-        for key, measures in got.items():
-            for m, values in measures.items():
-                data[name][key][m][spec.index] = values
 
-    per_job = args.tasks * len(todo)
-    with tqdm(
-        total=per_job * len(jobs), desc="strategies", unit="task", disable=not args.progress
-    ) as bar:
-        if args.workers == 1:
-            for spec, name in jobs:
-                store(spec, name, run_job(args, spec, name, todo))
-                bar.update(per_job)
-        else:
-            ctx = multiprocessing.get_context("spawn")  # no fork of a process with threads
-            with ProcessPoolExecutor(args.workers, mp_context=ctx) as pool:
-                futures = {pool.submit(run_job, args, s, n, todo): (s, n) for s, n in jobs}
-                for fut in as_completed(futures):
-                    store(*futures[fut], fut.result())
-                    bar.update(per_job)
-    return Results(suite, todo, data)
+def task_rows(results: Results) -> list[dict[str, Any]]:
+    """One row per map, explorer, configuration and task."""
+    out = []
+    for explorer, by_key in results.data.items():
+        for key, m in by_key.items():
+            for spec in results.maps:
+                for i in range(m["success"].shape[1]):
+                    out.append(
+                        {
+                            "map": spec.index,
+                            "explorer": explorer,
+                            "config": key,
+                            "task": i,
+                            **{name: float(v[spec.index, i]) for name, v in m.items()},
+                        }
+                    )
+    return out
+
+
+# ---- markdown ---------------------------------------------------------------------------
+def pct(x: float) -> str:
+    return f"{100 * x:.1f}"
+
+
+def rate_ci(r: dict[str, Any]) -> str:
+    return f"{pct(r['success'])} [{pct(r['success_ci_low'])}, {pct(r['success_ci_high'])}]"
+
+
+def change(r: dict[str, Any], prefix: str = "change") -> str:
+    mean, lo, hi = r[prefix], r[f"{prefix}_ci_low"], r[f"{prefix}_ci_high"]
+    return f"{100 * mean:+.1f} [{100 * lo:+.1f}, {100 * hi:+.1f}]"
+
+
+def verdict(r: dict[str, Any]) -> str:
+    if r["change_vs_none_ci_low"] > 0:
+        return "helps"
+    if r["change_vs_none_ci_high"] < 0:
+        return "hurts"
+    return "no clear change"
+
+
+def markdown(summary: dict[str, Any], args: Args, elapsed: float) -> str:
+    rows: list[dict[str, Any]] = summary["rows"]
+    configs = {r["key"]: r for r in rows}  # any scope: only the config fields are read
+    default_keys = [r["key"] for r in rows if r["default"] and r["curve"] in CURVES]
+    default_keys = list(dict.fromkeys(default_keys))
+    parts = [settings_note(args, elapsed)]
+    table = []
+    for explorer in FIXED_EXPLORERS:
+        for key in default_keys:
+            s, f = find(rows, "suite", explorer, key), find(rows, "file", explorer, key)
+            table.append(
+                [
+                    explorer,
+                    short(configs[key]),
+                    rate_ci(s),
+                    f"{s['advice_per_100_steps']:.1f}",
+                    f"{s['advice_per_task']:.0f}",
+                    "—" if key == "none" else change(s, "change_vs_none"),
+                    f"{s['trapped']}/{s['failures']}",
+                    rate_ci(f),
+                    f"{f['advice_per_100_steps']:.1f}",
+                ]
+            )
+    parts.append(
+        "**Default cost levels.** Success % [95% Wilson CI]; change vs no advice in percentage "
+        "points, paired per task [95% CI].\n\n"
+        + markdown_table(
+            [
+                "explorer",
+                "strategy",
+                "suite success %",
+                "advice /100 steps",
+                "advice /task",
+                "change vs no advice",
+                "trapped / failed",
+                f"map `{args.maze.stem}` success %",
+                f"map `{args.maze.stem}` advice /100",
+            ],
+            table,
+        )
+    )
+    parts.append(helps_table(rows, default_keys, configs))
+    parts.append(versus_table(summary["versus"], default_keys, configs))
+    parts.append(kinds_table(rows, default_keys, configs))
+    parts.append(targets_text(summary["targets"]))
+    parts.append(sweep_table(rows))
+    return "\n\n".join(parts) + "\n"
+
+
+def short(r: dict[str, Any]) -> str:
+    if r["curve"] == "none":
+        return "no advice"
+    if r["level_name"] == "" or (isinstance(r["level"], float) and math.isnan(r["level"])):
+        return str(r["curve"])
+    return f"{r['curve']} ({r['level_name']} {r['level']:g})"
+
+
+def settings_note(args: Args, elapsed: float) -> str:
+    n_perfect = (args.maps + 1) // 2
+    return (
+        f"Map suite: `{args.maze}` plus {args.maps} generated {args.map_size}x{args.map_size} "
+        f"mazes ({n_perfect} perfect, {args.maps - n_perfect} braided {args.braid}), 8 goals "
+        f"each; {args.tasks} tasks per map, explorer and configuration (the same tasks and "
+        f"explorer streams for every configuration); one-shot limit {args.steps} steps; seed "
+        f"{args.seed}; experts `{args.experts}` ({args.per_goal} per goal), alpha0 "
+        f"{args.alpha0}, window {args.window}; goal-aware beta {args.beta}. Q-learning not "
+        f"included. {elapsed:.0f} s with {args.workers} worker(s)."
+    )
+
+
+def helps_table(
+    rows: list[dict[str, Any]], keys: list[str], configs: dict[str, dict[str, Any]]
+) -> str:
+    strategies = [k for k in keys if k != "none"]
+    table = []
+    for explorer in FIXED_EXPLORERS:
+        none = find(rows, "suite", explorer, "none")
+        cells = []
+        for key in strategies:
+            r = find(rows, "suite", explorer, key)
+            cells.append(f"{verdict(r)} {100 * r['change_vs_none']:+.1f}")
+        table.append([explorer, pct(none["success"]), *cells])
+    header = ["explorer", "no advice %", *(short(configs[k]) for k in strategies)]
+    return (
+        "**Who advice helps and who it hurts** (suite, default levels): change in success "
+        "(percentage points) against no advice; *helps* / *hurts* when the paired 95% interval "
+        "excludes 0.\n\n" + markdown_table(header, table)
+    )
+
+
+def versus_table(
+    versus: list[dict[str, Any]], keys: list[str], configs: dict[str, dict[str, Any]]
+) -> str:
+    others = [k for k in keys if configs[k]["curve"] != "goal_aware"]
+    by = {(v["explorer"], v["other"]): v for v in versus}
+    table = [
+        [explorer, *(change(by[explorer, k], "difference") for k in others)]
+        for explorer in FIXED_EXPLORERS
+    ]
+    ga = next(k for k in keys if configs[k]["curve"] == "goal_aware")
+    return (
+        f"**Goal-aware advice against every other default** (suite): success of "
+        f"{short(configs[ga])} minus the other's, percentage points, paired per task "
+        "[95% CI].\n\n" + markdown_table(["explorer", *(short(configs[k]) for k in others)], table)
+    )
+
+
+def kinds_table(
+    rows: list[dict[str, Any]], keys: list[str], configs: dict[str, dict[str, Any]]
+) -> str:
+    table = []
+    for explorer in FIXED_EXPLORERS:
+        for key in keys:
+            cells = []
+            for scope in ("file", "perfect", "braided"):
+                try:
+                    r = find(rows, scope, explorer, key)
+                except KeyError:
+                    cells.append("—")
+                    continue
+                cells.append(f"{pct(r['success'])} / {r['advice_per_100_steps']:.1f}")
+            table.append([explorer, short(configs[key]), *cells])
+    return "**By kind of map** (success % / advice per 100 steps):\n\n" + markdown_table(
+        ["explorer", "strategy", "file map", "perfect", "braided"], table
+    )
+
+
+def targets_text(t: dict[str, Any]) -> str:
+    lines = [
+        f"**Target 1** (goal-aware vs paper at the default kappa, suite): "
+        f"{'met' if t['first_met'] else 'NOT met'}.\n"
+    ]
+    table = [
+        [
+            x["explorer"],
+            pct(x["paper"]),
+            pct(x["goal_aware"]),
+            f"{100 * x['difference']:+.1f} [{100 * x['difference_ci_low']:+.1f}, "
+            f"{100 * x['difference_ci_high']:+.1f}]",
+            f"{x['paper_advice_per_100']:.1f} → {x['goal_aware_advice_per_100']:.1f}",
+            f"{x['paper_advice_per_task']:.0f} → {x['goal_aware_advice_per_task']:.0f}",
+            f"{x['paper_levels_beaten']}/{x['paper_levels']}",
+            "met" if x["met"] else "not met",
+        ]
+        for x in t["goal_aware_beats_paper"]
+    ]
+    lines.append(
+        markdown_table(
+            [
+                "explorer",
+                "paper %",
+                "goal_aware %",
+                "difference, pp [95% CI]",
+                "advice /100 (paper → goal_aware)",
+                "advice /task",
+                "paper levels beaten",
+                "",
+            ],
+            table,
+        )
+    )
+    lines.append(
+        f"\n**Target 2** (the recommended default, `{t['recommended']}`, does not lower a "
+        f"competent explorer's success, i.e. one with >= {100 * t['competent_threshold']:.0f}% "
+        f"without advice): {'met' if t['second_met'] else 'NOT met'}. Every default strategy "
+        "for the competent explorers:\n"
+    )
+    table = [
+        [
+            x["explorer"],
+            x["strategy"] + (" (recommended)" if x["recommended"] else ""),
+            pct(x["no_advice"]),
+            pct(x["advised"]),
+            change(x),
+            x["maps_worse"],
+        ]
+        for x in t["competent"]
+    ]
+    lines.append(
+        markdown_table(
+            [
+                "explorer",
+                "strategy",
+                "no advice %",
+                "advised %",
+                "change, pp [95% CI]",
+                "maps where lower",
+            ],
+            table,
+        )
+    )
+    return "\n".join(lines)
+
+
+def sweep_table(rows: list[dict[str, Any]]) -> str:
+    table = [
+        [
+            r["explorer"],
+            short(r) + (" *" if r["default"] else ""),
+            rate_ci(r),
+            f"{r['advice_per_100_steps']:.1f}",
+            f"{r['advice_per_task']:.0f}",
+            f"{r['trapped']}/{r['failures']}",
+        ]
+        for r in rows
+        if r["scope"] == "suite"
+    ]
+    return "**Every cost level** (suite; * default level):\n\n" + markdown_table(
+        [
+            "explorer",
+            "strategy",
+            "success % [95% CI]",
+            "advice /100",
+            "advice /task",
+            "trapped / failed",
+        ],
+        table,
+    )
+
+
+# ---- plots ------------------------------------------------------------------------------
+COLOURS = {
+    "paper": "tab:blue",
+    "goal_aware": "tab:red",
+    "early": "tab:green",
+    "importance": "tab:purple",
+    "mistake": "tab:brown",
+    "random": "tab:grey",
+    "always": "black",
+}
+
+
+def plots(summary: dict[str, Any], args: Args) -> dict[str, Figure]:
+    """Success against advice per 100 steps, one panel per explorer, one curve per strategy:
+    for the whole suite and for the ``--maze`` map alone."""
+    return {scope: plot(summary["rows"], scope, args) for scope in ("suite", "file")}
+
+
+def plot(rows: list[dict[str, Any]], scope: str, args: Args) -> Figure:
+    """One panel per explorer; each curve's points joined in order of advice given."""
+    fig = Figure(figsize=(14, 8.4), layout="constrained")
+    axes = fig.subplots(2, 3, sharex=True, sharey=True).ravel()
+    for ax, explorer in zip(axes, FIXED_EXPLORERS, strict=False):
+        mine = [r for r in rows if r["scope"] == scope and r["explorer"] == explorer]
+        none = next(r for r in mine if r["curve"] == "none")
+        ax.axhspan(100 * none["success_ci_low"], 100 * none["success_ci_high"], color="0.9")
+        ax.axhline(100 * none["success"], color="0.4", ls="--", lw=1, label="no advice")
+        for curve, colour in COLOURS.items():
+            pts = sorted(
+                (r for r in mine if r["curve"] == curve), key=lambda r: r["advice_per_100_steps"]
+            )
+            x = np.array([r["advice_per_100_steps"] for r in pts])
+            y = np.array([100 * r["success"] for r in pts])
+            low = y - np.array([100 * r["success_ci_low"] for r in pts])
+            high = np.array([100 * r["success_ci_high"] for r in pts]) - y
+            ax.errorbar(x, y, yerr=[low, high], color=colour, ms=4, lw=1.2, capsize=2,
+                        marker="s" if curve == "always" else "o", label=curve)  # fmt: skip
+            for r, xi, yi in zip(pts, x, y, strict=True):
+                if r["default"] and curve != "always":
+                    ax.plot(xi, yi, marker="*", ms=13, color=colour, mec="black", mew=0.6)
+        ax.set_title(explorer)
+        ax.grid(alpha=0.3)
+        ax.set(xlim=(-2, 102), ylim=(0, 102))
+    for ax in axes[len(FIXED_EXPLORERS) - 3 : len(FIXED_EXPLORERS)]:
+        ax.set_xlabel("advice per 100 steps")
+        ax.xaxis.set_tick_params(labelbottom=True)
+    for ax in axes[::3]:
+        ax.set_ylabel("success %")
+    handles, labels = axes[0].get_legend_handles_labels()
+    axes[-1].axis("off")
+    axes[-1].legend(handles, labels, loc="center", fontsize=10, title="strategy")
+    where = "the map suite" if scope == "suite" else f"map `{args.maze.stem}`"
+    n_maps = args.maps + 1 if scope == "suite" else 1
+    fig.suptitle(
+        f"Success against advice given, {where}: {n_maps} map(s) x {args.tasks} tasks per "
+        f"point; bars 95% Wilson CI; stars: default levels; grey band: no advice (95% CI)"
+    )
+    return fig
 
 
 def run(args: Args, out: RunDir) -> dict[str, Any]:
     """Run the comparison and write JSON, CSV, markdown and PNG files."""
-    from app.experiments import strategies_report as report
-
     args.check()
     started = time.perf_counter()
     results = run_all(args)
     elapsed = time.perf_counter() - started
-    summary = report.summarise(results, args)
+    summary = summarise(results, args)
     result = {
-        "experiment": "strategies",
-        "settings": asdict(args),
-        "environment": environment(),
-        "elapsed_s": elapsed,
+        **header("strategies", args, elapsed),
         "maps": [map_info(prepare_world(args, s)) for s in results.maps],
         "configs": [{"key": c.key, **asdict(c)} for c in results.configs],
         **summary,
@@ -334,8 +603,8 @@ def run(args: Args, out: RunDir) -> dict[str, Any]:
     out.csv("strategies", summary["rows"])
     out.csv("strategies_maps", summary["map_rows"])
     out.csv("strategies_versus", summary["versus"])
-    out.csv("strategies_tasks", report.task_rows(results))
-    out.markdown("strategies", report.markdown(summary, args, elapsed))
-    for scope, fig in report.plots(summary, args).items():
+    out.csv("strategies_tasks", task_rows(results))
+    out.markdown("strategies", markdown(summary, args, elapsed))
+    for scope, fig in plots(summary, args).items():
         out.figure(f"strategies_{scope}", fig)
     return result

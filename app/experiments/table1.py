@@ -15,7 +15,7 @@ end of another goal (app/experiments/traps.py).
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -25,7 +25,7 @@ from tqdm import tqdm
 from app.agents.explorers import FIXED_EXPLORERS
 from app.experiments.common import CommonArgs, LearningArgs, Setup, prepare, wilson
 from app.experiments.mazeplot import draw_cells
-from app.experiments.output import RunDir, environment, markdown_table
+from app.experiments.output import RunDir, header, markdown_table
 from app.experiments.runs import FixedBatch, LearningBatch, run_fixed_tasks, run_learning_tasks
 
 #: The paper's Table I (mean reward without -> with advice), quoted for comparison only.
@@ -38,8 +38,6 @@ PAPER_TABLE1: dict[str, tuple[int, int]] = {
     "optimal": (1000, 1000),
 }
 ROW_ORDER = ("random", "random-avoid", "left", "bug", "q-learning", "optimal")
-ONE_SHOT_STREAM = "one-shot"  # Figure 5 draws the same runs
-LEARNING_STREAM = "learning"  # shared with Figure 6
 
 
 @dataclass
@@ -58,19 +56,7 @@ def learning_runs(
 ) -> dict[bool, LearningBatch]:
     """Q-learning over every task, without and with advice (Figure 6 and Table I)."""
     return {
-        advised: run_learning_tasks(
-            setup,
-            advised,
-            seed=args.seed,
-            stream=LEARNING_STREAM,
-            params=largs.q_params(),
-            episodes=largs.episodes,
-            max_steps=largs.episode_steps,
-            keep_history=largs.q_keep_history,
-            kappa=args.kappa,
-            window=args.window,
-            progress=bar,
-        )
+        advised: run_learning_tasks(setup, advised, args, largs, progress=bar)
         for advised in (False, True)
     }
 
@@ -137,16 +123,7 @@ def run(
     with tqdm(total=total, desc="table1", unit="task", disable=not args.progress) as bar:
         batches = {
             (name, advised): run_fixed_tasks(
-                setup,
-                name,
-                advised,
-                seed=args.seed,
-                stream=ONE_SHOT_STREAM,
-                kappa=args.kappa,
-                window=args.window,
-                max_steps=args.steps,
-                last_n=args.last_n,
-                progress=bar,
+                setup, name, advised, args, args.steps, last_n=args.last_n, progress=bar
             )
             for name in FIXED_EXPLORERS
             for advised in (False, True)
@@ -177,10 +154,7 @@ def run(
                 )
     goal_rows = per_goal(setup, batches, learning)
     result = {
-        "experiment": "table1",
-        "settings": asdict(args),
-        "environment": environment(),
-        "elapsed_s": time.perf_counter() - started,
+        **header("table1", args, time.perf_counter() - started),
         "goals": [list(setup.domain.cell(g)) for g in setup.domain.goals],
         "task_goals": [setup.goal_index(int(g)) for g in setup.goals],
         "rows": rows,

@@ -11,8 +11,8 @@ from fastapi import Depends, Path
 from fastapi.security import APIKeyHeader, HTTPAuthorizationCredentials, HTTPBearer
 from starlette.requests import HTTPConnection
 
-from app.service.domains import DomainState
-from app.service.registry import LiveSession
+from app.service.data.domains import DomainState
+from app.service.live.registry import LiveSession
 from app.service.schemas import NAME_PATTERN
 from app.service.security import AuthError, check_admin, check_session_token
 from app.service.state import ServiceState

@@ -18,9 +18,9 @@ from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from app.service.domains import DomainNotFound
-from app.service.events import BadInput, describe_errors
-from app.service.registry import SessionNotFound
+from app.service.data.domains import DomainNotFound
+from app.service.live.registry import SessionNotFound
+from app.service.problems import BadInput, describe_errors
 from app.service.security import AuthError
 
 

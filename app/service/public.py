@@ -2,17 +2,13 @@
 
 from __future__ import annotations
 
-from dataclasses import asdict
-
 import numpy as np
 
 from app.advice.advisor import Decision
-from app.advice.goals import GoalAwareAdvisor
-from app.advice.strategies import RuleAdvisor
 from app.domain.grid import ACTIONS, GridDomain
-from app.service.domains import DomainState
-from app.service.encode import decision_dict
-from app.service.registry import LiveSession, SessionSnapshot
+from app.service.data.domains import DomainState
+from app.service.data.store import POOLED
+from app.service.live.registry import LiveSession, SessionSnapshot
 from app.service.schemas import (
     AdviceGiven,
     AdvicePublic,
@@ -24,9 +20,8 @@ from app.service.schemas import (
     PriorPublic,
     SessionCreated,
     SessionPublic,
-    StrategyParams,
 )
-from app.service.store import POOLED
+from app.service.wire.encode import decision_dict
 
 
 def _cell(domain: GridDomain, state: int) -> tuple[int, int]:
@@ -68,7 +63,7 @@ def session_created(s: LiveSession, decision: Decision) -> SessionCreated:
     return SessionCreated(
         session_id=s.id, token=s.token, domain=s.domain.name, agent_type=s.agent_type,
         prior_table=s.table_key, kappa=s.advisor.kappa, window=s.advisor.window,
-        strategy=s.strategy, params=_params(s),
+        strategy=s.advisor.strategy, params=s.advisor.params(),
         decision=decision_public(decision, s.domain.domain),
     )  # fmt: skip
 
@@ -76,7 +71,8 @@ def session_created(s: LiveSession, decision: Decision) -> SessionCreated:
 def session_public(s: SessionSnapshot) -> SessionPublic:
     return SessionPublic(
         session_id=s.id, domain=s.domain, agent_type=s.agent_type, prior_table=s.table_key,
-        kappa=s.kappa, window=s.window, strategy=s.strategy, goals=_goals(s), steps=s.steps,
+        kappa=s.kappa, window=s.window, strategy=s.strategy, params=s.params, goals=_goals(s),
+        steps=s.steps,
         position=s.position, p_normal=s.p_normal,
         advice_count=s.advice_count, total_cost=s.total_cost, benefit=s.benefit,
         advice_per_100=s.advice_per_100, idle_seconds=s.idle_seconds, created_at=s.created_at,
@@ -97,15 +93,6 @@ def overview_session(s: SessionSnapshot) -> OverviewSession:
         total_cost=s.total_cost, advice_per_100=s.advice_per_100, last_advice=last,
         path=s.path, p_normal_history=s.p_history,
     )  # fmt: skip
-
-
-def _params(s: LiveSession) -> StrategyParams:
-    adv = s.advisor
-    if isinstance(adv, RuleAdvisor):
-        return StrategyParams(**asdict(adv.params))
-    if isinstance(adv, GoalAwareAdvisor):
-        return StrategyParams(beta=adv.beta)
-    return StrategyParams()
 
 
 def _goals(s: SessionSnapshot) -> list[GoalBelief] | None:

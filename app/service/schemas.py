@@ -7,11 +7,15 @@ the JSON bytes without building model objects.
 
 from __future__ import annotations
 
+import math
+from dataclasses import fields
 from datetime import datetime
-from typing import Annotated, Literal, NotRequired
+from typing import TYPE_CHECKING, Annotated, Any, Literal, NotRequired
 
-from pydantic import BaseModel, ConfigDict, Field, StringConstraints, with_config
+from pydantic import BaseModel, ConfigDict, Field, StringConstraints, create_model, with_config
 from typing_extensions import TypedDict
+
+from app.advice.strategies import StrategyParams as CoreStrategyParams
 
 NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
 NAME_RULE = "1-64 characters: letters, digits, '_', '.', '-' (starting with a letter or digit)"
@@ -31,6 +35,10 @@ ActionIn = Annotated[
     Field(description='A move: "N", "E", "S", "W" (or 0-3 in that order).'),
 ]
 ACTION_BRANCHES = frozenset({"literal['N','E','S','W']", "constrained-int"})
+#: an action as the schema reads it -> its code (-1: none given)
+ACTION_CODE: dict[str | int | None, int] = {
+    "N": 0, "E": 1, "S": 2, "W": 3, 0: 0, 1: 1, 2: 2, 3: 3, None: -1,
+}  # fmt: skip
 ACTION_RULE = "an action is 'N', 'E', 'S', 'W' or an integer 0-3"
 Name = Annotated[str, StringConstraints(pattern=NAME_PATTERN), Field(examples=["default"])]
 AgentType = Annotated[
@@ -156,31 +164,33 @@ STRATEGY_DOC = (
 )
 
 
-class StrategyParams(Strict):
-    """Parameters of the advising strategy; each strategy reads only its own."""
+def _strategy_params_fields() -> dict[str, Any]:
+    """The request's strategy parameters, made from the core's one definition
+    (:class:`app.advice.strategies.StrategyParams`: names, defaults, bounds, who reads them)."""
+    out: dict[str, Any] = {}
+    for f in fields(CoreStrategyParams):
+        m = f.metadata
+        kind: type = int if f.type == "int" else float
+        bounds: dict[str, Any] = {"ge": m["low"]}
+        if m["high"] != math.inf:
+            bounds["le"] = m["high"]
+        if kind is float:
+            bounds["allow_inf_nan"] = False
+        doc = f"{m['doc']} Default {f.default}."
+        out[f.name] = (kind | None, Field(None, strict=True, description=doc, **bounds))
+    return out
 
-    n_steps: int = Field(
-        20, strict=True, ge=0, lt=2**31, description="early: advise at the first n_steps decisions."
+
+if TYPE_CHECKING:  # the model is made at import time; type checkers see its base
+    StrategyParams = Strict
+else:
+    StrategyParams = create_model(
+        "StrategyParams",
+        __base__=Strict,
+        __doc__="Parameters of the advising strategy; a strategy refuses any it does not read "
+        "(422). Omitted ones take their defaults.",
+        **_strategy_params_fields(),
     )
-    threshold: float = Field(
-        0.5, strict=True, ge=0.0, allow_inf_nan=False,
-        description="importance: KL[theta_s || uniform] >= threshold (nats); mistake: "
-        "theta_s(a) < threshold.",
-    )  # fmt: skip
-    rate: float = Field(
-        0.1,
-        strict=True,
-        ge=0.0,
-        le=1.0,
-        allow_inf_nan=False,
-        description="random: P(advise) per decision.",
-    )
-    beta: float = Field(
-        0.0, strict=True, ge=0.0, le=1.0, allow_inf_nan=False,
-        description="goal_aware: weight of each goal's likelihood of the window (0: ruling "
-        "goals out only).",
-    )  # fmt: skip
-    seed: int = Field(0, strict=True, ge=0, le=2**32 - 1, description="random: seed of its draws.")
 
 
 class SessionCreate(Strict):
@@ -189,7 +199,15 @@ class SessionCreate(Strict):
     agent_type: AgentType | None = None
     start: Cell | None = Field(None, description="Start cell (default: the domain's start).")
     strategy: StrategyName = Field("paper", description=STRATEGY_DOC)
-    params: StrategyParams | None = Field(None, description="The strategy's parameters.")
+    params: StrategyParams | None = Field(
+        None, description="The strategy's parameters: only those it reads (see StrategyParams)."
+    )
+
+
+ParamsInForce = Annotated[
+    dict[str, int | float],
+    Field(description="The parameters the strategy reads, with the values in force."),
+]
 
 
 class GoalBelief(BaseModel):
@@ -243,17 +261,17 @@ class SessionCreated(BaseModel):
     kappa: float
     window: int
     strategy: StrategyName
-    params: StrategyParams
+    params: ParamsInForce
     decision: DecisionPublic
 
 
-class SessionPublic(BaseModel):
+class SessionBase(BaseModel):
+    """What every view of a live session shows."""
+
     session_id: str
     domain: str
     agent_type: str | None
-    prior_table: str = Field(description="The prior table advising it ('*' = pooled).")
     kappa: float
-    window: int
     strategy: StrategyName
     goals: list[GoalBelief] | None = Field(description="goal_aware sessions only, else null.")
     steps: int
@@ -261,8 +279,16 @@ class SessionPublic(BaseModel):
     p_normal: float
     advice_count: int
     total_cost: float
-    benefit: float
     advice_per_100: float
+
+
+class SessionPublic(SessionBase):
+    """A session's figures, for its token or the admin key."""
+
+    prior_table: str = Field(description="The prior table advising it ('*' = pooled).")
+    window: int
+    params: ParamsInForce
+    benefit: float
     idle_seconds: float
     created_at: datetime
 
@@ -288,19 +314,9 @@ class OverviewDomain(BaseModel):
     sessions: int
 
 
-class OverviewSession(BaseModel):
-    session_id: str
-    domain: str
-    agent_type: str | None
-    kappa: float
-    strategy: StrategyName
-    goals: list[GoalBelief] | None = Field(description="goal_aware sessions only, else null.")
-    steps: int
-    position: Cell
-    p_normal: float
-    advice_count: int
-    total_cost: float
-    advice_per_100: float
+class OverviewSession(SessionBase):
+    """A live session as the public overview shows it (no token, no parameters)."""
+
     last_advice: AdviceGiven | None
     path: list[Cell] = Field(description="Recent cells, oldest first.")
     p_normal_history: list[float] = Field(description="Recent P(M1 | H), oldest first.")

@@ -18,10 +18,10 @@ from fastapi import APIRouter, FastAPI, Request
 from pydantic import BaseModel, Field
 
 from app.service.config import Settings
-from app.service.domains import DomainState
-from app.service.registry import SessionSnapshot
+from app.service.data.domains import DomainState
+from app.service.data.store import POOLED
+from app.service.live.registry import SessionSnapshot
 from app.service.state import ServiceState
-from app.service.store import POOLED
 from app.viewer.state import DomainView, Feed, SessionView, Snapshot
 
 if TYPE_CHECKING:  # viser is imported only when the viewer starts

@@ -1,5 +1,6 @@
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -145,6 +146,41 @@ def test_save_load_round_trip(tmp_path: Path) -> None:
         np.testing.assert_array_equal(back.counts(t), prior.counts(t))
 
 
+def test_from_counts_restores_what_stored_counts_gives() -> None:
+    prior = ActionPrior(alpha0=0.7)
+    prior.partial_fit([np.array([[0, 1], [2, 3]])] * 2, n_states=5, agent_type="staff")
+    prior.partial_fit([np.array([[4, 0]])], agent_type="visitor")
+    prior.partial_fit([np.array([[1, 2]])])
+    back = ActionPrior.from_counts(0.7, prior.stored_counts())
+    assert back.n_trajectories_ == prior.n_trajectories_ == {"*": 4, "staff": 2, "visitor": 1}
+    for t in (None, "staff", "visitor"):
+        np.testing.assert_array_equal(back.theta(t), prior.theta(t))
+    # without the pooled table it is the sum of the typed ones
+    typed = {k: v for k, v in prior.stored_counts().items() if k != "*"}
+    pooled = ActionPrior.from_counts(0.7, typed)
+    assert pooled.n_trajectories_["*"] == 3
+    np.testing.assert_array_equal(
+        pooled.counts(), 0.7 + prior.increments_["staff"] + prior.increments_["visitor"]
+    )
+
+
+@pytest.mark.parametrize(
+    ("tables", "n_states", "message"),
+    [
+        ({"*": (1, np.zeros((3, 4)))}, 4, "table '*': counts of shape (3, 4), expected (4, 4)"),
+        ({"staff": (1, -np.ones((2, 4)))}, None, "table 'staff': counts and trajectories must"),
+        ({"*": (-1, np.zeros((2, 4)))}, None, "counts and trajectories must be >= 0"),
+        ({"*": (1, np.zeros((2, 4))), "a": (1, np.zeros((3, 4)))}, None, "n_states is needed"),
+        ({}, None, "n_states is needed"),
+    ],
+)
+def test_from_counts_says_what_does_not_fit(
+    tables: dict[str, tuple[int, np.ndarray]], n_states: int | None, message: str
+) -> None:
+    with pytest.raises(ValueError, match=re.escape(message)):
+        ActionPrior.from_counts(1.0, tables, n_states)
+
+
 @pytest.mark.parametrize(
     ("make", "message"),
     [
@@ -159,6 +195,7 @@ def test_save_load_round_trip(tmp_path: Path) -> None:
         (lambda: ActionPrior().fit([], 3).partial_fit([], n_states=4), "prior has 3 states"),
         (lambda: ActionPrior().fit_policies(np.ones((2, 3))), "shape"),
         (lambda: ActionPrior().fit_policies(-np.ones((3, 4))), "non-negative"),
+        (lambda: ActionPrior().fit([], 3).partial_fit_policies(np.ones((1, 1, 3, 4))), "shape"),
     ],
 )
 def test_prior_rejects_bad_input_with_message(make, message: str) -> None:  # type: ignore[no-untyped-def]

@@ -8,9 +8,9 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from app.advice.advisor import Advisor, kl_divergence
-from app.advice.goals import GoalAwareAdvisor, GoalPriors
+from app.advice.goals import GoalAwareAdvisor
 from app.advice.models import AdviceTables
-from app.advice.priors import ActionPrior
+from app.advice.priors import ActionPrior, GoalPriors
 from app.advice.strategies import STRATEGIES, RuleAdvisor, StrategyParams, make_advisor
 
 
@@ -155,9 +155,11 @@ def test_make_advisor_builds_each_strategy_and_rejects_unknown() -> None:
 @pytest.mark.parametrize(
     ("params", "message"),
     [
-        (StrategyParams(n_steps=-1), "n_steps must be >= 0"),
-        (StrategyParams(threshold=math.nan), "threshold must be a finite number"),
-        (StrategyParams(rate=1.5), "at most 1"),
+        (StrategyParams(n_steps=-1), "n_steps must be a whole number from 0 to 2147483647"),
+        (StrategyParams(n_steps=2.5), "n_steps must be a whole number, got 2.5"),  # type: ignore[arg-type]
+        (StrategyParams(threshold=math.nan), "threshold must be a finite number >= 0"),
+        (StrategyParams(rate=1.5), "rate must be a finite number from 0.0 to 1.0, got 1.5"),
+        (StrategyParams(seed=2**32), "seed must be a whole number from 0 to 4294967295"),
     ],
 )
 def test_strategy_params_are_checked(params: StrategyParams, message: str) -> None:

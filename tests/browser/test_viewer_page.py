@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import subprocess
 import sys
+from typing import Any
 
 import numpy as np
 import pytest
 from playwright.sync_api import Page, expect
 
 from tests.browser.conftest import Service, screenshot, wait_until
+from tests.viewer.conftest import choose
 
 pytestmark = pytest.mark.browser
 
@@ -35,12 +37,13 @@ def test_viewer_page_connects_and_shows_maze_prior_and_sessions(
     simulated -= before
     assert len(simulated) == 4
     viewer = service.viewer
-    assert viewer.server is not None
+    server = viewer.server
+    assert server is not None
     assert service.http.get("/viewer").json()["port"] == viewer.port
 
     page.goto(f"http://127.0.0.1:{viewer.port}/")
     expect(page.get_by_text("Connecting")).to_have_count(0, timeout=30_000)
-    wait_until(lambda: len(viewer.server.get_clients()) == 1, what="the viewer to see the browser")
+    wait_until(lambda: len(server.get_clients()) == 1, what="the viewer to see the browser")
     wait_until(
         lambda: (
             viewer.scene is not None and set(sessions) | simulated <= set(viewer.scene.session_ids)
@@ -50,11 +53,11 @@ def test_viewer_page_connects_and_shows_maze_prior_and_sessions(
     scene = viewer.scene
     assert scene is not None
     domain = scene.domain
-    names = set(viewer.server.scene._handle_from_node_name)
+    names = set(server.scene._handle_from_node_name)
     assert names >= SCENE_NODES, SCENE_NODES - names
     assert scene.walls.batched_positions.shape == (int(domain.walls.sum()), 3)
     assert scene.prior_arrows.batched_positions.shape == (4 * domain.n_states, 3)
-    drawn = scene.session_nodes
+    drawn: dict[str, Any] = scene.session_nodes  # handles of several kinds
     assert drawn["/markers/points"].points.shape[0] == len(scene.session_ids) >= 7
 
     # pick a session in the GUI (server side: the browser's panel follows). The pick wakes the
@@ -62,7 +65,7 @@ def test_viewer_page_connects_and_shows_maze_prior_and_sessions(
     # renders what the pump sent
     controls = viewer.controls
     assert controls is not None
-    controls.session.value = sessions[2]
+    choose(controls.session, sessions[2])
     wait_until(
         lambda: controls.plot.visible and f"**{sessions[2]}**" in controls.stats.content,
         what="the pump to show the picked session",
@@ -71,7 +74,7 @@ def test_viewer_page_connects_and_shows_maze_prior_and_sessions(
     expect(page.get_by_text("steps 9", exact=False)).to_be_visible()
 
     # the browser really renders the scene: walls, floor and arrows make a varied image
-    client = next(iter(viewer.server.get_clients().values()))
+    client = next(iter(server.get_clients().values()))
     image = client.get_render(240, 320, timeout=60.0)
     assert image.shape[:2] == (240, 320)
     assert np.asarray(image, dtype=np.float64).std() > 10.0

@@ -117,7 +117,7 @@ def test_grid_loader_rejects_bad_map_with_message(rows: list[str], message: str)
 
 def test_grid_loader_rejects_single_string() -> None:
     with pytest.raises(MapError, match="list of row strings"):
-        validate_map("S.G")  # type: ignore[arg-type]
+        validate_map("S.G")
 
 
 def test_grid_loader_reports_line_and_column_attributes() -> None:

@@ -12,7 +12,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 from typer.testing import CliRunner
 
-from app.__main__ import cli
+from app.cli import cli
 from app.domain.generate import generate_maze
 from app.domain.grid import GridDomain
 from app.experiments import difficulty, figure5, figure6, figure7, table1

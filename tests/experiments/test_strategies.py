@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from app.__main__ import cli
+from app.cli import cli
 from app.domain.generate import generate_maze
-from app.experiments import strategies
+from app.experiments import strategies, strategy_suite
 from app.experiments.output import RunDir
-from app.experiments.strategies_report import paired
+from app.experiments.strategies import paired
 
 TINY = {"tasks": 2, "maps": 2, "map_size": 9, "steps": 120, "workers": 1, "progress": False}
 
@@ -32,7 +32,7 @@ def small_maze(tmp_path_factory: pytest.TempPathFactory) -> Path:
 @pytest.fixture(scope="module")
 def tiny_run(small_maze: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict]:  # type: ignore[type-arg]
     out = tmp_path_factory.mktemp("strategies")
-    args = strategies.Args(maze=small_maze, **TINY)  # type: ignore[arg-type]
+    args = strategy_suite.Args(maze=small_maze, **TINY)  # type: ignore[arg-type]
     return out, strategies.run(args, RunDir(out))
 
 
@@ -80,11 +80,11 @@ def test_strategies_rows_are_consistent(tiny_run: tuple[Path, dict]) -> None:  #
 
 
 def test_strategies_seeded_runs_are_reproducible(small_maze: Path, tmp_path: Path) -> None:
-    args = strategies.Args(maze=small_maze, **{**TINY, "maps": 1})  # type: ignore[arg-type]
+    args = strategy_suite.Args(maze=small_maze, **{**TINY, "maps": 1})  # type: ignore[arg-type]
     args.goal_kappas, args.kappas, args.betas = (0.5,), (0.5,), ()
-    first = strategies.run_all(args)
-    again = strategies.run_all(replace(args, workers=2))  # worker processes give the same
-    other = strategies.run_all(replace(args, seed=1))
+    first = strategy_suite.run_all(args)
+    again = strategy_suite.run_all(replace(args, workers=2))  # worker processes give the same
+    other = strategy_suite.run_all(replace(args, seed=1))
     for explorer, by_key in first.data.items():
         for key, measures in by_key.items():
             for name, values in measures.items():
@@ -97,11 +97,11 @@ def test_strategies_seeded_runs_are_reproducible(small_maze: Path, tmp_path: Pat
 
 
 def test_strategies_configs_include_every_default_level() -> None:
-    args = strategies.Args(kappa=0.6, kappas=(0.25,), goal_kappas=(0.0,), betas=(0.0, 0.5))
-    keys = [c.key for c in strategies.configs(args)]
+    args = strategy_suite.Args(kappa=0.6, kappas=(0.25,), goal_kappas=(0.0,), betas=(0.0, 0.5))
+    keys = [c.key for c in strategy_suite.configs(args)]
     assert keys[0] == "none" and "paper@0.6" in keys and "goal_aware@0.6" in keys
     assert "goal_aware beta=0.5@0.6" in keys and "goal_aware beta=0@0.6" not in keys
-    defaults = [c.key for c in strategies.configs(args) if c.default]
+    defaults = [c.key for c in strategy_suite.configs(args) if c.default]
     assert defaults == [
         "none",
         "paper@0.6",

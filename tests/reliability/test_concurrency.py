@@ -35,8 +35,8 @@ import websockets
 from app.advice.advisor import Advisor
 from app.advice.models import AdviceTables
 from app.domain.grid import ACTIONS, GridDomain
-from app.service.encode import decision_dict
-from app.service.store import Store
+from app.service.data.store import Store
+from app.service.wire.encode import decision_dict
 from tests.client.test_client import run_async
 from tests.reliability.conftest import Live, server_errors
 from tests.service.conftest import TINY
@@ -75,7 +75,8 @@ def plan(i: int, grid: GridDomain, tables: AdviceTables) -> Explorer:
     start_decision = wire(core.start(s), grid)
     frames, expected, n = [], [], 0
     for _ in range(FRAMES):
-        events, answers = [], []
+        events: list[dict[str, Any]] = []
+        answers = []
         for _ in range(int(rng.integers(1, MAX_BATCH + 1))):
             a = int(rng.integers(4))
             s2 = int(grid.next_state[s, a])

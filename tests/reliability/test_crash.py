@@ -34,7 +34,7 @@ import numpy as np
 
 from app.advice.priors import ActionPrior
 from app.domain.grid import ACTIONS, GridDomain
-from app.service.store import Store, Trajectory
+from app.service.data.store import Store, Trajectory
 from tests.reliability.conftest import Live, server_errors, start, stop
 from tests.service.conftest import TINY
 

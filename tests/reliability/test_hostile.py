@@ -21,8 +21,8 @@ import httpx
 import pytest
 import websockets
 
-from app.service.domains import DomainCatalog
-from app.service.store import Store
+from app.service.data.domains import DomainCatalog
+from app.service.data.store import Store
 from tests.client.test_client import run_async
 from tests.reliability.conftest import Live, server_errors
 from tests.service.conftest import TINY

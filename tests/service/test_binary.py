@@ -16,8 +16,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from starlette.websockets import WebSocketDisconnect
 
-from app.agents.experts import expert_trajectory
 from app.domain.grid import ACTIONS
+from app.domain.paths import expert_trajectory
 from app.protocol import HEADER, MAGIC, FrameError, pack, unpack
 from app.service.main import create_app
 from app.service.state import ServiceState
@@ -58,7 +58,8 @@ def test_binary_frames_carry_the_json_decisions_and_leave_the_same_session(
     client, service = live
     grid = service.catalog.get("default").domain
     rng = np.random.default_rng(seed)
-    body = {"kappa": kappa, "window": window, "strategy": strategy, "params": {"seed": 3}}
+    params = {"seed": 3} if strategy == "random" else {}
+    body = {"kappa": kappa, "window": window, "strategy": strategy, "params": params}
     text_ws, binary_ws, ids = streams(client, body)
     s = grid.start
     with text_ws, binary_ws:

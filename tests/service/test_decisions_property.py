@@ -22,11 +22,11 @@ from hypothesis import strategies as st
 from app.advice.advisor import Advisor, Decision
 from app.advice.models import AdviceTables
 from app.advice.priors import ActionPrior
-from app.agents.experts import expert_trajectory
 from app.domain.grid import ACTIONS
-from app.service.encode import decision_dict
+from app.domain.paths import expert_trajectory
 from app.service.main import create_app
 from app.service.state import ServiceState
+from app.service.wire.encode import decision_dict
 from tests.service.conftest import make_settings
 
 

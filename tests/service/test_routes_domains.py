@@ -8,8 +8,8 @@ import numpy as np
 from fastapi.testclient import TestClient
 
 from app.domain.grid import GridDomain
+from app.service.data.store import POOLED
 from app.service.state import ServiceState
-from app.service.store import POOLED
 from tests.service.conftest import TINY, open_session, put_tiny
 
 DOMAIN = GridDomain.from_strings(TINY)

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
+from app.service.data.store import POOLED
 from app.service.state import ServiceState
-from app.service.store import POOLED
 from tests.service.conftest import open_session
 
 E = {"state": [28, 0], "action": "E"}

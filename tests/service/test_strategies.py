@@ -11,8 +11,9 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Iterator
+from dataclasses import fields
 from pathlib import Path
-from typing import Any
+from typing import Any, get_args
 
 import numpy as np
 import pytest
@@ -20,12 +21,13 @@ from fastapi.testclient import TestClient
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from app.advice.goals import GoalPriors
-from app.advice.strategies import STRATEGIES, StrategyParams, make_advisor
-from app.agents.experts import expert_trajectory
+from app.advice.priors import GoalPriors
+from app.advice.strategies import READS, STRATEGIES, StrategyParams, make_advisor
 from app.domain.grid import ACTIONS, GridDomain
+from app.domain.paths import expert_trajectory
 from app.protocol import unpack
 from app.service.main import create_app
+from app.service.schemas import StrategyName
 from app.service.state import ServiceState
 from tests.service.conftest import make_settings, open_session
 from tests.service.test_decisions_property import core_tables, expected_json
@@ -66,7 +68,7 @@ def moves(grid: GridDomain, s: int, rng: np.random.Generator) -> list[int]:
     goals' priors disagree, so a goal posterior moves), with a few random moves mixed in."""
     n = int(rng.integers(0, 80))
     if rng.random() < 0.5:
-        return rng.integers(0, 4, n).tolist()
+        return [int(a) for a in rng.integers(0, 4, n)]
     goal = grid.goals[int(rng.integers(len(grid.goals)))]
     path = [int(a) for a in expert_trajectory(grid, s, goal, rng)[:, 1].tolist()]
     noise = rng.random(len(path)) < 0.1
@@ -103,11 +105,13 @@ def test_strategy_sessions_decide_as_the_core(
     grid = service.catalog.get("default").domain
     rng = np.random.default_rng(seed)
     start = grid.start if rng.random() < 0.5 else int(rng.integers(grid.n_states))
+    given = {name: params[name] for name in READS[strategy]}  # a strategy reads only its own
     sid, auth, created = open_session(
         client, kappa=kappa, window=window, start=grid.cell(start), strategy=strategy,
-        params=params,
+        params=given,
     )  # fmt: skip
     assert created["strategy"] == strategy
+    assert created["params"] == given  # exactly the parameters in force
     core = make_advisor(
         strategy, core_tables(service), kappa, window, StrategyParams(**params),
         core_goal_priors(service),
@@ -121,9 +125,7 @@ def test_strategy_sessions_decide_as_the_core(
         for _ in range(int(rng.integers(1, 5))):
             if rng.random() < 0.3:  # new expert data: the session follows it from now on
                 add_expert(client, service, grid, rng)
-                core.tables = core_tables(service)
-                if hasattr(core, "use_priors"):
-                    core.use_priors(core_goal_priors(service))
+                core.use_tables(core_tables(service), core_goal_priors(service))
             events, expected = [], []
             for a in moves(grid, s, rng):
                 s2 = int(grid.next_state[s, a])
@@ -143,6 +145,7 @@ def test_strategy_sessions_decide_as_the_core(
             assert got == expected
     summary = client.get(f"/sessions/{sid}", headers=auth).json()
     assert summary["strategy"] == strategy and summary["steps"] == core.steps
+    assert summary["params"] == given
     assert client.delete(f"/sessions/{sid}", headers=auth).status_code == 200
 
 
@@ -176,9 +179,21 @@ def test_sessions_default_to_the_papers_rule(live: tuple[TestClient, ServiceStat
     client, _ = live
     sid, auth, created = open_session(client)
     assert created["strategy"] == "paper"
-    assert created["params"] == StrategyParams().__dict__
+    assert created["params"] == {}  # the paper's rule reads no parameter besides kappa
     summary = client.get(f"/sessions/{sid}", headers=auth).json()
     assert summary["strategy"] == "paper" and summary["goals"] is None
+    assert summary["params"] == {}
+
+
+def test_a_session_states_the_parameters_in_force_with_their_defaults(
+    live: tuple[TestClient, ServiceState],
+) -> None:
+    client, _ = live
+    sid, auth, created = open_session(client, strategy="random", params={"rate": 0.3})
+    assert created["params"] == {"rate": 0.3, "seed": StrategyParams().seed}
+    assert client.get(f"/sessions/{sid}", headers=auth).json()["params"] == created["params"]
+    _, _, early = open_session(client, strategy="early")
+    assert early["params"] == {"n_steps": StrategyParams().n_steps}
 
 
 @pytest.mark.parametrize(
@@ -191,6 +206,9 @@ def test_sessions_default_to_the_papers_rule(live: tuple[TestClient, ServiceStat
         ({"strategy": "early", "params": {"n_steps": 2.5}}, "n_steps"),
         ({"strategy": "mistake", "params": {"threshold": "high"}}, "threshold"),
         ({"strategy": "random", "params": {"speed": 3}}, "speed"),
+        ({"strategy": "goal_aware", "params": {"n_steps": 7}}, "goal_aware does not read n_steps"),
+        ({"params": {"beta": 0.5}}, "paper does not read beta"),
+        ({"strategy": "always", "params": {"rate": 0.5}}, "always does not read rate"),
         ({"params": []}, "params"),
     ],
 )
@@ -259,3 +277,22 @@ def test_parameters_are_numbers_not_booleans(
     client, _ = live
     r = client.post("/domains/default/sessions", json={"params": {name: False}})
     assert r.status_code == 422 and name in r.text
+
+
+def test_the_schema_s_strategies_and_parameters_are_the_core_s(
+    live: tuple[TestClient, ServiceState],
+) -> None:
+    """One source of truth: the request schema is made from the core's definitions."""
+    client, _ = live
+    assert get_args(StrategyName) == STRATEGIES
+    schema = client.get("/openapi.json").json()["components"]["schemas"]["StrategyParams"]
+    core = {f.name: f for f in fields(StrategyParams)}
+    assert set(schema["properties"]) == set(core)
+    assert schema["additionalProperties"] is False
+    for name, f in core.items():
+        prop = next(p for p in schema["properties"][name]["anyOf"] if p["type"] != "null")
+        assert prop["type"] == ("integer" if f.type == "int" else "number")
+        assert prop["minimum"] == f.metadata["low"]
+        assert prop.get("maximum", math.inf) == f.metadata["high"]
+        assert f"Default {f.default}." in schema["properties"][name]["description"]
+    assert {s for names in READS.values() for s in names} == set(core)  # each is read by one

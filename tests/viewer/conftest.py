@@ -5,6 +5,7 @@ from __future__ import annotations
 import socket
 import time
 from collections.abc import Callable, Iterator
+from typing import Any
 
 import numpy as np
 import pytest
@@ -25,6 +26,12 @@ def wait_until(condition: Callable[[], object], timeout: float = 20.0) -> None:
         if time.monotonic() > deadline:
             pytest.fail(f"timed out after {timeout}s waiting for {condition}")
         time.sleep(0.05)
+
+
+def choose(handle: Any, value: object) -> None:
+    """Set a GUI input's value from code, as a browser's change arrives (viser's typing gives
+    ``value`` no setter for the checker, though it has one)."""
+    handle.value = value
 
 
 def free_port() -> int:

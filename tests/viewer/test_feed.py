@@ -36,9 +36,9 @@ def client(tmp_path_factory: pytest.TempPathFactory) -> Iterator[TestClient]:
         yield c
 
 
-def walk(client: TestClient, moves: str) -> tuple[str, dict[str, str]]:
+def walk(client: TestClient, moves: str, kappa: float = 0.5) -> tuple[str, dict[str, str]]:
     """A new session that makes ``moves`` one event at a time; its id and auth header."""
-    created = client.post("/domains/default/sessions", json={"kappa": 0.5})
+    created = client.post("/domains/default/sessions", json={"kappa": kappa})
     assert created.status_code == 201
     body = created.json()
     auth = {"Authorization": f"Bearer {body['token']}"}
@@ -63,7 +63,7 @@ def test_feed_snapshot_holds_domains_with_their_prior(client: TestClient) -> Non
 
 
 def test_feed_snapshot_holds_each_session_as_the_service_sees_it(client: TestClient) -> None:
-    sid, auth = walk(client, "EEEWW")
+    sid, auth = walk(client, "EEEWW", kappa=0.0)  # kappa 0: advised at every decision
     snap = ServiceFeed(client.app.state.service)()  # type: ignore[attr-defined]
     mine = next(s for s in snap.sessions if s.session_id == sid)
     summary = client.get(f"/sessions/{sid}", headers=auth).json()
@@ -74,9 +74,10 @@ def test_feed_snapshot_holds_each_session_as_the_service_sees_it(client: TestCli
     assert mine.total_cost == pytest.approx(summary["total_cost"])
     assert [list(c) for c in mine.path] == [[28, 0], [28, 1], [28, 2], [28, 3], [28, 2], [28, 1]]
     assert len(mine.p_normal_history) == 6
-    assert len(mine.advice) <= mine.advice_count
-    for given in mine.advice:
-        assert sum(given.probabilities) == pytest.approx(1.0)
+    assert len(mine.advice) == mine.advice_count == 6
+    for (_, cell, probabilities), at in zip(mine.advice, mine.path, strict=True):
+        assert tuple(cell) == tuple(at) and sum(probabilities) == pytest.approx(1.0)
+    assert [step for step, _, _ in mine.advice] == list(range(6))
 
 
 def test_feed_prior_version_goes_up_when_trajectories_arrive(client: TestClient) -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Iterator
+from typing import Any
 
 import numpy as np
 import pytest
@@ -40,9 +41,11 @@ def test_scene_prior_arrows_follow_theta(
 ) -> None:
     arrows = scene.prior_arrows
     assert arrows.batched_positions.shape == (domain.n_states * N_ACTIONS, 3)
+    assert arrows.batched_scales is not None
     np.testing.assert_allclose(arrows.batched_scales[:, 0], geo.ARROW_REACH * theta.ravel(), 1e-6)
     new = np.roll(theta, 1, axis=1)
     scene.set_prior(new)
+    assert arrows.batched_scales is not None and arrows.batched_opacities is not None
     np.testing.assert_allclose(arrows.batched_scales[:, 0], geo.ARROW_REACH * new.ravel(), 1e-6)
     np.testing.assert_allclose(arrows.batched_opacities, geo.arrow_opacity(new.ravel()), 1e-6)
 
@@ -52,7 +55,8 @@ def test_scene_shading_marks_exactly_the_advised_cells(scene: MazeScene, theta: 
         count = scene.shade(theta, kappa, p)
         expected = geo.advised_cells(theta, kappa, p)
         assert count == int(expected.sum())
-        assert np.array_equal(scene.shading.batched_opacities > 0, expected)
+        opacities = scene.shading.batched_opacities
+        assert opacities is not None and np.array_equal(opacities > 0, expected)
     assert scene.shade(theta, 0.0) == len(theta)  # kappa = 0: advise everywhere
 
 
@@ -62,7 +66,7 @@ def test_scene_draws_sessions_and_removes_them(
     rng = np.random.default_rng(1)
     sessions = [walk(domain, theta, f"s{i}", 40, rng, kappa=0.05) for i in range(3)]
     assert scene.update_sessions(sessions, picked="s1")
-    drawn = scene.session_nodes
+    drawn: dict[str, Any] = scene.session_nodes  # handles of several kinds
     assert {"/paths/lines", "/markers/points", "/advice/arrows", "/markers/picked"} <= set(drawn)
     assert drawn["/markers/points"].points.shape == (3, 3)
     here = geo.cell_centres(domain, [sessions[1].position])[0, :2]
@@ -70,7 +74,7 @@ def test_scene_draws_sessions_and_removes_them(
     assert np.isclose(points[:, :2], here, atol=1e-3).all(axis=1).any()
     # arrows start at cells where advice was given
     starts = drawn["/advice/arrows"].points[:, 0, :2]
-    advised = geo.cell_centres(domain, [a.cell for s in sessions for a in s.advice])[:, :2]
+    advised = geo.cell_centres(domain, [cell for s in sessions for _, cell, _ in s.advice])[:, :2]
     assert all(np.isclose(advised, p, atol=1e-5).all(axis=1).any() for p in starts)
     assert not scene.update_sessions(sessions, picked="s1")  # nothing new: nothing redrawn
     assert scene.update_sessions([], picked=None)

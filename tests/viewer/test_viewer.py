@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import threading
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 import pytest
@@ -16,7 +17,7 @@ from app.viewer import geometry as geo
 from app.viewer.controls import LOST_PICKED, NONE
 from app.viewer.state import DomainView, Snapshot
 from app.viewer.viewer import Viewer, pump_wait
-from tests.viewer.conftest import FakeFeed, free_port, wait_until, walk
+from tests.viewer.conftest import FakeFeed, choose, free_port, wait_until, walk
 
 
 def snapshot(domain: GridDomain, theta: np.ndarray, n_sessions: int, version: int = 0) -> Snapshot:
@@ -46,7 +47,7 @@ def test_viewer_session_options_follow_the_live_sessions(
     feed.snapshot = snapshot(domain, theta, 3)
     viewer.tick()
     assert viewer.controls is not None
-    viewer.controls.session.value = "w2"
+    choose(viewer.controls.session, "w2")
     viewer.tick()
     assert "steps **50**" in viewer.controls.stats.content
     assert viewer.controls.plot.visible
@@ -67,12 +68,12 @@ def test_viewer_kappa_slider_and_lost_mode_drive_the_shading(
     controls, scene = viewer.controls, viewer.scene
     assert controls is not None and scene is not None
     for kappa in (0.1, 0.8):
-        controls.kappa.value = kappa
+        choose(controls.kappa, kappa)
         viewer.tick()
         assert scene.shaded.sum() == geo.advised_cells(theta, kappa, 0.0).sum()
         assert f"kappa = {kappa:.2f}" in controls.shading_text.content
-    controls.session.value = "w0"
-    controls.lost.value = LOST_PICKED
+    choose(controls.session, "w0")
+    choose(controls.lost, LOST_PICKED)
     viewer.tick()
     p = feed.snapshot.sessions[0].p_normal
     assert np.array_equal(scene.shaded, geo.advised_cells(theta, 0.8, p))
@@ -87,7 +88,9 @@ def test_viewer_updates_the_prior_when_its_version_changes(
     feed.snapshot = Snapshot({domain.name: DomainView(domain, new, 1)})
     viewer.tick()
     assert viewer.scene is not None
-    scales = viewer.scene.prior_arrows.batched_scales[:, 0]
+    scales = viewer.scene.prior_arrows.batched_scales
+    assert scales is not None
+    scales = scales[:, 0]
     np.testing.assert_allclose(scales, geo.ARROW_REACH * new.ravel(), rtol=1e-6)
 
 
@@ -97,7 +100,7 @@ def test_viewer_layer_checkboxes_hide_layers(
     feed.snapshot = snapshot(domain, theta, 1)
     viewer.tick()
     assert viewer.controls is not None and viewer.scene is not None
-    viewer.controls.layers["prior"].value = False
+    choose(viewer.controls.layers["prior"], False)
     viewer.tick()
     assert not viewer.scene.frames["prior"].visible
     assert viewer.scene.frames["paths"].visible
@@ -113,7 +116,7 @@ def test_viewer_switches_domains_and_clears_when_none_left(
     )
     viewer.tick()
     assert viewer.controls is not None
-    viewer.controls.domain.value = other.name
+    choose(viewer.controls.domain, other.name)
     viewer.tick()
     assert viewer.scene is not None and viewer.scene.domain is other
     assert viewer.scene.walls.batched_positions.shape[0] == int(other.walls.sum())
@@ -162,7 +165,7 @@ def test_a_control_change_wakes_the_pump_from_its_paced_wait(
         assert viewer.ticks == 1  # its own choice of the domain did not wake it
         assert viewer.controls is not None and viewer.controls.session.options[-1] == "w1"
         ticks = viewer.ticks
-        viewer.controls.session.value = "w1"  # from code, as a browser's change arrives
+        choose(viewer.controls.session, "w1")  # from code, as a browser's change arrives
         wait_until(lambda: viewer.ticks > ticks, timeout=10.0)
         wait_until(lambda: viewer.controls is not None and viewer.controls.plot.visible)
         assert "**w1**" in viewer.controls.stats.content
@@ -177,7 +180,7 @@ def test_a_control_change_wakes_the_pump_from_its_paced_wait(
 )  # fmt: skip
 def test_viewer_refuses_bad_pacing(kwargs: dict[str, float], message: str) -> None:
     with pytest.raises(ValueError, match=message):
-        Viewer(Snapshot, **kwargs)
+        Viewer(Snapshot, **dict[str, Any](kwargs))
 
 
 @given(st.floats(0.0, 2.0), st.floats(0.01, 2.0), st.floats(0.01, 1.0))
@@ -204,12 +207,12 @@ def test_viewer_shows_a_goal_aware_sessions_goal_posterior(
     feed.snapshot = Snapshot(snap.domains, [*snap.sessions, aware])
     viewer.tick()
     assert viewer.controls is not None
-    viewer.controls.session.value = "g"
+    choose(viewer.controls.session, "g")
     viewer.tick()
     text = viewer.controls.stats.content
     assert "strategy `goal_aware`" in text and "Goal posterior" in text
     assert f"G0 {list(cells[0])}: ~~ruled out~~" in text
     assert f"G1 {list(cells[1])}: **{p[1]:.2f}**" in text
-    viewer.controls.session.value = "w0"
+    choose(viewer.controls.session, "w0")
     viewer.tick()
     assert "Goal posterior" not in viewer.controls.stats.content

@@ -25,8 +25,8 @@ from starlette.websockets import WebSocketState
 
 from app.service import ops
 from app.service.deps import service_of
-from app.service.events import BadInput
-from app.service.registry import LiveSession, SessionNotFound
+from app.service.live.registry import LiveSession, SessionNotFound
+from app.service.problems import BadInput
 from app.service.security import AuthError, check_session_token
 from app.service.state import ServiceState
 
@@ -83,17 +83,14 @@ async def stream(websocket: WebSocket, session_id: str) -> None:
         if len(text) > limit:
             await websocket.send_text(_error(413, f"the message is larger than {limit} bytes"))
             continue
-        out: str | bytes
         try:
-            apply = ops.apply_events_binary if binary else ops.apply_events
-            out = apply(state, session, text)
+            if binary:
+                await websocket.send_bytes(ops.apply_events_binary(state, session, text))
+            else:  # JSON is ASCII: decoding it is a copy
+                await websocket.send_text(ops.apply_events(state, session, text).decode())
         except BadInput as exc:
-            out = _error(exc.status, exc.detail)
+            await websocket.send_text(_error(exc.status, exc.detail))
         except SessionNotFound:
             if websocket.client_state == WebSocketState.CONNECTED:
                 await websocket.close(4404, CLOSE_REASONS[4404])
             return
-        if isinstance(out, bytes):
-            await websocket.send_bytes(out)
-        else:
-            await websocket.send_text(out)

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from app.advice.priors import trajectory_counts
-from app.agents.experts import expert_trajectories
 from app.domain.grid import GridDomain
-from app.service.store import POOLED, Store, Trajectory
+from app.domain.paths import expert_trajectories
+from app.service.data.store import POOLED, Store, Trajectory
 from tests.service.conftest import TINY
 
 DOMAIN = GridDomain.from_strings(TINY, name="tiny")
@@ -28,8 +28,8 @@ def store(db_url: str) -> Iterator[Store]:
 
 def _items(seed: int, agent_type: str | None = None, per_goal: int = 2) -> list[Trajectory]:
     rng = np.random.default_rng(seed)
-    trajs = expert_trajectories(DOMAIN, rng, "anywhere", per_goal)
-    return [Trajectory(agent_type, t, DOMAIN.goals[0]) for t in trajs]
+    experts = expert_trajectories(DOMAIN, rng, "anywhere", per_goal)
+    return [Trajectory(agent_type, e.pairs, DOMAIN.goals[0]) for e in experts]
 
 
 def _assert_counts_equal(a: dict, b: dict) -> None:  # type: ignore[type-arg]

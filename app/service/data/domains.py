@@ -14,13 +14,10 @@ from contextlib import nullcontext
 from dataclasses import dataclass, field
 from datetime import datetime
 
-import numpy as np
-
-from app.advice.goals import GoalPriors
 from app.advice.models import AdviceTables
-from app.advice.priors import ActionPrior
+from app.advice.priors import ActionPrior, GoalPriors
 from app.domain.grid import GridDomain, MapError
-from app.service.store import POOLED, DomainRecord, Store, TableCounts, Trajectory
+from app.service.data.store import POOLED, DomainRecord, Store, TableCounts, Trajectory
 
 
 class DomainNotFound(KeyError):
@@ -42,30 +39,9 @@ class PriorView:
 
 
 def restore_prior(alpha0: float, n_states: int, tables: Mapping[str, TableCounts]) -> ActionPrior:
-    """An :class:`ActionPrior` holding stored counts (its learned ``*_`` attributes, set right
-    after an empty fit, exactly as :meth:`ActionPrior.load` restores a saved one)."""
-    prior = ActionPrior(alpha0=alpha0).fit([], n_states)
-    for key, stored in tables.items():
-        inc = stored.counts.astype(float)
-        if key == POOLED:
-            prior.pooled_increments_ = inc
-        else:
-            prior.increments_[key] = inc
-        prior.n_trajectories_[key] = stored.n_trajectories
-    return prior
-
-
-def prior_tables(prior: ActionPrior) -> dict[str, TableCounts]:
-    """The counts a prior holds, per table, in the store's form (inverse of restore_prior)."""
-    return {
-        key: TableCounts(
-            n,
-            (prior.pooled_increments_ if key == POOLED else prior.increments_[key]).astype(
-                np.int64
-            ),
-        )
-        for key, n in prior.n_trajectories_.items()
-    }
+    """An :class:`ActionPrior` holding the stored counts."""
+    stored = {key: (t.n_trajectories, t.counts) for key, t in tables.items()}
+    return ActionPrior.from_counts(alpha0, stored, n_states)
 
 
 def _view(prior: ActionPrior, old: PriorView | None, changed: set[str]) -> PriorView:
@@ -88,14 +64,12 @@ class DomainState:
     updated_at: datetime
     lock: threading.Lock = field(default_factory=threading.Lock)
     view: PriorView = field(init=False)
-    cell_json: list[str] = field(init=False)  # "[r,c]" per state, for the decision encoder
     # per-goal counts for goal-aware sessions: built from the stored trajectories when the
     # first such session starts, then kept up to date (replaced whole, never changed)
     goal_priors: GoalPriors | None = None
 
     def __post_init__(self) -> None:
         self.view = _view(self.prior, None, set())
-        self.cell_json = [f"[{r},{c}]" for r, c in self.domain.cells.tolist()]
 
     @property
     def map_text(self) -> str:
@@ -155,8 +129,8 @@ class DomainCatalog:
     @staticmethod
     def _state(rec: DomainRecord, domain: GridDomain, keep: DomainState | None) -> DomainState:
         """The state of a put domain; ``keep``: the old state whose counts it keeps."""
-        tables = prior_tables(keep.prior) if keep is not None else {}
-        prior = restore_prior(rec.alpha0, domain.n_states, tables)
+        stored = keep.prior.stored_counts() if keep is not None else {}
+        prior = ActionPrior.from_counts(rec.alpha0, stored, domain.n_states)
         goals = keep.goal_priors if keep is not None else None
         return DomainState(
             rec.name, domain, prior, rec.created_at, rec.updated_at,

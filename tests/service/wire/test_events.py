@@ -1,4 +1,5 @@
-"""Events to (s, a, s'): the vectorised checks against a slow, obviously correct version."""
+"""Events to (s, a, s'): the checks against a slow, obviously correct version, and the
+one-event path against the batch path (the same moves and the same words)."""
 
 from __future__ import annotations
 
@@ -11,15 +12,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from app.domain.grid import ACTIONS, GridDomain
-from app.service.events import (
-    SMALL_EVENTS,
-    BadInput,
-    _many_moves,
-    describe_errors,
-    parse_events,
-    read_move,
-    to_moves,
-)
+from app.service.problems import BadInput, describe_errors
+from app.service.wire.events import read_move, read_moves
 from tests.service.conftest import TINY
 
 DOMAIN = GridDomain.from_strings(TINY)
@@ -62,18 +56,22 @@ events = st.fixed_dictionaries(
 )
 
 
-@given(st.lists(events, max_size=30))
-def test_to_moves_matches_slow_version(batch: list[dict[str, Any]]) -> None:
+def moves(raw: str, limit: int = 100) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    return read_moves(DOMAIN, raw, limit)[0]
+
+
+@given(st.lists(events, max_size=30), st.booleans())
+def test_read_moves_matches_slow_version(batch: list[dict[str, Any]], spaced: bool) -> None:
+    """Written plainly (the compiled reader) or with other spacing: the same checks."""
     expected = slow_moves(batch)
-    parsed, single = parse_events(json.dumps(batch), 1000)
-    assert not single
+    raw = json.dumps(batch, indent=1 if spaced else None)
     if isinstance(expected, int):
         with pytest.raises(BadInput) as err:
-            to_moves(DOMAIN, parsed)
+            moves(raw, 1000)
         assert err.value.detail.startswith(f"event {expected}:")
         assert err.value.status == 422
     else:
-        s, a, s2 = to_moves(DOMAIN, parsed)
+        s, a, s2 = moves(raw, 1000)
         assert list(zip(s.tolist(), a.tolist(), s2.tolist(), strict=True)) == expected
 
 
@@ -88,9 +86,9 @@ def test_the_three_event_forms_give_the_same_moves(pairs: list[tuple[int, int]])
     only_next = [
         {"state": DOMAIN.cell(s), "next_state": DOMAIN.cell(DOMAIN.step(s, a))} for s, a in moved
     ]
-    a1 = np.stack(to_moves(DOMAIN, parse_events(json.dumps(with_action), 100)[0]))
-    a2 = np.stack(to_moves(DOMAIN, parse_events(json.dumps(both), 100)[0]))
-    a3 = np.stack(to_moves(DOMAIN, parse_events(json.dumps(only_next), 100)[0]))
+    a1 = np.stack(moves(json.dumps(with_action)))
+    a2 = np.stack(moves(json.dumps(both)))
+    a3 = np.stack(moves(json.dumps(only_next)))
     np.testing.assert_array_equal(a1, a2)
     keep = np.array([DOMAIN.step(s, a) != s for s, a in pairs], dtype=bool)
     np.testing.assert_array_equal(a1[:, keep] if pairs else a1, a3)
@@ -120,27 +118,31 @@ def test_the_three_event_forms_give_the_same_moves(pairs: list[tuple[int, int]])
     ],
 )
 def test_bad_events_are_refused_with_a_reason(body: str, message: str) -> None:
-    with pytest.raises(BadInput) as err:
-        to_moves(DOMAIN, parse_events(body, 100)[0])
+    with pytest.raises(BadInput) as err:  # the batch path (lists, binary answers)
+        moves(body)
     assert err.value.status == 422
     assert message in err.value.detail
+    if body.lstrip().startswith("{"):  # the one-event path gives the same words
+        with pytest.raises(BadInput) as one:
+            read_move(DOMAIN, body)
+        assert (one.value.status, one.value.detail) == (422, err.value.detail)
 
 
 def test_unchanged_cell_with_action_is_a_bump() -> None:
-    s, a, s2 = to_moves(DOMAIN, parse_events('{"state": [5, 1], "action": "W"}', 10)[0])
+    s, a, s2 = moves('{"state": [5, 1], "action": "W"}')
     assert (s[0], a[0], s2[0]) == (DOMAIN.state(5, 1), 3, DOMAIN.state(5, 1))
 
 
 def test_an_observed_move_other_than_the_action_is_accepted() -> None:
     # a slippery world: the explorer meant N (a wall) but slid E
     body = '{"state": [5, 1], "action": "N", "next_state": [5, 2]}'
-    _, a, s2 = to_moves(DOMAIN, parse_events(body, 10)[0])
+    _, a, s2 = moves(body)
     assert (a[0], s2[0]) == (0, DOMAIN.state(5, 2))
 
 
 def test_too_many_events_is_413() -> None:
     with pytest.raises(BadInput) as err:
-        parse_events(json.dumps([{"state": [5, 1], "action": "N"}] * 11), 10)
+        moves(json.dumps([{"state": [5, 1], "action": "N"}] * 11), 10)
     assert err.value.status == 413
     assert "at most 10" in err.value.detail
 
@@ -149,19 +151,6 @@ def test_describe_errors_names_place_and_problem_and_counts_the_rest() -> None:
     errors = [{"loc": ("body", "items", i, "x"), "msg": "bad"} for i in range(8)]
     text = describe_errors(errors, limit=2)
     assert text == "body.items[0].x: bad; body.items[1].x: bad (and 6 more)"
-
-
-@given(st.lists(events, max_size=SMALL_EVENTS))
-def test_small_batches_are_checked_as_large_ones_are(batch: list[dict[str, Any]]) -> None:
-    """The plain-Python path for small batches and the numpy path agree: moves and errors."""
-    parsed, _ = parse_events(json.dumps(batch), 100)
-    outcomes = []
-    for check in (to_moves, _many_moves):
-        try:
-            outcomes.append([a.tolist() for a in check(DOMAIN, parsed)])
-        except BadInput as exc:
-            outcomes.append([exc.detail, exc.status])
-    assert outcomes[0] == outcomes[1]
 
 
 def _single(raw: str | bytes) -> Any:
@@ -175,9 +164,9 @@ def _single(raw: str | bytes) -> Any:
 def _parsed(raw: str | bytes) -> Any:
     """The full parser's answer for one event object, through the batch path."""
     try:
-        events, single = parse_events(raw, 1)
+        checked, single = read_moves(DOMAIN, raw, 1)
         assert single
-        return tuple(int(x[0]) for x in to_moves(DOMAIN, events))
+        return tuple(int(x[0]) for x in checked)
     except BadInput as exc:
         return ("refused", exc.status, exc.detail)
 

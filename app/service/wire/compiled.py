@@ -1,10 +1,10 @@
-"""A compiled reader for the common shape of an event batch: a JSON list of events written
-plainly, ``[{"state": [28, 0], "action": "E"}, {"state": [28, 1], "next_state": [27, 1]}]``.
+"""The service's compiled wire code (numba): reading event batches, writing decision batches.
 
-For a 500-event websocket message, pydantic-core builds about 4,000 Python objects (dicts,
-lists, ints) that :func:`app.service.events.to_moves` then reads back one by one; this reads
-the bytes once, in a numba loop, straight into arrays. It accepts a strict subset of what the
-pydantic schema (``list[EventIn]``) accepts, with the same meaning:
+**Reading.** :func:`scan_events` reads the common shape of an event batch, a JSON list of
+events written plainly (``[{"state": [28, 0], "action": "E"}, {"state": [28, 1], "next_state":
+[27, 1]}]``), once, in a numba loop, straight into arrays, where pydantic-core would build
+about 4,000 Python objects for 500 events. It accepts a strict subset of what the schema
+(``list[EventIn]``) accepts, with the same meaning:
 
 * keys ``"state"`` (required), ``"action"`` and ``"next_state"``, each at most once, without
   escapes; JSON whitespace anywhere between tokens;
@@ -12,10 +12,16 @@ pydantic schema (``list[EventIn]``) accepts, with the same meaning:
 * an action is ``"N"``, ``"E"``, ``"S"``, ``"W"``, a digit 0-3, or ``null``; a next state a cell
   or ``null``.
 
-Anything else (an empty list, a float, a sign, an escape, an unknown or repeated key, a
-non-ASCII byte, ...) makes it answer ``None``, and the caller falls back to the full parser,
-which then accepts it or names the error exactly as before. ``tests/service/test_scan.py`` checks
-the two against each other on random and mutated texts.
+Anything else (a float, a sign, an escape, an unknown or repeated key, a non-ASCII byte, ...)
+makes it answer ``None``, and the caller reads the text with pydantic, which accepts it or
+names the error. ``tests/service/wire/test_compiled.py`` checks the two against each other.
+
+**Checking.** :func:`check_moves` turns cells and actions into (s, a, s') and stops at the
+first bad event with a reason code (:data:`REASONS`); the caller words it.
+
+**Writing.** :func:`write_decisions` lays out the JSON text of a batch of decisions; every
+number's text comes from orjson (written from the numpy columns without Python floats), so
+the bytes are those of the one-event answer, which orjson writes whole.
 """
 
 from __future__ import annotations
@@ -26,6 +32,7 @@ from numba import njit
 
 IntArray = npt.NDArray[np.int64]
 ByteArray = npt.NDArray[np.uint8]
+BoolArray = npt.NDArray[np.bool_]
 
 # byte values
 _SPACE, _TAB, _LF, _CR = 32, 9, 10, 13
@@ -76,18 +83,16 @@ def _cell(buf: ByteArray, i: int) -> tuple[int, int, int]:  # pragma: no cover -
     n = buf.shape[0]
     if i >= n or buf[i] != _LBRACKET:
         return _BAD, _BAD, i
-    r, i = _int(buf, _skip(buf, i + 1))
-    if r < 0:
-        return _BAD, _BAD, i
-    i = _skip(buf, i)
-    if i >= n or buf[i] != _COMMA:
-        return _BAD, _BAD, i
-    c, i = _int(buf, _skip(buf, i + 1))
-    if c < 0:
-        return _BAD, _BAD, i
-    i = _skip(buf, i)
-    if i >= n or buf[i] != _RBRACKET:
-        return _BAD, _BAD, i
+    r = c = _BAD
+    for part in range(2):  # the row then ",", the column then "]"
+        v, i = _int(buf, _skip(buf, i + 1))
+        i = _skip(buf, i)
+        if v < 0 or i >= n or buf[i] != (_COMMA if part == 0 else _RBRACKET):
+            return _BAD, _BAD, i
+        if part == 0:
+            r = v
+        else:
+            c = v
     return r, c, i + 1
 
 
@@ -165,6 +170,20 @@ def _action(buf: ByteArray, i: int) -> tuple[int, int]:  # pragma: no cover - co
     if _null(buf, i):
         return -1, i + 4
     return -2, i
+
+
+@njit(cache=True, inline="always")
+def _after_item(buf: ByteArray, i: int, close: int) -> tuple[int, int]:  # pragma: no cover
+    """After an item of an object or a list: (the next item's index, 1) past a comma,
+    (the index of ``close``, 0) at the end, or (i, -1) for anything else."""
+    i = _skip(buf, i)
+    if i >= buf.shape[0]:
+        return i, -1
+    if buf[i] == _COMMA:
+        return _skip(buf, i + 1), 1
+    if buf[i] == close:
+        return i, 0
+    return i, -1
 
 
 _STATE_KEY = np.frombuffer(b'{"state":', dtype=np.uint8)
@@ -308,15 +327,11 @@ def _scan(buf: ByteArray, out: IntArray) -> int:  # pragma: no cover - compiled
                     nr, nc, i = _cell(buf, i)
                     if nr < 0:
                         return _BAD
-                i = _skip(buf, i)
-                if i >= n:
+                i, more = _after_item(buf, i, _RBRACE)
+                if more < 0:
                     return _BAD
-                if buf[i] == _COMMA:
-                    i = _skip(buf, i + 1)
-                    continue
-                if buf[i] == _RBRACE:
+                if not more:
                     break
-                return _BAD
             if not seen & 1:
                 return _BAD
             out[count, 0] = r
@@ -326,15 +341,11 @@ def _scan(buf: ByteArray, out: IntArray) -> int:  # pragma: no cover - compiled
             out[count, 4] = nc
             count += 1
             after = i + 1
-        i = _skip(buf, after)
-        if i >= n:
+        i, more = _after_item(buf, after, _RBRACKET)
+        if more < 0:
             return _BAD
-        if buf[i] == _COMMA:
-            i = _skip(buf, i + 1)
-            continue
-        if buf[i] == _RBRACKET:
+        if not more:
             break
-        return _BAD
     if _skip(buf, i + 1) != n:
         return _BAD
     return count
@@ -359,33 +370,40 @@ def scan_events(
     return rows[:, 0:2], rows[:, 2], rows[:, 3:5]
 
 
+#: Why :func:`check_moves` refused an event, in the order an event is checked.
+OK, STATE_OFF, STATE_WALL, NEXT_OFF, NEXT_WALL, NO_MOVE, NOT_ONE_MOVE, AMBIGUOUS = range(8)
+REASONS = (
+    "ok", "state off the map", "state a wall", "next_state off the map", "next_state a wall",
+    "neither action nor next_state", "not one move", "ambiguous",
+)  # fmt: skip
+
+
 @njit(cache=True)
-def _moves(
-    state_of: IntArray,
-    next_state: IntArray,
-    cells: IntArray,
-    actions: IntArray,
-    nexts: IntArray,
-    out: tuple[IntArray, IntArray, IntArray],
-) -> int:  # pragma: no cover - compiled
-    """The checks of :func:`app.service.events.to_moves` in one loop: fills (s, a, s') and
-    returns -1, or the index of the first bad event (whose message the caller writes)."""
+def _check(
+    state_of: IntArray, next_state: IntArray, cells: IntArray, actions: IntArray,
+    nexts: IntArray, out: tuple[IntArray, IntArray, IntArray],
+) -> tuple[int, int]:  # pragma: no cover - compiled  # fmt: skip
+    """Fills (s, a, s') and returns (-1, OK), or (index, reason) of the first bad event."""
     rows, cols = state_of.shape
     out_s, out_a, out_s2 = out
     for i in range(cells.shape[0]):
         r, c = cells[i, 0], cells[i, 1]
-        if r < 0 or r >= rows or c < 0 or c >= cols or state_of[r, c] < 0:
-            return i
+        if r < 0 or r >= rows or c < 0 or c >= cols:
+            return i, STATE_OFF
         s = state_of[r, c]
+        if s < 0:
+            return i, STATE_WALL
         a = actions[i]
         has_next = nexts[i, 0] >= 0
         if has_next:
             r2, c2 = nexts[i, 0], nexts[i, 1]
-            if r2 >= rows or c2 < 0 or c2 >= cols or state_of[r2, c2] < 0:
-                return i
+            if r2 >= rows or c2 < 0 or c2 >= cols:
+                return i, NEXT_OFF
             s2 = state_of[r2, c2]
+            if s2 < 0:
+                return i, NEXT_WALL
         elif a < 0:
-            return i
+            return i, NO_MOVE
         else:
             s2 = next_state[s, a]
         if a < 0 or has_next:
@@ -395,22 +413,155 @@ def _moves(
                     lands = k
                     break
             if has_next and s2 != s and lands < 0:
-                return i
+                return i, NOT_ONE_MOVE
             if a < 0:
                 if s2 == s:
-                    return i
+                    return i, AMBIGUOUS
                 a = lands
         out_s[i] = s
         out_a[i] = a
         out_s2[i] = s2
-    return -1
+    return -1, OK
 
 
-def checked_moves(
+def check_moves(
     state_of: IntArray, next_state: IntArray, cells: IntArray, actions: IntArray, nexts: IntArray
-) -> tuple[tuple[IntArray, IntArray, IntArray], int]:
-    """((s, a, s'), -1) for events that pass every check, else (partial arrays, the index of
-    the first bad event)."""
+) -> tuple[tuple[IntArray, IntArray, IntArray], int, int]:
+    """(s, a, s') arrays, and (-1, OK) for events that pass every check, else the index of the
+    first bad event and its reason (the arrays then hold only the events before it). Cells
+    (n, 2) and next cells (n, 2; -1: none) are as read; action codes -1 where none."""
     n = len(cells)
     out = (np.empty(n, np.int64), np.empty(n, np.int64), np.empty(n, np.int64))
-    return out, _moves(state_of, next_state, cells, actions, nexts, out)
+    bad, reason = _check(state_of, next_state, cells, actions, nexts, out)
+    return out, bad, reason
+
+
+# ---- writing ------------------------------------------------------------------------------------
+def _literal(text: str) -> ByteArray:
+    return np.frombuffer(text.encode(), dtype=np.uint8)
+
+
+#: the fixed parts of a decision's text, in order (see write_decisions)
+PIECES = tuple(
+    _literal(t)
+    for t in ('{"step":', ',"state":[', ',', '],"advise":', 'true', 'false', ',"advice":',
+              'null', '{"N":', ',"E":', ',"S":', ',"W":', '}', ',"kl":', ',"p_normal":',
+              ',"cost":{"advice_count":', ',"total":', ',"benefit":', '}}')
+)  # fmt: skip
+
+
+@njit(cache=True, inline="always")
+def _put(out: ByteArray, at: int, src: ByteArray, lo: int, hi: int) -> int:  # pragma: no cover
+    out[at : at + hi - lo] = src[lo:hi]
+    return at + hi - lo
+
+
+@njit(cache=True, inline="always")
+def _put_int(out: ByteArray, at: int, v: int) -> int:  # pragma: no cover - compiled
+    """The decimal digits of ``v`` >= 0."""
+    k = 1
+    rest = v
+    while rest >= 10:
+        rest //= 10
+        k += 1
+    for j in range(k - 1, -1, -1):
+        out[at + j] = 48 + v % 10
+        v //= 10
+    return at + k
+
+
+@njit(cache=True)
+def _tokens(text: ByteArray, columns: int) -> tuple[IntArray, IntArray]:  # pragma: no cover
+    """Where each number of ``[[a,b,...],[...],...]`` (``columns`` lists, as orjson writes
+    them) starts and ends: (starts, ends) over every list in order."""
+    lo = np.empty(text.shape[0] // 2 + 1, np.int64)
+    hi = np.empty(text.shape[0] // 2 + 1, np.int64)
+    n = 0
+    i = 1  # past the outer "["
+    for _ in range(columns):
+        i += 1  # past the list's "["
+        if text[i] == 93:  # "]": an empty list
+            i += 2  # past "]" and "," (or the outer "]")
+            continue
+        while True:
+            lo[n] = i
+            while text[i] != 44 and text[i] != 93:  # up to "," or "]"
+                i += 1
+            hi[n] = i
+            n += 1
+            i += 1
+            if text[i - 1] == 93:
+                i += 1  # past the "," between lists (or the outer "]")
+                break
+    return lo[:n], hi[:n]
+
+
+@njit(cache=True)
+def _write(
+    step0: int, states: IntArray, cells: IntArray, advise: BoolArray, counts: IntArray,
+    numbers: ByteArray, pieces: tuple[ByteArray, ...],
+) -> ByteArray:  # pragma: no cover - compiled  # fmt: skip
+    n = states.shape[0]
+    lo, hi = _tokens(numbers, 5)
+    head, state_key, comma, close_state, true, false, advice_key, null = pieces[:8]
+    n_key, e_key, s_key, w_key, close_advice, kl_key, p_key = pieces[8:15]
+    cost_key, total_key, benefit_key, tail = pieces[15:]
+    fixed = 0
+    for piece in pieces:
+        fixed += piece.shape[0]
+    out = np.empty(2 + n * (fixed + 3 * 20) + numbers.shape[0], np.uint8)  # an upper bound
+    out[0] = 91  # "["
+    at = 1
+    k = 0  # advising decisions so far
+    for i in range(n):
+        if i:
+            out[at] = 44  # ","
+            at += 1
+        at = _put(out, at, head, 0, head.shape[0])
+        at = _put_int(out, at, step0 + i)
+        at = _put(out, at, state_key, 0, state_key.shape[0])
+        at = _put_int(out, at, cells[states[i], 0])
+        at = _put(out, at, comma, 0, 1)
+        at = _put_int(out, at, cells[states[i], 1])
+        at = _put(out, at, close_state, 0, close_state.shape[0])
+        flag = true if advise[i] else false
+        at = _put(out, at, flag, 0, flag.shape[0])
+        at = _put(out, at, advice_key, 0, advice_key.shape[0])
+        if advise[i]:
+            t = 4 * n + 4 * k  # the advice's numbers follow the four columns of n
+            at = _put(out, at, n_key, 0, n_key.shape[0])
+            at = _put(out, at, numbers, lo[t], hi[t])
+            at = _put(out, at, e_key, 0, e_key.shape[0])
+            at = _put(out, at, numbers, lo[t + 1], hi[t + 1])
+            at = _put(out, at, s_key, 0, s_key.shape[0])
+            at = _put(out, at, numbers, lo[t + 2], hi[t + 2])
+            at = _put(out, at, w_key, 0, w_key.shape[0])
+            at = _put(out, at, numbers, lo[t + 3], hi[t + 3])
+            at = _put(out, at, close_advice, 0, 1)
+            k += 1
+        else:
+            at = _put(out, at, null, 0, null.shape[0])
+        at = _put(out, at, kl_key, 0, kl_key.shape[0])
+        at = _put(out, at, numbers, lo[i], hi[i])
+        at = _put(out, at, p_key, 0, p_key.shape[0])
+        at = _put(out, at, numbers, lo[n + i], hi[n + i])
+        at = _put(out, at, cost_key, 0, cost_key.shape[0])
+        at = _put_int(out, at, counts[i])
+        at = _put(out, at, total_key, 0, total_key.shape[0])
+        at = _put(out, at, numbers, lo[2 * n + i], hi[2 * n + i])
+        at = _put(out, at, benefit_key, 0, benefit_key.shape[0])
+        at = _put(out, at, numbers, lo[3 * n + i], hi[3 * n + i])
+        at = _put(out, at, tail, 0, tail.shape[0])
+    out[at] = 93  # "]"
+    return out[: at + 1]
+
+
+def write_decisions(
+    step0: int, states: IntArray, cells: IntArray, advise: BoolArray, counts: IntArray,
+    numbers: bytes,
+) -> bytes:  # fmt: skip
+    """The JSON list of decisions ``step0 + i`` at ``cells[states[i]]``: ``numbers`` is orjson's
+    text of five lists, kl, p_normal, total cost and benefit (one number per decision) and the
+    advice of the advising decisions (four numbers each, N, E, S, W, in order)."""
+    text = np.frombuffer(numbers, dtype=np.uint8)
+    return _write(step0, states, cells, advise, counts, text, PIECES).tobytes()

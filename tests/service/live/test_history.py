@@ -1,4 +1,4 @@
-"""The session registry's bounded history."""
+"""A session's bounded history: the rings of its recent path, posterior and advice."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from app.advice.models import AdviceTables
-from app.service.registry import AdviceLog, Recent
+from app.service.live.history import AdviceLog, Recent
 
 
 @given(
@@ -48,14 +48,17 @@ def test_advice_log_keeps_what_a_bounded_deque_keeps(
     size: int, batches: list[tuple[list[int], int, bool]]
 ) -> None:
     """Advice logged in batches, or one at a time (``add``, the single-event path)."""
-    log, reference = AdviceLog(size), deque(maxlen=size)
+    log = AdviceLog(size)
+    reference: deque[tuple[int, int, AdviceTables]] = deque(maxlen=size)
     for steps, which, one_by_one in batches:
         states = [s % 97 for s in steps]
         if one_by_one:
             for a, s in zip(steps, states, strict=True):
                 log.add(a, s, TABLES[which], None)
         else:
-            log.extend(steps, states, TABLES[which])
+            log.extend(
+                np.array(steps, dtype=np.int64), np.array(states, dtype=np.int64), TABLES[which]
+            )
         reference.extend((a, s, TABLES[which]) for a, s in zip(steps, states, strict=True))
         got = log.items()
         assert [(a, s) for a, s, _ in got] == [(a, s) for a, s, _ in reference]

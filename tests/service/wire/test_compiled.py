@@ -1,19 +1,22 @@
-"""The compiled reader of plain event lists (app/service/scan.py) against the full parser:
-``read_moves`` must give what ``parse_events`` + ``to_moves`` give, moves or error, for any
+"""The compiled reader of plain event lists (app/service/wire/compiled.py) against the full
+parser: ``read_moves`` must give what it gives with pydantic alone, moves or error, for any
 text; the reader may only decline (and let the full parser answer)."""
 
 from __future__ import annotations
 
 import json
 from typing import Any
+from unittest import mock
 
 import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
 
 from app.domain.grid import ACTIONS, GridDomain
-from app.service.events import SMALL_EVENTS, BadInput, parse_events, read_moves, to_moves
-from app.service.scan import scan_events
+from app.service.problems import BadInput
+from app.service.wire import events as wire_events
+from app.service.wire.compiled import scan_events
+from app.service.wire.events import read_moves
 from tests.service.conftest import TINY
 
 DOMAIN = GridDomain.from_strings(TINY)
@@ -38,17 +41,18 @@ def outcome(fn: Any, raw: str | bytes) -> Any:
     return ([a.tolist() for a in moves], single)
 
 
-def slow(raw: str | bytes) -> Any:
-    events, single = parse_events(raw, 100)
-    return to_moves(DOMAIN, events), single
+def slow(raw: str | bytes, limit: int = 100) -> Any:
+    """``read_moves`` with the compiled reader declining everything: pydantic reads."""
+    with mock.patch.object(wire_events, "scan_events", lambda _: None):
+        return read_moves(DOMAIN, raw, limit)
 
 
-def fast(raw: str | bytes) -> Any:
-    return read_moves(DOMAIN, raw, 100)
+def fast(raw: str | bytes, limit: int = 100) -> Any:
+    return read_moves(DOMAIN, raw, limit)
 
 
 @given(st.lists(events, max_size=40), layouts, st.booleans())
-def test_read_moves_equals_parse_then_to_moves(
+def test_read_moves_equals_the_full_parser(
     batch: list[dict[str, Any]], layout: tuple[Any, Any], as_bytes: bool
 ) -> None:
     indent, separators = layout
@@ -58,7 +62,7 @@ def test_read_moves_equals_parse_then_to_moves(
 
 
 @given(
-    st.lists(events, min_size=SMALL_EVENTS + 1, max_size=30),
+    st.lists(events, min_size=1, max_size=30),
     st.data(),
 )
 def test_mutated_texts_get_the_same_answer(batch: list[dict[str, Any]], data: Any) -> None:
@@ -74,8 +78,8 @@ def test_mutated_texts_get_the_same_answer(batch: list[dict[str, Any]], data: An
 
 
 def test_the_reader_declines_what_it_does_not_read_plainly() -> None:
-    good = [{"state": [5, 1], "action": "E"}] * (SMALL_EVENTS + 1)
-    assert scan_events(json.dumps(good)) is not None
+    for n in (1, 2, 9):
+        assert scan_events(json.dumps([{"state": [5, 1], "action": "E"}] * n)) is not None
     declined = [
         '[{"state": [5, 1.0], "action": "E"}]',
         '[{"state": [5, 1], "action": "E", "action": "E"}]',
@@ -110,17 +114,16 @@ def test_a_large_plain_batch_is_read_by_the_compiled_reader() -> None:
     text = json.dumps(batch)
     scanned = scan_events(text)
     assert scanned is not None and len(scanned[0]) == 500
-    moves = outcome(lambda raw: read_moves(DOMAIN, raw, 500), text)
+    moves = outcome(lambda raw: fast(raw, 500), text)
     assert moves[0] != "refused"
-    events, single = parse_events(text, 500)
-    assert moves == ([a.tolist() for a in to_moves(DOMAIN, events)], single)
-    too_many = outcome(lambda raw: read_moves(DOMAIN, raw, 499), text)
+    assert moves == outcome(lambda raw: slow(raw, 500), text)
+    too_many = outcome(lambda raw: fast(raw, 499), text)
     assert too_many == ("refused", 413, "too many events: 500 in one batch, at most 499")
 
 
 @given(
     seed=st.integers(0, 2**32 - 1),
-    n=st.integers(SMALL_EVENTS + 1, 300),
+    n=st.integers(1, 300),
     layout=st.sampled_from([(None, (",", ":")), (None, None), (1, None)]),
     with_next=st.floats(0, 1),
 )
@@ -142,6 +145,5 @@ def test_walks_are_read_as_the_full_parser_reads_them(
     indent, separators = layout
     text = json.dumps(batch, indent=indent, separators=separators)
     assert scan_events(text) is not None
-    got = outcome(lambda raw: read_moves(DOMAIN, raw, 300), text)
-    events, single = parse_events(text, 300)
-    assert got == ([a.tolist() for a in to_moves(DOMAIN, events)], single)
+    got = outcome(lambda raw: fast(raw, 300), text)
+    assert got == outcome(lambda raw: slow(raw, 300), text)

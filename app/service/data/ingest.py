@@ -14,9 +14,9 @@ import numpy.typing as npt
 from pydantic import TypeAdapter, ValidationError
 
 from app.domain.grid import GridDomain
-from app.service.events import ACTION_CODE, BadInput, describe_errors
-from app.service.schemas import TrajectoriesCreate
-from app.service.store import Trajectory
+from app.service.data.store import Trajectory
+from app.service.problems import BadInput, describe_errors
+from app.service.schemas import ACTION_CODE, TrajectoriesCreate
 
 IntArray = npt.NDArray[np.int64]
 BODY = TypeAdapter(TrajectoriesCreate)

@@ -1,0 +1,34 @@
+"""The command line, ``python -m app`` (or ``advisor``): the composition root.
+
+Each command wires the parts it needs and nothing else: ``serve`` builds the service (which
+learns the default domain's prior from simulated experts on first start), ``simulate`` drives
+simulated explorers through a running service as a client, ``experiment`` runs the paper's
+experiments in process, ``maze`` and ``train`` work on maps and priors. Heavy imports (the
+service, numba kernels, matplotlib) wait until a command runs.
+"""
+
+from __future__ import annotations
+
+import typer
+
+from app.cli.experiment import experiment_cli
+from app.cli.maze import maze_cli
+from app.cli.serve import serve
+from app.cli.simulate import simulate
+from app.cli.train import train
+
+cli = typer.Typer(
+    help="An advisor for agents with hidden goals (Rosman & Ramamoorthy, ICRA 2014).",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+cli.add_typer(maze_cli, name="maze")
+cli.command()(train)
+cli.add_typer(experiment_cli, name="experiment")
+cli.command()(serve)
+cli.command()(simulate)
+
+
+def main() -> None:
+    cli()

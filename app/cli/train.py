@@ -1,0 +1,72 @@
+"""``python -m app train``: learn an action prior from simulated experts, write it as .npz."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated, cast
+
+import numpy as np
+import typer
+
+from app.cli.maze import MazeOption, describe, load_domain
+from app.domain.grid import ACTIONS
+from app.domain.maps import DEFAULT_MAP
+
+
+def train(
+    maze: MazeOption = DEFAULT_MAP,
+    experts: Annotated[
+        str, typer.Option(help="Where experts start: start | anywhere | policy (full policies).")
+    ] = "start",
+    per_goal: Annotated[int, typer.Option(min=1, help="Expert trajectories per goal.")] = 10,
+    alpha0: Annotated[
+        float, typer.Option(min=0.0, help="Dirichlet hyperprior alpha0 (> 0).")
+    ] = 1.0,
+    delta: Annotated[float, typer.Option(min=0.0, max=1.0, help="Policy threshold (eq. 1).")] = 0.0,
+    epsilon: Annotated[
+        float, typer.Option(min=0.0, max=1.0, help="Experts' chance of a random move per step.")
+    ] = 0.0,
+    seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
+    out: Annotated[Path, typer.Option(help="Where to write the prior (.npz).")] = Path("prior.npz"),
+    as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
+) -> None:
+    """Learn an action prior from simulated optimal experts and write it as .npz."""
+    from app.advice.text import direction_map
+    from app.agents.experts import EXPERT_SOURCES, ExpertSource, train_prior
+
+    if experts not in EXPERT_SOURCES:
+        typer.echo(f"error: --experts must be one of {', '.join(EXPERT_SOURCES)}", err=True)
+        raise typer.Exit(code=2)
+    domain = load_domain(maze)
+    try:
+        source = cast(ExpertSource, experts)
+        rng = np.random.default_rng(seed)
+        prior = train_prior(domain, rng, source, per_goal, alpha0, delta, epsilon)
+    except ValueError as exc:
+        typer.echo(f"error: {exc}", err=True)
+        raise typer.Exit(code=2) from None
+    prior.save(out)
+    summary = prior.summary() | {
+        "maze": str(maze),
+        "experts": experts,
+        "per_goal": per_goal,
+        "alpha0": alpha0,
+        "delta": delta,
+        "epsilon": epsilon,
+        "seed": seed,
+        "out": str(out),
+    }
+    if as_json:
+        typer.echo(json.dumps(summary, indent=2))
+        return
+    typer.echo(describe(domain))
+    kind = "policies" if experts == "policy" else "trajectories"
+    typer.echo(
+        f"prior: {summary['trajectories']} expert {kind}"
+        f" ({experts}), alpha0={alpha0}, delta={delta}; {summary['states_with_data']}/"
+        f"{summary['states']} states have expert data; mean entropy "
+        f"{summary['mean_entropy_nats']:.3f} nats (uniform {np.log(len(ACTIONS)):.3f})"
+    )
+    typer.echo(f"wrote {out}\nmost advised direction (· no data, + tie):")
+    typer.echo(direction_map(domain, prior.theta()))

@@ -1,0 +1,102 @@
+"""Shortest paths on a map, and the simulated experts that walk them.
+
+What the building knows of its own map: from any cell, which moves lie on a shortest path to a
+destination. Simulated experts (Section V-B: "expert trajectories from agents moving towards
+each of the eight goals") walk such paths; where they start is a choice the paper leaves open
+(METHOD.md): at the start cell (``"start"``) or at uniformly random free cells
+(``"anywhere"``). The service learns a new domain's prior from them; the experiments and the
+``train`` command do too (:mod:`app.agents.experts`).
+"""
+
+from __future__ import annotations
+
+from typing import Literal, NamedTuple
+
+import numpy as np
+import numpy.typing as npt
+
+from app.domain.grid import N_ACTIONS, GridDomain
+
+IntArray = npt.NDArray[np.int64]
+FloatArray = npt.NDArray[np.float64]
+BoolArray = npt.NDArray[np.bool_]
+TrajectorySource = Literal["start", "anywhere"]
+TRAJECTORY_SOURCES: tuple[str, ...] = ("start", "anywhere")
+
+
+class ExpertTrajectory(NamedTuple):
+    """An expert's walk to ``goal``: (state, action) pairs, shape (T, 2)."""
+
+    goal: int
+    pairs: IntArray
+
+
+def optimal_actions(domain: GridDomain, goal: int) -> BoolArray:
+    """``out[s, a]``: action ``a`` lies on a shortest path from ``s`` to ``goal``.
+
+    The goal itself is terminal (no action is optimal there).
+    """
+    dist = domain.distances_to(goal)
+    nxt = dist[domain.next_state]  # distance after each move
+    out: BoolArray = (nxt == dist[:, None] - 1) & (dist[:, None] > 0)
+    return out
+
+
+def optimal_policy(domain: GridDomain, goal: int) -> FloatArray:
+    """pi*(s, a): uniform over the optimal actions (ties all count, METHOD.md); 0 at the goal."""
+    opt = optimal_actions(domain, goal).astype(np.float64)
+    n = opt.sum(axis=1, keepdims=True)
+    out: FloatArray = np.divide(opt, n, out=np.zeros_like(opt), where=n > 0)
+    return out
+
+
+def optimal_policies(domain: GridDomain) -> FloatArray:
+    """One optimal policy per goal, shape (goals, states, 4)."""
+    return np.stack([optimal_policy(domain, g) for g in domain.goals])
+
+
+def expert_trajectory(
+    domain: GridDomain,
+    start: int,
+    goal: int,
+    rng: np.random.Generator,
+    epsilon: float = 0.0,
+    max_steps: int = 10_000,
+) -> IntArray:
+    """(state, action) pairs of an expert from ``start`` to ``goal``: a shortest path with
+    random tie-breaks; with probability ``epsilon`` per step a uniformly random move instead."""
+    opt = optimal_actions(domain, goal)
+    s = start
+    pairs: list[tuple[int, int]] = []
+    while s != goal and len(pairs) < max_steps:
+        if epsilon > 0 and rng.random() < epsilon:
+            a = int(rng.integers(N_ACTIONS))
+        else:
+            choices = np.flatnonzero(opt[s])
+            a = int(choices[rng.integers(len(choices))])
+        pairs.append((s, a))
+        s = int(domain.next_state[s, a])
+    return np.array(pairs, dtype=np.int64).reshape(-1, 2)
+
+
+def expert_trajectories(
+    domain: GridDomain,
+    rng: np.random.Generator,
+    source: TrajectorySource = "start",
+    per_goal: int = 10,
+    epsilon: float = 0.0,
+) -> list[ExpertTrajectory]:
+    """``per_goal`` expert trajectories to each goal in turn, starting at the start cell or
+    anywhere, each with the goal it walked to."""
+    if source not in TRAJECTORY_SOURCES:
+        raise ValueError(f"source must be 'start' or 'anywhere' for trajectories, got {source!r}")
+    if per_goal < 1:
+        raise ValueError(f"per_goal must be at least 1, got {per_goal}")
+    if not 0.0 <= epsilon < 1.0:
+        raise ValueError(f"epsilon must be in [0, 1), got {epsilon}")
+    out = []
+    for goal in domain.goals:
+        for _ in range(per_goal):
+            start = domain.start if source == "start" else int(rng.integers(domain.n_states))
+            out.append(ExpertTrajectory(goal, expert_trajectory(domain, start, goal, rng, epsilon)))
+    return out

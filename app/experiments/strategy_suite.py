@@ -1,0 +1,292 @@
+"""The strategies experiment's machinery: its arguments, the configurations (a strategy at a
+cost level), the suite of maps, and the runs (:mod:`app.experiments.strategies` runs and
+reports them)."""
+
+from __future__ import annotations
+
+import math
+import multiprocessing
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import asdict, dataclass, field
+from typing import Any, Literal
+
+import numpy as np
+import numpy.typing as npt
+from tqdm import tqdm
+
+from app.advice.models import AdviceTables
+from app.advice.strategies import StrategyParams
+from app.agents.experts import train_goal_priors
+from app.agents.explorers import FIXED_EXPLORERS
+from app.agents.simulate import Simulator
+from app.domain.generate import generate_domain
+from app.domain.grid import GridDomain
+from app.experiments.common import CommonArgs, rng_for
+from app.experiments.traps import dead_end_masks, other_dead_end_share, trap_goal
+
+FloatArray = npt.NDArray[np.float64]
+#: Curves in the order of tables and plots (``none``: no advice given).
+CURVES = ("none", "paper", "goal_aware", "early", "importance", "mistake", "random", "always")
+#: The parameter each curve's cost level sets.
+LEVEL_NAME = {
+    "none": "",
+    "paper": "kappa",
+    "goal_aware": "kappa",
+    "early": "n_steps",
+    "importance": "threshold",
+    "mistake": "threshold",
+    "random": "rate",
+    "always": "",
+}
+MEASURES = ("success", "steps", "advice", "trapped", "other_dead_end_share", "ruled_out")
+
+
+@dataclass
+class Args(CommonArgs):
+    """Strategies arguments (``--tasks``: tasks per map, explorer and configuration)."""
+
+    tasks: int = 50
+    """Random one-shot tasks per map; every strategy and level sees the same tasks."""
+    steps: int = 5000
+    """Step limit of a one-shot task."""
+    maps: int = 10
+    """Generated mazes besides ``--maze``: the first half perfect, the rest braided."""
+    map_size: int = 29
+    """Rows and columns of a generated maze (29: 449-465 free cells, as the shipped 455)."""
+    braid: float = 0.2
+    """Braid of the braided mazes (the shipped maze was generated with 0.2)."""
+    beta: float = 0.0
+    """Goal-aware advice: weight of the per-goal likelihood of H (0: ruling out only)."""
+    workers: int = 2
+    """Processes (1: run in this process)."""
+    last_n: int = 500
+    """A failure is 'trapped' if half of its last ``last_n`` steps were in another goal's
+    dead end (app/experiments/traps.py)."""
+    kappas: tuple[float, ...] = (0.25, 0.5, 0.75, 1.0)
+    """paper: kappa levels (kappa 0 is ``always``)."""
+    goal_kappas: tuple[float, ...] = (0.0, 0.25, 0.5, 0.75, 1.0)
+    """goal_aware: kappa levels (kappa 0: always advise theta^w)."""
+    betas: tuple[float, ...] = (0.1, 0.5, 1.0)
+    """goal_aware: other betas, at the default kappa only."""
+    early_steps: tuple[int, ...] = (20, 100, 500, 2000)
+    """early: advise during the first n_steps decisions."""
+    importance_thresholds: tuple[float, ...] = (0.25, 0.5, 0.75, 1.0)
+    """importance: advise where KL[theta_s || uniform] >= threshold."""
+    mistake_thresholds: tuple[float, ...] = (0.05, 0.15, 0.25, 0.5)
+    """mistake: advise after a move a with theta_s(a) < threshold."""
+    rates: tuple[float, ...] = (0.02, 0.05, 0.1, 0.2, 0.4)
+    """random: probability of advising per step."""
+
+    def check(self) -> None:
+        super().check()
+        if self.experts == "policy":
+            raise ValueError("strategies needs expert trajectories: experts start or anywhere")
+        if self.maps < 0 or self.map_size < 5 or self.workers < 1 or self.steps < 1:
+            raise ValueError("need maps >= 0, map-size >= 5, workers >= 1 and steps >= 1")
+        if not (0.0 <= self.braid <= 1.0 and 0.0 <= self.beta <= 1.0):
+            raise ValueError("braid and beta must be in [0, 1]")
+
+
+@dataclass(frozen=True)
+class Config:
+    """One point of one curve: a strategy at one cost level."""
+
+    curve: str  # a name in CURVES, or "goal_aware beta=<b>"
+    strategy: str  # the kernel's strategy ("paper" for ``none``, which gives no advice)
+    level: float  # the curve's cost parameter (nan: none, always)
+    kappa: float
+    params: StrategyParams = field(default_factory=StrategyParams)
+    default: bool = False  # the curve's default level
+
+    @property
+    def key(self) -> str:
+        return self.curve if math.isnan(self.level) else f"{self.curve}@{self.level:g}"
+
+    @property
+    def advised(self) -> bool:
+        return self.curve != "none"
+
+
+def configs(args: Args) -> list[Config]:
+    """Every configuration run, in report order; each curve's levels ascending."""
+    base = StrategyParams(beta=args.beta)
+    k0 = args.kappa
+    out = [Config("none", "paper", math.nan, k0, base, True)]
+    for kappa in sorted({*args.kappas, k0}):
+        out.append(Config("paper", "paper", kappa, kappa, base, kappa == k0))
+    for kappa in sorted({*args.goal_kappas, k0}):
+        out.append(Config("goal_aware", "goal_aware", kappa, kappa, base, kappa == k0))
+    for n in sorted({*args.early_steps, base.n_steps}):
+        p = StrategyParams(n_steps=n, beta=args.beta)
+        out.append(Config("early", "early", n, k0, p, n == base.n_steps))
+    for rule, values in (
+        ("importance", args.importance_thresholds),
+        ("mistake", args.mistake_thresholds),
+    ):
+        for t in sorted({*values, base.threshold}):
+            p = StrategyParams(threshold=t, beta=args.beta)
+            out.append(Config(rule, rule, t, k0, p, t == base.threshold))
+    for r in sorted({*args.rates, base.rate}):
+        out.append(Config("random", "random", r, k0, StrategyParams(rate=r), r == base.rate))
+    out.append(Config("always", "always", math.nan, k0, base, True))
+    for b in sorted(set(args.betas) - {args.beta}):
+        out.append(Config(f"goal_aware beta={b:g}", "goal_aware", k0, k0, StrategyParams(beta=b)))
+    return out
+
+
+@dataclass(frozen=True)
+class MapSpec:
+    index: int
+    kind: str  # "file" (--maze), "perfect" or "braided"
+    seed: int  # the generator's seed (-1 for the file)
+    name: str
+
+
+def map_suite(args: Args) -> list[MapSpec]:
+    """The ``--maze`` map, then ``--maps`` generated ones (perfect first, then braided)."""
+    out = [MapSpec(0, "file", -1, args.maze.stem)]
+    n_perfect = (args.maps + 1) // 2
+    for i in range(1, args.maps + 1):
+        kind = "perfect" if i <= n_perfect else "braided"
+        seed = int(rng_for(args.seed, "strategies-maps", i).integers(2**31))
+        out.append(MapSpec(i, kind, seed, f"{kind}-{args.map_size}-s{seed}"))
+    return out
+
+
+def load_map(args: Args, spec: MapSpec) -> GridDomain:
+    if spec.kind == "file":
+        return GridDomain.from_file(args.maze)
+    braid = 0.0 if spec.kind == "perfect" else args.braid
+    return generate_domain(args.map_size, args.map_size, spec.seed, braid=braid)
+
+
+@dataclass
+class World:
+    """One map of the suite, ready to run: the maze, its priors, the simulator, the tasks."""
+
+    spec: MapSpec
+    domain: GridDomain
+    sim: Simulator
+    goals: list[int]
+    masks: npt.NDArray[np.bool_]
+    states_with_data: int  # cells some expert passed through (elsewhere theta is uniform)
+
+
+def prepare_world(args: Args, spec: MapSpec) -> World:
+    domain = load_map(args, spec)
+    # the --maze map uses Table I's expert stream, so its pooled prior is Table I's
+    keys = ("experts",) if spec.kind == "file" else ("experts", spec.index)
+    source: Literal["start", "anywhere"] = "anywhere" if args.experts == "anywhere" else "start"
+    prior, goal_priors = train_goal_priors(
+        domain, rng_for(args.seed, *keys), source, args.per_goal, args.alpha0
+    )
+    sim = Simulator(domain, AdviceTables.paper(prior.theta()), goal_priors)
+    goals = rng_for(args.seed, "strategies-tasks", spec.index).choice(
+        np.array(domain.goals, dtype=np.int64), size=args.tasks
+    )
+    with_data = int((prior.pooled_increments_.sum(axis=1) > 0).sum())
+    return World(spec, domain, sim, goals.tolist(), dead_end_masks(domain), with_data)
+
+
+def map_info(world: World) -> dict[str, Any]:
+    """What a map of the suite is like (for the report)."""
+    d = world.domain
+    degree = d.open_moves.sum(axis=1)
+    return {
+        **asdict(world.spec),
+        "states": d.n_states,
+        "dead_ends": int((degree == 1).sum()),
+        "junctions": int((degree >= 3).sum()),
+        "independent_loops": int(d.open_moves.sum()) // 2 - d.n_states + 1,
+        "mean_goal_distance": float(d.goal_distances[:, d.start].mean()),
+        "states_with_expert_data": world.states_with_data,
+    }
+
+
+_WORLDS: dict[tuple[Any, ...], World] = {}  # per process: a map's jobs come one after another
+
+
+def cached_world(args: Args, spec: MapSpec) -> World:
+    """:func:`prepare_world`, kept for the next job on the same map (expert data takes a BFS
+    per trajectory, more than a job's short tasks)."""
+    key = (str(args.maze), args.seed, args.experts, args.per_goal, args.alpha0, args.tasks,
+           args.map_size, args.braid, spec)  # fmt: skip
+    if key not in _WORLDS:
+        _WORLDS.clear()
+        _WORLDS[key] = prepare_world(args, spec)
+    return _WORLDS[key]
+
+
+def run_job(
+    args: Args, spec: MapSpec, explorer: str, todo: list[Config]
+) -> dict[str, dict[str, FloatArray]]:
+    """Every task of one map for one explorer under every configuration: config key ->
+    measure -> one value per task."""
+    world = cached_world(args, spec)
+    out: dict[str, dict[str, FloatArray]] = {}
+    for c in todo:
+        m = {name: np.zeros(args.tasks) for name in MEASURES}
+        for i, goal in enumerate(world.goals):
+            run = world.sim.fixed(
+                explorer,
+                goal,
+                rng_for(args.seed, "strategies", spec.index, explorer, i),
+                advised=c.advised,
+                strategy=c.strategy,
+                kappa=c.kappa,
+                window=args.window,
+                params=c.params,
+                rule_rng=rng_for(args.seed, "strategies-rule", spec.index, explorer, c.key, i),
+                max_steps=args.steps,
+                record_p=False,
+            )
+            gi = world.domain.goals.index(goal)
+            m["success"][i] = run.success
+            m["steps"][i] = run.steps
+            m["advice"][i] = run.advice_count if c.advised else 0
+            m["trapped"][i] = trap_goal(run.states, run.success, gi, world.masks, args.last_n) >= 0
+            m["other_dead_end_share"][i] = other_dead_end_share(run.states, gi, world.masks)
+            m["ruled_out"][i] = run.goals_ruled_out
+        out[c.key] = m
+    return out
+
+
+@dataclass
+class Results:
+    """Per-task measures: ``data[explorer][config key][measure]`` has shape (maps, tasks)."""
+
+    maps: list[MapSpec]
+    configs: list[Config]
+    data: dict[str, dict[str, dict[str, FloatArray]]]
+
+
+def run_all(args: Args) -> Results:
+    """Every (map, explorer) job, in this process or in ``--workers`` processes."""
+    suite, todo = map_suite(args), configs(args)
+    jobs = [(spec, name) for spec in suite for name in FIXED_EXPLORERS]
+    data = {
+        name: {c.key: {m: np.zeros((len(suite), args.tasks)) for m in MEASURES} for c in todo}
+        for name in FIXED_EXPLORERS
+    }
+
+    def store(spec: MapSpec, name: str, got: dict[str, dict[str, FloatArray]]) -> None:
+        for key, measures in got.items():
+            for m, values in measures.items():
+                data[name][key][m][spec.index] = values
+
+    per_job = args.tasks * len(todo)
+    with tqdm(
+        total=per_job * len(jobs), desc="strategies", unit="task", disable=not args.progress
+    ) as bar:
+        if args.workers == 1:
+            for spec, name in jobs:
+                store(spec, name, run_job(args, spec, name, todo))
+                bar.update(per_job)
+        else:
+            ctx = multiprocessing.get_context("spawn")  # no fork of a process with threads
+            with ProcessPoolExecutor(args.workers, mp_context=ctx) as pool:
+                futures = {pool.submit(run_job, args, s, n, todo): (s, n) for s, n in jobs}
+                for fut in as_completed(futures):
+                    store(*futures[fut], fut.result())
+                    bar.update(per_job)
+    return Results(suite, todo, data)

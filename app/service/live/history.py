@@ -1,0 +1,169 @@
+"""A session's bounded recent history: its path and P(M1 | H) (:class:`Recent`), and the
+advice it was given (:class:`AdviceLog`).
+
+Both are rings of fixed size in ``array.array`` buffers (a single event sets an item at a
+third of numpy's cost; batches write through numpy views), so a live session's memory does
+not grow with its length, and 100,000 sessions hold one each (docs/PERFORMANCE.md, memory).
+"""
+
+from __future__ import annotations
+
+from array import array
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from app.advice.models import AdviceTables
+
+IntArray = npt.NDArray[np.int64]
+Advice = tuple[float, float, float, float]
+
+
+def _ring_spans(count: int, k: int, size: int) -> tuple[int, int, int]:
+    """Where the last ``m = min(k, size)`` of ``k`` values appended to a ring of ``size``
+    after ``count`` items go: ring[start:start + first] gets the first ``first`` of them and
+    ring[:m - first] the rest (two slices: no index arrays). Returns (m, start, first)."""
+    m = min(k, size)
+    start = (count + k - m) % size
+    return m, start, min(m, size - start)
+
+
+class Recent:
+    """The last ``size`` numbers pushed, oldest first, in one ring (8 bytes or less a number,
+    where a deque of Python numbers costs about 32). The ring is an ``array.array``, whose
+    items a single event sets at a third of numpy's cost; batches go through a numpy view."""
+
+    __slots__ = ("_buf", "_count")
+
+    def __init__(self, size: int, dtype: type[np.generic], first: float):
+        kind = np.dtype(dtype)
+        self._buf: array[Any] = array(kind.char, bytes(kind.itemsize * size))
+        self._buf[0] = first
+        self._count = 1
+
+    def _view(self) -> npt.NDArray[Any]:
+        return np.frombuffer(self._buf, dtype=self._buf.typecode)
+
+    def push(self, value: float) -> None:
+        self._buf[self._count % len(self._buf)] = value
+        self._count += 1
+
+    def extend(self, values: Sequence[float] | npt.NDArray[Any]) -> None:
+        size, k = len(self._buf), len(values)
+        if k == 1:  # one event per request: no index arrays
+            self.push(values[0])
+            return
+        m, start, first = _ring_spans(self._count, k, size)
+        view, tail = self._view(), values[k - m :]
+        view[start : start + first] = tail[:first]
+        view[: m - first] = tail[first:]
+        self._count += k
+
+    def tolist(self) -> list[Any]:
+        size = len(self._buf)
+        m = min(self._count, size)
+        out: list[Any] = self._view()[np.arange(self._count - m, self._count) % size].tolist()
+        return out
+
+
+class AdviceLog:
+    """The last ``size`` pieces of advice as (step, state, tables that advised), oldest first,
+    in one numpy ring (the tables as an index into a short list: they change only when the
+    prior does). About 1.3 kB for 50 entries where a deque of tuples takes about 7 kB:
+    100,000 sessions hold one each (docs/PERFORMANCE.md, memory)."""
+
+    __slots__ = ("_buf", "_count", "_own", "_tables")
+
+    def __init__(self, size: int):
+        # rows step, state, index into _tables; an array.array, as in Recent
+        self._buf = array("q", bytes(8 * 3 * size))
+        self._count = 0
+        self._tables: list[AdviceTables] = []
+        # the advice itself, for advisors whose advice is not theta_s (made at the first one)
+        self._own: npt.NDArray[np.float64] | None = None
+
+    def extend(
+        self, steps: IntArray, states: IntArray, tables: AdviceTables,
+        advice: npt.NDArray[np.float64] | None = None,
+    ) -> None:  # fmt: skip
+        """Log advice given at ``states`` (arrays): theta_s of ``tables``, or the rows of
+        ``advice`` (one per entry) for advisors whose advice is not theta_s."""
+        k, size = len(steps), len(self._buf) // 3
+        if not k:
+            return
+        which, buf = self._index(tables), self._rows()
+        m, start, first = _ring_spans(self._count, k, size)
+        spans = (
+            (slice(start, start + first), slice(0, first)),
+            (slice(0, m - first), slice(first, m)),
+        )
+        tail_steps, tail_states = steps[k - m :], states[k - m :]
+        for ring, part in spans:
+            buf[0, ring] = tail_steps[part]
+            buf[1, ring] = tail_states[part]
+            buf[2, ring] = which
+        if advice is not None and self._own is None:
+            self._own = np.full((size, 4), np.nan)
+        if self._own is not None:  # NaN rows: theta_s of the tables
+            rows = np.full((m, 4), np.nan) if advice is None else advice[k - m :]
+            for ring, part in spans:
+                self._own[ring] = rows[part]
+        self._count += k
+
+    def add(self, step: int, state: int, tables: AdviceTables, advice: Advice | None) -> None:
+        """:meth:`extend` for one piece of advice (``advice`` None: theta_s of ``tables``;
+        pass it only for advisors whose advice is not theta_s), without index arrays."""
+        which, buf, size = self._index(tables), self._buf, len(self._buf) // 3
+        at = self._count % size
+        buf[at], buf[size + at], buf[2 * size + at] = step, state, which
+        if advice is not None and self._own is None:
+            self._own = np.full((size, 4), np.nan)
+        if self._own is not None:  # NaN row: theta_s of the tables
+            self._own[at] = np.nan if advice is None else advice
+        self._count += 1
+
+    def _index(self, tables: AdviceTables) -> int:
+        """The index of ``tables`` in the list: the last one, appended (after a compaction)
+        when it is not already."""
+        if not self._tables or self._tables[-1] is not tables:
+            self._compact()
+            self._tables.append(tables)
+        return len(self._tables) - 1
+
+    def _rows(self) -> npt.NDArray[np.int64]:
+        """The ring as a (3, size) numpy view."""
+        return np.frombuffer(self._buf, dtype=np.int64).reshape(3, -1)
+
+    def _compact(self) -> None:
+        """Forget tables no entry refers to any more (so the list stays short).
+
+        Entries are written oldest first and each table of the list got entries when it was
+        appended, so the tables in use are those from the oldest entry's to the last: the
+        unused ones are a prefix. (This runs at nearly every piece of advice while the prior
+        changes often, e.g. one trajectory per ingest request: O(1), not a set.)"""
+        if len(self._tables) < 4:
+            return
+        size = len(self._buf) // 3
+        oldest = (self._count - min(self._count, size)) % size
+        first = self._buf[2 * size + oldest]
+        if first:
+            self._rows()[2] -= first  # slots not yet written are never read
+            del self._tables[:first]
+
+    def _order(self) -> npt.NDArray[np.int64]:
+        size = len(self._buf) // 3
+        m = min(self._count, size)
+        return np.arange(self._count - m, self._count) % size
+
+    def items(self) -> list[tuple[int, int, AdviceTables | Advice]]:
+        order = self._order()
+        steps, states, which = self._rows()[:, order].tolist()
+        if self._own is None:
+            return [(a, s, self._tables[t]) for a, s, t in zip(steps, states, which, strict=True)]
+        own = self._own[order].tolist()
+        return [
+            (a, s, self._tables[t] if o[0] != o[0] else (o[0], o[1], o[2], o[3]))  # NaN: theta
+            for a, s, t, o in zip(steps, states, which, own, strict=True)
+        ]

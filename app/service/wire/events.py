@@ -1,0 +1,180 @@
+"""Events in: JSON text to checked (s, a, s'), with one set of checks and one set of words.
+
+An event ``{"state": [r, c], "action": "E", "next_state": [r, c]}`` becomes (s, a, s'):
+
+* without ``next_state`` the domain's transitions give it: ``s' = T(s, a)``;
+* without ``action`` it is the move from ``s`` to ``s'``; an unchanged cell is ambiguous (a
+  bump into a wall, or standing still) and refused;
+* with both, ``s'`` must be ``s`` or one move from it (a client's world may move it
+  differently from its intention: the advisor learns from (s, a) and decides for ``s'``).
+
+Two paths, the same checks and the same errors:
+
+* one event (:func:`read_move`): the common form ``{"state": [r, c], "action": "E"}`` by a
+  regular expression and plain ints; any other object through pydantic and the batch checks;
+* a batch (:func:`read_moves`): the compiled reader for a plainly written list
+  (:func:`app.service.wire.compiled.scan_events`), pydantic for anything else, then the
+  compiled checks (:func:`app.service.wire.compiled.check_moves`), whose reason code
+  :func:`reason_text` words.
+
+A batch is checked whole before the advisor sees any of it, so a refused batch changes nothing.
+"""
+
+from __future__ import annotations
+
+import re
+import weakref
+from dataclasses import dataclass
+from itertools import chain
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+from pydantic import TypeAdapter, ValidationError
+
+from app.domain.grid import GridDomain
+from app.service.problems import BadInput, describe_errors
+from app.service.schemas import ACTION_CODE, EventIn
+from app.service.wire import compiled
+from app.service.wire.compiled import check_moves, scan_events
+
+IntArray = npt.NDArray[np.int64]
+Moves = tuple[IntArray, IntArray, IntArray]
+
+EVENT = TypeAdapter(EventIn)
+EVENT_LIST = TypeAdapter(list[EventIn])
+NOT_JSON = 'send JSON: an event {"state": [r, c], "action": "N"} or a list of them'
+AMBIGUOUS = (
+    "state and next_state are the same cell and no action is given: ambiguous "
+    "(a bump into a wall, or standing still); send the action"
+)
+
+
+def reason_text(domain: GridDomain, reason: int, cell: list[int], nxt: list[int]) -> str:
+    """The words for a reason code of :func:`check_moves` about the event at ``cell``."""
+    rows, cols = domain.shape
+    if reason == compiled.STATE_OFF:
+        return f"state {cell} is off the {rows}x{cols} map"
+    if reason == compiled.STATE_WALL:
+        return f"state {cell} is a wall"
+    if reason == compiled.NEXT_OFF:
+        return f"next_state {nxt} is off the {rows}x{cols} map"
+    if reason == compiled.NEXT_WALL:
+        return f"next_state {nxt} is a wall"
+    if reason == compiled.NO_MOVE:
+        return "give an action, a next_state or both"
+    if reason == compiled.NOT_ONE_MOVE:
+        return (
+            f"next_state {nxt} is not one move from state {cell} "
+            "(a move reaches an adjacent open cell or stays put)"
+        )
+    return AMBIGUOUS
+
+
+def _validate(adapter: TypeAdapter[Any], raw: bytes | str) -> Any:
+    """``adapter.validate_json(raw)``; errors as BadInput, located under ``event(s)``."""
+    root = "event" if adapter is EVENT else "events"
+    try:
+        return adapter.validate_json(raw)
+    except ValidationError as exc:
+        errors = [{**e, "loc": (root, *e["loc"])} for e in exc.errors(include_input=False)]
+        raise BadInput(describe_errors(errors)) from None
+
+
+def _arrays(events: list[EventIn]) -> tuple[IntArray, IntArray, IntArray]:
+    """Parsed events as the compiled reader gives them: cells (n, 2), action codes (n,; -1
+    none), next cells (n, 2; -1 none)."""
+    n = len(events)
+    flat = chain.from_iterable
+    cells = np.fromiter(flat(e["state"] for e in events), np.int64, 2 * n).reshape(n, 2)
+    actions = np.fromiter((ACTION_CODE[e.get("action")] for e in events), np.int64, n)
+    nexts = np.fromiter(flat(e.get("next_state") or (-1, -1) for e in events), np.int64, 2 * n)
+    return cells, actions, nexts.reshape(n, 2)
+
+
+def _checked(domain: GridDomain, cells: IntArray, actions: IntArray, nexts: IntArray) -> Moves:
+    moves, bad, reason = check_moves(domain.state_of, domain.next_state, cells, actions, nexts)
+    if bad >= 0:
+        why = reason_text(domain, reason, cells[bad].tolist(), nexts[bad].tolist())
+        raise BadInput(f"event {bad}: {why}")
+    return moves
+
+
+def read_moves(domain: GridDomain, raw: bytes | str, max_events: int) -> tuple[Moves, bool]:
+    """JSON text (one event or a list) -> (checked (s, a, s') arrays, single): single when it
+    was one event object, not a list. BadInput (422, or 413 for too many events) names the
+    first problem."""
+    head = raw.lstrip()[:1]
+    if head in (b"[", "["):
+        scanned = scan_events(raw)
+        if scanned is None:
+            scanned = _arrays(_validate(EVENT_LIST, raw))
+        single = False
+    elif head in (b"{", "{"):
+        scanned, single = _arrays([_validate(EVENT, raw)]), True
+    else:
+        raise BadInput(NOT_JSON)
+    if len(scanned[0]) > max_events:
+        raise BadInput(
+            f"too many events: {len(scanned[0])} in one batch, at most {max_events}", 413
+        )
+    return _checked(domain, *scanned), single
+
+
+def read_move(domain: GridDomain, raw: bytes | str) -> tuple[int, int, int] | None:
+    """One event object (JSON text) -> its checked (s, a, s') as plain ints, or None when
+    ``raw`` does not start as an object (then :func:`read_moves` reads it). The same checks
+    and errors as :func:`read_moves` gives for it; the common form costs no parser and no
+    arrays: one event per request is the REST route's common case."""
+    head = raw.lstrip()[:1]
+    if head not in (b"{", "{"):
+        return None
+    plain = _PLAIN_BYTES.fullmatch(raw) if isinstance(raw, bytes) else _PLAIN_TEXT.fullmatch(raw)
+    if plain is None:
+        (s,), (a,), (s2,) = _checked(domain, *_arrays([_validate(EVENT, raw)]))
+        return int(s), int(a), int(s2)
+    r, c, letter = plain.groups()
+    t = _tables(domain)
+    row, col = int(r), int(c)
+    s = t.state_of[row][col] if row < t.rows and col < t.cols else -1
+    if s < 0:
+        reason = compiled.STATE_OFF if row >= t.rows or col >= t.cols else compiled.STATE_WALL
+        raise BadInput(f"event 0: {reason_text(domain, reason, [row, col], [-1, -1])}")
+    a = _CODE[letter]
+    return s, a, t.next_state[s][a]
+
+
+# ``{"state": [r, c], "action": "E"}`` as json.dumps writes it, with or without its spaces,
+# and JSON whitespace around it: what the parser reads as that event (1-9 plain digits with
+# no leading zero make a valid coordinate, below 2**31). tests/service/wire/test_events.py checks
+# read_move against the parser on such texts, mutated ones and edge cases.
+_PLAIN = (
+    r'[ \t\n\r]*\{"state": ?\[(0|[1-9][0-9]{0,8}), ?(0|[1-9][0-9]{0,8})\], ?'
+    r'"action": ?"([NESW])"\}[ \t\n\r]*'
+)
+_PLAIN_TEXT = re.compile(_PLAIN)
+_PLAIN_BYTES = re.compile(_PLAIN.encode())
+_CODE: dict[str | bytes, int] = {x: ACTION_CODE[x] for x in "NESW"}
+_CODE |= {x.encode(): ACTION_CODE[x] for x in "NESW"}
+
+
+@dataclass(frozen=True, slots=True)
+class _Lists:
+    """A domain's tables as nested lists (Python indexing is fast for one event)."""
+
+    rows: int
+    cols: int
+    state_of: list[list[int]]
+    next_state: list[list[int]]
+
+
+_LISTS: weakref.WeakKeyDictionary[GridDomain, _Lists] = weakref.WeakKeyDictionary()
+
+
+def _tables(domain: GridDomain) -> _Lists:
+    lists = _LISTS.get(domain)
+    if lists is None:
+        rows, cols = domain.shape
+        lists = _Lists(rows, cols, domain.state_of.tolist(), domain.next_state.tolist())
+        _LISTS[domain] = lists
+    return lists

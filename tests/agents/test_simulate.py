@@ -1,0 +1,228 @@
+"""The compiled kernels (app/kernels.py) make exactly the draws, moves and decisions of the
+reference loops, advisors and explorers, for every strategy and explorer, over random tables
+with two or three behaviour models and arbitrary weights: equal to the last bit."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from app import kernels
+from app.advice.advisor import Advisor
+from app.advice.models import AdviceTables
+from app.advice.priors import GoalPriors
+from app.advice.strategies import STRATEGIES, StrategyParams, make_advisor
+from app.agents.episodes import run_episode, run_learning
+from app.agents.experts import train_goal_priors, train_prior
+from app.agents.explorers import FIXED_EXPLORERS, make_explorer
+from app.agents.qlearning import QLearningExplorer
+from app.agents.simulate import EXPLORER_CODES, STRATEGY_CODES, QParams, Simulator
+from app.domain.generate import generate_domain
+from app.domain.grid import GridDomain
+from tests.tables import random_tables, split_weight_tables
+
+finite = st.floats(allow_nan=False, allow_infinity=False, min_value=-1e300, max_value=1e300)
+
+
+@given(st.lists(finite | st.sampled_from([1e-16, 1.0, 1e16, -1e16, 0.1, -0.0]), max_size=60))
+def test_fsum_is_cpython_fsum(values: list[float]) -> None:
+    assert kernels.fsum(np.array(values, dtype=np.float64)) == math.fsum(values)
+
+
+def test_fsum_rounds_half_even_across_partials() -> None:
+    for values in ([1e-16, 1.0, 1e16], [1.0, 1e100, 1.0, -1e100], [0.1] * 10):
+        assert kernels.fsum(np.array(values)) == math.fsum(values)
+
+
+def test_kernel_codes_name_every_explorer_and_strategy() -> None:
+    assert set(EXPLORER_CODES) == set(FIXED_EXPLORERS)
+    assert set(STRATEGY_CODES) == set(STRATEGIES)
+    assert len(set(EXPLORER_CODES.values())) == len(EXPLORER_CODES)
+    assert len(set(STRATEGY_CODES.values())) == len(STRATEGY_CODES)
+
+
+def world(seed: int, n_models: int) -> tuple[GridDomain, AdviceTables, GoalPriors]:
+    """A small braided maze, per-goal counts from experts, and tables over their pooled theta
+    with 2 or 3 models of random weights."""
+    d = generate_domain(9, 11, seed, braid=0.3, n_goals=3)
+    alpha0 = (0.1, 1.0, 5.0)[seed % 3]
+    prior, goal_priors = train_goal_priors(d, np.random.default_rng(seed), "start", 2, alpha0)
+    tables = random_tables(np.random.default_rng(seed + 1), d.n_states, n_models, prior.theta())
+    return d, tables, goal_priors
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    st.integers(0, 10_000),
+    st.sampled_from(STRATEGIES),
+    st.sampled_from(FIXED_EXPLORERS),
+    st.sampled_from([0.0, 0.3, 0.7]),
+    st.integers(3, 40),
+    st.sampled_from([0.0, 0.5, 1.0]),
+    st.booleans(),
+    st.sampled_from([2, 3]),
+)
+def test_compiled_episode_follows_the_reference_loop(
+    seed: int, strategy: str, explorer: str, kappa: float, window: int, beta: float,
+    advised: bool, n_models: int,
+) -> None:  # fmt: skip
+    d, tables, goal_priors = world(seed, n_models)
+    rng = np.random.default_rng(seed)
+    params = StrategyParams(
+        n_steps=int(rng.integers(0, 60)),
+        threshold=float(rng.choice([0.1, 0.3, 0.5, 0.9])),
+        rate=float(rng.choice([0.05, 0.3])),
+        beta=beta,
+        seed=seed,
+    )
+    goal = d.goals[seed % len(d.goals)]
+    fast = Simulator(d, tables, goal_priors).fixed(
+        explorer, goal, np.random.default_rng(seed), advised=advised, strategy=strategy,
+        kappa=kappa, window=window, params=params,
+        max_steps=1200,  # past the exact re-sum (1,024 pairs) when the task is not solved
+    )  # fmt: skip
+    advisor = make_advisor(strategy, tables, kappa, window, params, goal_priors)
+    ref = run_episode(
+        d, make_explorer(explorer, d), advisor, goal, np.random.default_rng(seed),
+        advised=advised, max_steps=1200,
+    )  # fmt: skip
+    assert fast.success == ref.success
+    assert fast.steps == ref.steps
+    assert fast.states.tolist() == ref.states
+    assert fast.advise.tolist() == [dec.advise for dec in ref.decisions]
+    assert fast.advice_count == ref.advice_count
+    assert fast.benefit == ref.decisions[-1].benefit
+    if strategy in ("paper", "goal_aware"):  # the others compute P(M1 | H) where it is read
+        assert fast.p_normal.tolist() == [dec.p_normal for dec in ref.decisions]
+    beliefs = advisor.goal_beliefs()
+    assert fast.goals_ruled_out == (sum(out for *_, out in beliefs) if beliefs else 0)
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    st.integers(0, 10_000),
+    st.booleans(),
+    st.booleans(),
+    st.sampled_from(["advice", "uniform"]),
+    st.sampled_from([0.05, 0.3]),
+    st.sampled_from([2, 3]),
+)
+def test_learning_kernel_follows_the_reference_q_learner(
+    seed: int, advised: bool, keep_history: bool, ties: str, epsilon: float, n_models: int
+) -> None:
+    d, tables, _ = world(seed, n_models)
+    goal = d.goals[seed % len(d.goals)]
+    params = QParams(alpha=0.3, gamma=0.9, epsilon=epsilon, ties=ties)
+    fast = Simulator(d, tables).learning(
+        goal, np.random.default_rng(seed), advised=advised, params=params, episodes=25,
+        max_steps=60, keep_history=keep_history, kappa=0.4, window=50,
+    )  # fmt: skip
+    learner = QLearningExplorer(d, 0.3, 0.9, epsilon, ties)  # type: ignore[arg-type]
+    ref = run_learning(
+        d, learner, Advisor(tables, 0.4, 50), goal, np.random.default_rng(seed), episodes=25,
+        advised=advised, max_steps=60, keep_history=keep_history,
+    )  # fmt: skip
+    assert fast.steps.tolist() == [r.steps for r in ref]
+    assert fast.success.tolist() == [r.success for r in ref]
+    assert fast.advice_count.tolist() == [r.advice_count for r in ref]
+    np.testing.assert_array_equal(fast.q, learner.q)
+    # a mean over each episode's decisions (summed in another order), not a decision
+    means = [math.fsum(x.p_normal for x in r.decisions) / len(r.decisions) for r in ref]
+    np.testing.assert_allclose(fast.p_normal_mean, means, rtol=1e-12)
+
+
+@pytest.mark.parametrize("explorer", FIXED_EXPLORERS)
+def test_compiled_episode_reads_the_core_s_log_weights(explorer: str) -> None:
+    """Weights whose log numpy and libm round differently: the kernels read the tables' own."""
+    d, _, goal_priors = world(7, 3)
+    tables = split_weight_tables(np.random.default_rng(7), d.n_states)
+    for i, strategy in enumerate(("paper", "goal_aware")):
+        fast = Simulator(d, tables, goal_priors).fixed(
+            explorer, d.goals[i], np.random.default_rng(i), advised=True, strategy=strategy,
+            kappa=0.3, window=40, max_steps=1500,
+        )  # fmt: skip
+        advisor = make_advisor(strategy, tables, 0.3, 40, None, goal_priors)
+        ref = run_episode(d, make_explorer(explorer, d), advisor, d.goals[i],
+                          np.random.default_rng(i), advised=True, max_steps=1500)  # fmt: skip
+        assert fast.states.tolist() == ref.states
+        assert fast.p_normal.tolist() == [dec.p_normal for dec in ref.decisions]
+        assert fast.benefit == ref.decisions[-1].benefit
+
+
+def test_step_budget_stops_learning_mid_episode() -> None:
+    d, tables, _ = world(3, 2)
+    run = Simulator(d, tables).learning(
+        d.goals[0], np.random.default_rng(0), advised=True, episodes=100, max_steps=7,
+        step_budget=30,
+    )  # fmt: skip
+    assert run.steps.sum() == 30
+    assert len(run.steps) <= 5
+
+
+def test_goal_priors_share_the_pooled_prior_with_train_prior() -> None:
+    d = generate_domain(11, 11, 3, braid=0.2, n_goals=4)
+    prior, goal_priors = train_goal_priors(d, np.random.default_rng(5), "start", 3, 0.5)
+    same = train_prior(d, np.random.default_rng(5), "start", 3, 0.5)
+    np.testing.assert_array_equal(prior.theta(), same.theta())
+    np.testing.assert_allclose(goal_priors.pooled_theta(), prior.theta(), atol=1e-12)
+    assert goal_priors.goal_counts.sum(axis=(1, 2)).min() > 0  # every goal has its own data
+
+
+def test_goal_aware_lets_an_explorer_out_of_another_goals_dead_end() -> None:
+    # a corridor with a goal at each end, the start in the middle; experts walk to both, so
+    # each half of the corridor advises towards its end. Always advised (kappa 0), a random
+    # walker whose goal is on the right and that reached the left goal is held there by the
+    # paper's advice; goal-aware advice rules the left goal out and stops pointing at it.
+    d = GridDomain.from_strings(["G...S...G"])
+    prior, goal_priors = train_goal_priors(d, np.random.default_rng(0), "start", 5, 0.1)
+    sim = Simulator(d, AdviceTables.paper(prior.theta()), goal_priors)
+    left, right = d.goals
+    escaped = {}
+    for strategy in ("paper", "goal_aware"):
+        runs = [
+            sim.fixed(
+                "random",
+                right,
+                np.random.default_rng(i),
+                advised=True,
+                strategy=strategy,
+                kappa=0.0,
+                max_steps=40,
+            )
+            for i in range(50)
+        ]
+        trapped = [r for r in runs if left in r.states.tolist()]
+        assert len(trapped) > 10 and all(r.advise.all() for r in runs)
+        escaped[strategy] = sum(r.success for r in trapped)
+        if strategy == "goal_aware":
+            assert all(r.goals_ruled_out == 1 for r in trapped)
+    assert escaped["paper"] == 0
+    assert escaped["goal_aware"] >= 5
+
+
+def test_simulator_rejects_bad_arguments() -> None:
+    d, tables, goal_priors = world(1, 2)
+    sim = Simulator(d, tables, goal_priors)
+    goal = d.goals[0]
+    rng = np.random.default_rng(0)
+    with pytest.raises(ValueError, match="unknown explorer 'teleport'"):
+        sim.fixed("teleport", goal, rng, advised=True)
+    with pytest.raises(ValueError, match="unknown strategy 'loud'"):
+        sim.fixed("random", goal, rng, advised=True, strategy="loud")
+    with pytest.raises(ValueError, match=r"rate must be a finite number from 0\.0 to 1\.0"):
+        sim.fixed(
+            "random", goal, rng, advised=True, strategy="random", params=StrategyParams(rate=2.0)
+        )
+    with pytest.raises(ValueError, match="kappa"):
+        sim.fixed("random", goal, rng, advised=True, kappa=-1.0)
+    with pytest.raises(ValueError, match="needs the experts' goals"):
+        Simulator(d, tables).fixed("random", goal, rng, advised=True, strategy="goal_aware")
+    with pytest.raises(ValueError, match="ties"):
+        QParams(ties="coin")
+    other = generate_domain(7, 7, 0)
+    with pytest.raises(ValueError, match="states"):
+        Simulator(other, tables)

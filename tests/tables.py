@@ -1,0 +1,53 @@
+"""Random advice tables for the equality tests: any theta, two or three behaviour models with
+arbitrary prior weights P(M), so that no fast path is checked only on the paper's 0.5 / 0.5."""
+
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import strategies as st
+
+from app.advice.models import AdviceTables, BehaviourModel, normal_model, uniform_model
+
+
+def random_theta(rng: np.random.Generator, n_states: int) -> np.ndarray:
+    """Rows from flat to peaked: Dirichlet-mean-like counts over a random alpha0."""
+    alpha = rng.choice([0.05, 0.5, 1.0, 5.0]) + rng.integers(0, 20, (n_states, 4))
+    out: np.ndarray = alpha / alpha.sum(axis=1, keepdims=True)
+    return out
+
+
+def random_tables(
+    rng: np.random.Generator, n_states: int, n_models: int = 2, theta: np.ndarray | None = None
+) -> AdviceTables:
+    """theta (given or random), the normal and uniform models and, for three models, a third
+    random one; every weight drawn from 0.05 to 20 (they are normalised across models)."""
+    th = random_theta(rng, n_states) if theta is None else np.asarray(theta)
+    weights = rng.uniform(0.05, 20.0, n_models).tolist()
+    models = [normal_model(th, weights[0]), uniform_model(n_states, weights[1])]
+    if n_models == 3:
+        other = rng.dirichlet(np.full(4, 0.7), size=n_states)
+        other = np.maximum(other, 1e-9)
+        models.append(BehaviourModel("other", other / other.sum(axis=1, keepdims=True), weights[2]))
+    return AdviceTables(th, tuple(models))
+
+
+#: P(M) weights for which numpy's log and libm's differ in the last bit (of the second, once
+#: normalised): every form of the advisor must read AdviceTables' one value, whichever it is
+SPLIT_WEIGHTS = (7.1935, 19.4471, 2.689)
+
+
+def split_weight_tables(
+    rng: np.random.Generator, n_states: int, theta: np.ndarray | None = None
+) -> AdviceTables:
+    """Three models with :data:`SPLIT_WEIGHTS`."""
+    th = random_theta(rng, n_states) if theta is None else np.asarray(theta)
+    other = BehaviourModel("other", rng.dirichlet(np.ones(4), size=n_states), SPLIT_WEIGHTS[2])
+    models = (normal_model(th, SPLIT_WEIGHTS[0]), uniform_model(n_states, SPLIT_WEIGHTS[1]))
+    return AdviceTables(th, (*models, other))
+
+
+@st.composite
+def advice_tables(draw: st.DrawFn, n_states: int) -> AdviceTables:
+    """Hypothesis: random tables for ``n_states`` states with 2 or 3 models."""
+    seed = draw(st.integers(0, 2**32 - 1))
+    return random_tables(np.random.default_rng(seed), n_states, draw(st.sampled_from([2, 3])))
