@@ -28,7 +28,7 @@ RUN pip install --no-deps . \
 
 USER advisor
 # compile the service's numba loop once, into the image (startup then only loads it)
-RUN python -c "from app.service.stream_advisor import warm_up; warm_up()"
+RUN python -c "from app.service.ops import warm_up; warm_up()"
 
 VOLUME ["/data"]
 EXPOSE 8000 8080

@@ -140,6 +140,7 @@ TEXTS = [
     *sorted((ROOT / "docs").glob("*.md")),
     ROOT / "README.md",
     ROOT / "Makefile",
+    ROOT / "Dockerfile",
 ]
 
 
