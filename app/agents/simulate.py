@@ -42,6 +42,8 @@ STRATEGY_CODES = {
     "random": kernels.RANDOM_RULE, "always": kernels.ALWAYS,
 }  # fmt: skip
 _NOTHING = np.zeros(0)
+_DEFAULTS = StrategyParams()
+_UNUSED_RNG = np.random.default_rng(0)  # the random rule's generator, for the other rules
 
 
 @dataclass(frozen=True)
@@ -134,12 +136,17 @@ class Simulator:
         self.next_state = np.ascontiguousarray(domain.next_state)
         self.open_moves = np.ascontiguousarray(domain.open_moves)
         self.cells = np.ascontiguousarray(domain.cells)
-        self._optimal: dict[int, BoolArray] = {}
+        self._worlds: dict[int, tuple[IntArray, BoolArray, IntArray, BoolArray]] = {}
 
     def optimal(self, goal: int) -> BoolArray:
-        if goal not in self._optimal:
-            self._optimal[goal] = np.ascontiguousarray(optimal_actions(self.domain, goal))
-        return self._optimal[goal]
+        return self._world(goal)[3]
+
+    def _world(self, goal: int) -> tuple[IntArray, BoolArray, IntArray, BoolArray]:
+        """What the episode kernel reads of the maze for ``goal`` (made once per goal)."""
+        if goal not in self._worlds:
+            optimal = np.ascontiguousarray(optimal_actions(self.domain, goal))
+            self._worlds[goal] = (self.next_state, self.open_moves, self.cells, optimal)
+        return self._worlds[goal]
 
     def fixed(
         self,
@@ -166,16 +173,19 @@ class Simulator:
         if strategy == "goal_aware" and not self.has_goals:
             raise ValueError("goal_aware advice needs the experts' goals (goal priors)")
         check_kappa_window(kappa, window)
-        p = params or StrategyParams()
-        p.check()
+        p = _DEFAULTS if params is None else params
+        if params is not None:
+            params.check()
         if max_steps < 1:
             raise ValueError(f"max_steps must be at least 1, got {max_steps}")
+        if rule_rng is None:  # a fresh generator only where the random rule draws from it
+            rule_rng = np.random.default_rng(p.seed) if strategy == "random" else _UNUSED_RNG
         states = np.empty(max_steps, dtype=np.int64)
         p_out = np.empty(max_steps) if record_p else _NOTHING
         advise = np.empty(max_steps, dtype=np.bool_)
         steps, success, count, benefit, ruled_out = kernels.episode(
             EXPLORER_CODES[explorer],
-            (self.next_state, self.open_moves, self.cells, self.optimal(goal)),
+            self._world(goal),
             self.domain.start,
             goal,
             max_steps,
@@ -188,7 +198,7 @@ class Simulator:
             self.tables.arrays,
             self.goals,
             rng,
-            rule_rng if rule_rng is not None else np.random.default_rng(p.seed),
+            rule_rng,
             (states, p_out, advise),
         )
         return FixedRun(

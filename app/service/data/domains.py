@@ -132,10 +132,12 @@ class DomainCatalog:
         stored = keep.prior.stored_counts() if keep is not None else {}
         prior = ActionPrior.from_counts(rec.alpha0, stored, domain.n_states)
         goals = keep.goal_priors if keep is not None else None
+        if goals is not None:
+            goals = goals.copy(alpha0=rec.alpha0)
+            goals.rows()  # built here, in the worker thread, not at a session's first event
         return DomainState(
-            rec.name, domain, prior, rec.created_at, rec.updated_at,
-            goal_priors=goals.copy(alpha0=rec.alpha0) if goals is not None else None,
-        )  # fmt: skip
+            rec.name, domain, prior, rec.created_at, rec.updated_at, goal_priors=goals
+        )
 
     def goal_priors(self, state: DomainState) -> GoalPriors:
         """*Worker thread* the first time (reads every stored trajectory of the domain).
@@ -174,7 +176,9 @@ class DomainCatalog:
 
 
 def add_goals(priors: GoalPriors, items: Sequence[Trajectory]) -> GoalPriors:
-    """``priors`` with ``items`` added under the goals they ended at (if one of the map's)."""
-    index = {g: i for i, g in enumerate(priors.goals)}
-    goal_index = [index.get(t.goal) if t.goal is not None else None for t in items]
-    return priors.add([t.pairs for t in items], goal_index)
+    """``priors`` with ``items`` added under the goals they ended at (if one of the map's),
+    and the flat lists sessions read built (this runs in a worker thread, not on the loop)."""
+    goal_index = [priors.goal_index.get(t.goal) if t.goal is not None else None for t in items]
+    priors.add([t.pairs for t in items], goal_index)
+    priors.rows()
+    return priors
