@@ -69,7 +69,7 @@ def advance(state: ServiceState, rng: np.random.Generator, steps: int) -> None:
         s[0] = session.position
         for i in range(steps):
             s[i + 1] = grid.next_state[s[i], a[i]]
-        state.registry.observe(session, (s[:-1], a.astype(np.int64), s[1:]))
+        state.registry.observe_batch(session, (s[:-1], a.astype(np.int64), s[1:]))
 
 
 def timed_ms(fn: Callable[[], object], calls: int) -> float:
