@@ -166,8 +166,14 @@ class GridDomain:
         return s
 
     def cell(self, state: int) -> tuple[int, int]:
-        r, c = self.cells[state]
-        return (int(r), int(c))
+        """(row, col) of ``state``."""
+        return self._cell_tuples[state]
+
+    @cached_property
+    def _cell_tuples(self) -> list[tuple[int, int]]:
+        """Every state's cell as plain ints (a list lookup is a tenth of a numpy row's cost,
+        and the service answers every event with one)."""
+        return [(r, c) for r, c in self.cells.tolist()]
 
     def step(self, state: int, action: int) -> int:
         return int(self.next_state[state, action])
