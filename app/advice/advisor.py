@@ -77,6 +77,8 @@ class DecisionBatch:
     kappa: float
     count_before: int  # the advisor's figures before the batch
     benefit_before: float
+    #: the tables whose theta_s the advice is (None: the advice is the advisor's own)
+    advised_from: AdviceTables | None = None
 
     def __len__(self) -> int:
         return len(self.state)
@@ -88,7 +90,7 @@ class DecisionBatch:
     @classmethod
     def of(
         cls, decisions: Sequence[Decision], kappa: float, count_before: int,
-        benefit_before: float,
+        benefit_before: float, advised_from: AdviceTables | None = None,
     ) -> DecisionBatch:  # fmt: skip
         """Columns of decisions made one at a time (``first_step`` 0 when there are none)."""
         rows = [d.advice for d in decisions if d.advise]
@@ -101,7 +103,7 @@ class DecisionBatch:
             np.array([d.advice_count for d in decisions], dtype=np.int64),
             np.array([d.benefit for d in decisions], dtype=np.float64),
             np.array(rows, dtype=np.float64).reshape(len(rows), N_ACTIONS),
-            kappa, count_before, benefit_before,
+            kappa, count_before, benefit_before, advised_from,
         )  # fmt: skip
 
     def decisions(self) -> list[Decision]:
@@ -362,10 +364,11 @@ class Advisor:
         """:meth:`observe` for each (s, a, s') in turn, as columns. Inputs must be valid
         (states in range, actions 0..3): the caller checks them first. Advisors with a faster
         way (the service's compiled one) override this with the same results."""
-        count, benefit = self.advice_count, self.benefit
+        count, benefit, tables = self.advice_count, self.benefit, self.tables
         moves = zip(states.tolist(), actions.tolist(), next_states.tolist(), strict=True)
         decisions = [self.observe(s, a, s2) for s, a, s2 in moves]
-        return DecisionBatch.of(decisions, self.kappa, count, benefit)
+        theta = None if self.own_advice else tables
+        return DecisionBatch.of(decisions, self.kappa, count, benefit, theta)
 
     @property
     def total_cost(self) -> float:

@@ -21,7 +21,7 @@ from app.service.live.stream import StreamAdvisor
 from app.service.problems import BadInput
 from app.service.schemas import Cell, DomainPut, SessionCreate, TrajectoriesAccepted
 from app.service.state import ServiceState
-from app.service.wire.encode import batch_binary, batch_json, decision_json
+from app.service.wire.encode import batch_binary, batch_json, decision_json, theta_text
 from app.service.wire.events import read_move, read_moves
 
 
@@ -83,7 +83,9 @@ def put_domain(state: ServiceState, name: str, body: DomainPut) -> tuple[DomainS
         grid = state.catalog.parse_map(body.map, name)
     except MapError as exc:
         raise BadInput(f"map: {exc}") from None
-    return state.catalog.put(name, grid, body.alpha0)
+    domain, created, kept = state.catalog.put(name, grid, body.alpha0)
+    prepare_answers(domain)
+    return domain, created, kept
 
 
 def after_put(state: ServiceState, domain: DomainState, kept: bool) -> None:
@@ -99,7 +101,16 @@ def ingest(state: ServiceState, domain: DomainState, raw: bytes) -> Trajectories
     body = parse_trajectories(raw)
     items = to_trajectories(domain.domain, body, state.settings.max_trajectory_steps)
     state.catalog.add_trajectories(domain, items)
+    prepare_answers(domain)
     return TrajectoriesAccepted(accepted=len(items), pairs=sum(len(t.pairs) for t in items))
+
+
+def prepare_answers(domain: DomainState) -> None:
+    """*Worker thread.* The text of theta that batch answers copy their advice from, for each
+    table of the domain's current prior, made here rather than at the first batch after the
+    prior changed (on the event loop)."""
+    for tables in domain.view.tables.values():
+        theta_text(tables)
 
 
 def warm_up() -> None:

@@ -144,5 +144,5 @@ class StreamAdvisor(Advisor):
         advice = tables.theta[next_states[advise]] if n else _NO_ADVICE
         return DecisionBatch(
             self.steps - n + 1, next_states, advise, kl, p_normal, count, benefit, advice,
-            self.kappa, count_before, benefit_before,
+            self.kappa, count_before, benefit_before, tables,
         )  # fmt: skip

@@ -444,9 +444,9 @@ def _literal(text: str) -> ByteArray:
 #: the fixed parts of a decision's text, in order (see write_decisions)
 PIECES = tuple(
     _literal(t)
-    for t in ('{"step":', ',"state":[', ',', '],"advise":', 'true', 'false', ',"advice":',
-              'null', '{"N":', ',"E":', ',"S":', ',"W":', '}', ',"kl":', ',"p_normal":',
-              ',"cost":{"advice_count":', ',"total":', ',"benefit":', '}}')
+    for t in ('{"step":', ',"state":[', ',', '],"advise":false,"advice":null,"kl":',
+              '],"advise":true,"advice":{"N":', ',"E":', ',"S":', ',"W":', '},"kl":',
+              ',"p_normal":', ',"cost":{"advice_count":', ',"total":', ',"benefit":', '}}')
 )  # fmt: skip
 
 
@@ -475,48 +475,48 @@ def _put_int(out: ByteArray, at: int, v: int) -> int:  # pragma: no cover - comp
 
 
 @njit(cache=True)
-def _tokens(text: ByteArray, columns: int) -> tuple[IntArray, IntArray]:  # pragma: no cover
-    """Where each number of ``[[a,b,...],[...],...]`` (``columns`` lists, as orjson writes
-    them) starts and ends: (starts, ends) over every list in order."""
+def tokens(text: ByteArray) -> tuple[IntArray, IntArray]:  # pragma: no cover - compiled
+    """Where each number of orjson's text of lists of numbers (``[[a,b,...],[...],...]`` or
+    ``[a,b,...]``) starts and ends, every list in order: (starts, ends)."""
     lo = np.empty(text.shape[0] // 2 + 1, np.int64)
     hi = np.empty(text.shape[0] // 2 + 1, np.int64)
     n = 0
-    i = 1  # past the outer "["
-    for _ in range(columns):
-        i += 1  # past the list's "["
-        if text[i] == 93:  # "]": an empty list
-            i += 2  # past "]" and "," (or the outer "]")
-            continue
-        while True:
-            lo[n] = i
-            while text[i] != 44 and text[i] != 93:  # up to "," or "]"
-                i += 1
-            hi[n] = i
-            n += 1
-            i += 1
-            if text[i - 1] == 93:
-                i += 1  # past the "," between lists (or the outer "]")
-                break
+    start = -1
+    for i in range(text.shape[0]):
+        b = text[i]
+        if b == 91 or b == 44 or b == 93:  # "[", "," or "]": a number ends or starts here
+            if start >= 0:
+                lo[n] = start
+                hi[n] = i
+                n += 1
+                start = -1
+        elif start < 0:
+            start = i
     return lo[:n], hi[:n]
 
 
 @njit(cache=True)
 def _write(
     step0: int, states: IntArray, cells: IntArray, advise: BoolArray, counts: IntArray,
-    numbers: ByteArray, pieces: tuple[ByteArray, ...],
+    numbers: ByteArray, advice: tuple[ByteArray, IntArray, IntArray, IntArray],
+    pieces: tuple[ByteArray, ...],
 ) -> ByteArray:  # pragma: no cover - compiled  # fmt: skip
     n = states.shape[0]
-    lo, hi = _tokens(numbers, 5)
-    head, state_key, comma, close_state, true, false, advice_key, null = pieces[:8]
-    n_key, e_key, s_key, w_key, close_advice, kl_key, p_key = pieces[8:15]
-    cost_key, total_key, benefit_key, tail = pieces[15:]
+    lo, hi = tokens(numbers)
+    text, a_lo, a_hi, row = advice
+    head, state_key, comma, plain, advised, e_key, s_key, w_key, advised_end = pieces[:9]
+    p_key, cost_key, total_key, benefit_key, tail = pieces[9:]
     fixed = 0
     for piece in pieces:
         fixed += piece.shape[0]
-    out = np.empty(2 + n * (fixed + 3 * 20) + numbers.shape[0], np.uint8)  # an upper bound
+    bound = 2 + n * (fixed + 3 * 20) + numbers.shape[0]
+    for i in range(n):
+        if advise[i]:
+            r = 4 * row[i]
+            bound += a_hi[r + 3] - a_lo[r]
+    out = np.empty(bound, np.uint8)
     out[0] = 91  # "["
     at = 1
-    k = 0  # advising decisions so far
     for i in range(n):
         if i:
             out[at] = 44  # ","
@@ -527,25 +527,19 @@ def _write(
         at = _put_int(out, at, cells[states[i], 0])
         at = _put(out, at, comma, 0, 1)
         at = _put_int(out, at, cells[states[i], 1])
-        at = _put(out, at, close_state, 0, close_state.shape[0])
-        flag = true if advise[i] else false
-        at = _put(out, at, flag, 0, flag.shape[0])
-        at = _put(out, at, advice_key, 0, advice_key.shape[0])
         if advise[i]:
-            t = 4 * n + 4 * k  # the advice's numbers follow the four columns of n
-            at = _put(out, at, n_key, 0, n_key.shape[0])
-            at = _put(out, at, numbers, lo[t], hi[t])
+            r = 4 * row[i]
+            at = _put(out, at, advised, 0, advised.shape[0])
+            at = _put(out, at, text, a_lo[r], a_hi[r])
             at = _put(out, at, e_key, 0, e_key.shape[0])
-            at = _put(out, at, numbers, lo[t + 1], hi[t + 1])
+            at = _put(out, at, text, a_lo[r + 1], a_hi[r + 1])
             at = _put(out, at, s_key, 0, s_key.shape[0])
-            at = _put(out, at, numbers, lo[t + 2], hi[t + 2])
+            at = _put(out, at, text, a_lo[r + 2], a_hi[r + 2])
             at = _put(out, at, w_key, 0, w_key.shape[0])
-            at = _put(out, at, numbers, lo[t + 3], hi[t + 3])
-            at = _put(out, at, close_advice, 0, 1)
-            k += 1
+            at = _put(out, at, text, a_lo[r + 3], a_hi[r + 3])
+            at = _put(out, at, advised_end, 0, advised_end.shape[0])
         else:
-            at = _put(out, at, null, 0, null.shape[0])
-        at = _put(out, at, kl_key, 0, kl_key.shape[0])
+            at = _put(out, at, plain, 0, plain.shape[0])
         at = _put(out, at, numbers, lo[i], hi[i])
         at = _put(out, at, p_key, 0, p_key.shape[0])
         at = _put(out, at, numbers, lo[n + i], hi[n + i])
@@ -562,10 +556,16 @@ def _write(
 
 def write_decisions(
     step0: int, states: IntArray, cells: IntArray, advise: BoolArray, counts: IntArray,
-    numbers: bytes,
+    numbers: bytes, advice: tuple[bytes, IntArray, IntArray, IntArray],
 ) -> bytes:  # fmt: skip
-    """The JSON list of decisions ``step0 + i`` at ``cells[states[i]]``: ``numbers`` is orjson's
-    text of five lists, kl, p_normal, total cost and benefit (one number per decision) and the
-    advice of the advising decisions (four numbers each, N, E, S, W, in order)."""
-    text = np.frombuffer(numbers, dtype=np.uint8)
-    return _write(step0, states, cells, advise, counts, text, PIECES).tobytes()
+    """The JSON list of decisions ``step0 + i`` at ``cells[states[i]]``. ``numbers`` is orjson's
+    text of four lists, kl, p_normal, total cost and benefit (one number per decision);
+    ``advice`` is (a text of advice numbers as orjson wrote them, where each number starts and
+    ends (:func:`tokens`), and per decision the row of its advice there: four numbers N, E, S,
+    W from ``4 * row``)."""
+    text, lo, hi, row = advice
+    numbers_text = np.frombuffer(numbers, dtype=np.uint8)
+    advice_text = np.frombuffer(text, dtype=np.uint8)
+    return _write(
+        step0, states, cells, advise, counts, numbers_text, (advice_text, lo, hi, row), PIECES
+    ).tobytes()

@@ -2,7 +2,8 @@
 
 * one decision: :func:`decision_json`, a dict written by orjson;
 * a batch: :func:`batch_json`, orjson's texts of the numbers (written from the numpy columns,
-  no Python floats) laid out by a compiled loop (:func:`app.service.wire.compiled.write_decisions`),
+  no Python floats; theta's once per tables) laid out by a compiled loop
+  (:func:`app.service.wire.compiled.write_decisions`),
   which is several times faster than orjson over a list of dicts (measured side by side:
   docs/PERFORMANCE.md); the same bytes as :func:`decision_json` decision for decision
   (``tests/service/wire/test_encode.py``);
@@ -13,15 +14,20 @@ Every number's text is orjson's shortest round-trip form, on every path.
 
 from __future__ import annotations
 
+import weakref
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 import orjson
 
 from app import protocol
 from app.advice.advisor import Decision, DecisionBatch
+from app.advice.models import AdviceTables
 from app.domain.grid import GridDomain
-from app.service.wire.compiled import write_decisions
+from app.service.wire.compiled import tokens, write_decisions
+
+IntArray = npt.NDArray[np.int64]
 
 NUMPY = orjson.OPT_SERIALIZE_NUMPY
 
@@ -46,12 +52,35 @@ def decision_json(d: Decision, domain: GridDomain) -> bytes:
 
 def batch_json(out: DecisionBatch, domain: GridDomain) -> bytes:
     """A batch of decisions as a JSON list."""
-    numbers = orjson.dumps(
-        (out.kl, out.p_normal, out.total_cost, out.benefit, out.advice.reshape(-1)), option=NUMPY
-    )
+    numbers = orjson.dumps((out.kl, out.p_normal, out.total_cost, out.benefit), option=NUMPY)
+    if out.advised_from is not None:  # theta_s: the tables' text, made once
+        text, lo, hi = theta_text(out.advised_from)
+        row = out.state
+    else:  # the advisor's own advice: this answer's rows
+        text = orjson.dumps(out.advice.reshape(-1), option=NUMPY)
+        lo, hi = tokens(np.frombuffer(text, dtype=np.uint8))
+        row = np.cumsum(out.advise) - 1
     return write_decisions(
-        out.first_step, out.state, domain.cells, out.advise, out.advice_count, numbers
-    )
+        out.first_step, out.state, domain.cells, out.advise, out.advice_count, numbers,
+        (text, lo, hi, row),
+    )  # fmt: skip
+
+
+_THETA_TEXT: weakref.WeakKeyDictionary[AdviceTables, tuple[bytes, IntArray, IntArray]] = (
+    weakref.WeakKeyDictionary()
+)
+
+
+def theta_text(tables: AdviceTables) -> tuple[bytes, IntArray, IntArray]:
+    """theta of every state as orjson writes it, and where each number starts and ends: the
+    advice of a batch answer, made once per tables (the service makes it in the worker thread
+    that publishes new tables, so no event waits for it)."""
+    made = _THETA_TEXT.get(tables)
+    if made is None:
+        text = orjson.dumps(tables.theta.reshape(-1), option=NUMPY)
+        made = (text, *tokens(np.frombuffer(text, dtype=np.uint8)))
+        _THETA_TEXT[tables] = made
+    return made
 
 
 def batch_binary(out: DecisionBatch, domain: GridDomain) -> bytes:
