@@ -17,7 +17,8 @@ makes it answer ``None``, and the caller reads the text with pydantic, which acc
 names the error. ``tests/service/wire/test_compiled.py`` checks the two against each other.
 
 **Checking.** :func:`check_moves` turns cells and actions into (s, a, s') and stops at the
-first bad event with a reason code (:data:`REASONS`); the caller words it.
+first bad event with a reason code (``STATE_OFF`` ... ``AMBIGUOUS``), which
+:func:`app.service.wire.events.reason_text` words.
 
 **Writing.** :func:`write_decisions` lays out the JSON text of a batch of decisions; every
 number's text comes from orjson (written from the numpy columns without Python floats), so
@@ -372,10 +373,6 @@ def scan_events(
 
 #: Why :func:`check_moves` refused an event, in the order an event is checked.
 OK, STATE_OFF, STATE_WALL, NEXT_OFF, NEXT_WALL, NO_MOVE, NOT_ONE_MOVE, AMBIGUOUS = range(8)
-REASONS = (
-    "ok", "state off the map", "state a wall", "next_state off the map", "next_state a wall",
-    "neither action nor next_state", "not one move", "ambiguous",
-)  # fmt: skip
 
 
 @njit(cache=True)
