@@ -24,6 +24,7 @@ MAY_IMPORT: dict[str, set[str]] = {
     "app.kernels": set(),
     "app.domain": set(),
     "app.advice": {"app.domain"},
+    "app.mapio": {"app.domain"},  # file formats (Pillow, PyYAML) read into the core's grids
     "app.agents": {"app.domain", "app.advice", "app.kernels"},
     "app.experiments": {"app.domain", "app.advice", "app.kernels", "app.agents"},
     "app.service": {"app.domain", "app.advice", "app.kernels", "app.protocol"},

@@ -1,17 +1,31 @@
-"""``python -m app maze``: show, check and generate ASCII maze maps."""
+"""``python -m app maze``: show, check, generate and import ASCII maps."""
 
 from __future__ import annotations
 
+from enum import StrEnum
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, NoReturn
 
 import numpy as np
 import typer
 
-from app.domain.grid import GridDomain, MapError
+from app.domain.grid import Frame, GridDomain, MapError
 from app.domain.maps import DEFAULT_MAP
 
-maze_cli = typer.Typer(help="Show, check and generate ASCII maze maps.", no_args_is_help=True)
+
+class Kind(StrEnum):
+    maze = "maze"
+    building = "building"
+
+
+class ImportFormat(StrEnum):
+    auto = "auto"
+    movingai = "movingai"
+    ros = "ros"
+    image = "image"
+
+
+maze_cli = typer.Typer(help="Show, check, generate and import ASCII maps.", no_args_is_help=True)
 
 MazeOption = Annotated[
     Path, typer.Option("--maze", "-m", help="ASCII map file ('#' wall, '.' free, 'S', 'G').")
@@ -30,13 +44,19 @@ def load_domain(path: Path) -> GridDomain:
 def describe(domain: GridDomain) -> str:
     rows, cols = domain.shape
     dist = domain.goal_distances[:, domain.start]
+    frame = ""
+    if domain.frame is not None:
+        ox, oy, yaw = domain.frame.origin
+        frame = f", cells of {domain.frame.resolution:g} m, origin ({ox:g}, {oy:g}) m" + (
+            f" yaw {yaw:g} rad" if yaw else ""
+        )
     goals = ", ".join(
         f"G{i}{list(domain.cell(g))} at {int(d)}"
         for i, (g, d) in enumerate(zip(domain.goals, dist, strict=True))
     )
     return (
         f"{domain.name}: {rows}x{cols}, {domain.n_states} free cells, "
-        f"{len(domain.dead_ends)} dead ends, start {list(domain.cell(domain.start))}\n"
+        f"{len(domain.dead_ends)} dead ends, start {list(domain.cell(domain.start))}{frame}\n"
         f"goals (shortest distance from start): {goals}"
     )
 
@@ -60,28 +80,136 @@ def maze_check(maze: Annotated[Path, typer.Argument(help="Map file to validate."
     typer.echo(f"ok: {describe(domain)}")
 
 
+def _write(rows: list[str], out: Path | None, frame: Frame | None = None) -> None:
+    name = out.stem if out is not None else "maze"
+    domain = GridDomain.from_strings(rows, name=name, frame=frame)
+    body = domain.to_text() + "\n"
+    if out is None:
+        typer.echo(body, nl=False)
+        return
+    out.write_text(body, encoding="utf-8")
+    typer.echo(f"wrote {out}: {describe(domain)}")
+
+
+def _fail(message: str) -> NoReturn:
+    typer.echo(f"error: {message}", err=True)
+    raise typer.Exit(code=2)
+
+
 @maze_cli.command("generate")
 def maze_generate(
     out: Annotated[Path | None, typer.Option(help="Write here (default: print).")] = None,
+    kind: Annotated[
+        Kind,
+        typer.Option(help="maze: corridors one cell wide; building: rooms along corridors."),
+    ] = Kind.maze,
     rows: Annotated[int, typer.Option(min=3, help="Rows, including walls.")] = 30,
     cols: Annotated[int, typer.Option(min=3, help="Columns, including walls.")] = 30,
     seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
     braid: Annotated[
-        float, typer.Option(min=0.0, max=1.0, help="0 perfect maze; >0 opens dead ends (loops).")
+        float,
+        typer.Option(min=0.0, max=1.0, help="Mazes: 0 perfect; >0 opens dead ends (loops)."),
     ] = 0.0,
+    corridor: Annotated[int, typer.Option(min=1, help="Buildings: corridor width in cells.")] = 2,
+    room_min: Annotated[int, typer.Option(min=1, help="Buildings: least room side.")] = 3,
+    room_max: Annotated[int, typer.Option(min=1, help="Buildings: largest room side.")] = 7,
+    loops: Annotated[
+        float,
+        typer.Option(
+            min=0.0, max=1.0, help="Buildings: chance of a second door between joined spaces."
+        ),
+    ] = 0.1,
     goals: Annotated[int, typer.Option(min=1, help="Number of goals.")] = 8,
 ) -> None:
-    """Generate a maze (start lower-left, goals at corners and corridor ends)."""
-    from app.domain.generate import generate_maze
+    """Generate a map: a maze (start lower-left, goals at corners and corridor ends) or a
+    building (start at the corridor nearest the lower-left corner, goals in rooms)."""
+    from app.domain.generate import generate_building, generate_maze
+
+    rng = np.random.default_rng(seed)
+    try:
+        if kind is Kind.building:
+            text = generate_building(
+                rows,
+                cols,
+                rng,
+                n_goals=goals,
+                corridor=corridor,
+                room=(room_min, room_max),
+                loops=loops,
+            )
+        else:
+            text = generate_maze(rows, cols, rng, braid=braid, n_goals=goals)
+    except ValueError as exc:
+        _fail(str(exc))
+    _write(text, out)
+
+
+@maze_cli.command("import")
+def maze_import(
+    file: Annotated[
+        Path,
+        typer.Argument(
+            help="A Moving AI .map, a ROS map_server .yaml (with its image) or a floor-plan "
+            "image (.png, .pgm, ...)."
+        ),
+    ],
+    out: Annotated[Path | None, typer.Option(help="Write the map here (default: print).")] = None,
+    fmt: Annotated[
+        ImportFormat, typer.Option("--format", help="The file's format (auto: by its name).")
+    ] = ImportFormat.auto,
+    merge: Annotated[
+        int,
+        typer.Option(
+            min=1,
+            help="Images: pixels per cell side. A cell is free when none of its pixels is "
+            "occupied and at least half are free.",
+        ),
+    ] = 1,
+    threshold: Annotated[
+        int, typer.Option(min=1, max=255, help="Floor plans: grey level below which is wall.")
+    ] = 128,
+    seal: Annotated[
+        int,
+        typer.Option(
+            min=0,
+            help="Floor plans: close gaps in the outline up to 2*SEAL cells wide "
+            "while finding the outside.",
+        ),
+    ] = 0,
+    start: Annotated[
+        str | None, typer.Option(help="Start cell ROW,COL of the imported grid (default: picked).")
+    ] = None,
+    goal_cells: Annotated[
+        str | None, typer.Option(help='Goal cells "ROW,COL;ROW,COL" (default: --goals picked).')
+    ] = None,
+    goals: Annotated[
+        int, typer.Option(min=1, help="How many goals to pick (spread out; rooms, dead ends).")
+    ] = 8,
+    seed: Annotated[int, typer.Option(help="Random seed for the picks' ties.")] = 0,
+) -> None:
+    """Import a map: keep its largest connected region, place a start and goals, write it as
+    an ASCII map (with the resolution and origin when the format has them)."""
+    from app.domain.place import largest_region, parse_cells, place
+    from app.mapio import read_map
 
     try:
-        text = generate_maze(rows, cols, np.random.default_rng(seed), braid=braid, n_goals=goals)
-    except ValueError as exc:
-        typer.echo(f"error: {exc}", err=True)
-        raise typer.Exit(code=2) from None
-    body = "\n".join(text) + "\n"
-    if out is None:
-        typer.echo(body, nl=False)
-    else:
-        out.write_text(body, encoding="utf-8")
-        typer.echo(f"wrote {out}: {describe(GridDomain.from_strings(text, name=out.stem))}")
+        starts = parse_cells(start, "--start") if start is not None else [None]
+        if len(starts) != 1:
+            raise ValueError("--start takes one cell ROW,COL")
+        goal_list = parse_cells(goal_cells, "--goal-cells") if goal_cells is not None else None
+        imported = read_map(file, fmt.value, merge=merge, threshold=threshold, seal=seal)
+        kept, dropped = largest_region(imported.free)
+        rows = place(
+            kept, np.random.default_rng(seed), start=starts[0], goals=goal_list, n_goals=goals
+        )
+    except ValueError as exc:  # MapError is one
+        _fail(str(exc))
+    for note in imported.notes:
+        typer.echo(note, err=out is None)
+    total = int(imported.free.sum())
+    typer.echo(
+        f"kept the largest connected region: {total - dropped} of {total} free cells "
+        f"({dropped} dropped)",
+        err=out is None,
+    )
+    _write(rows, out, imported.frame)

@@ -8,10 +8,18 @@ States are the free cells, numbered in row-major order; ``cells[s]`` is ``(row, 
 ``state_of[row, col]`` is the state index (``-1`` for walls). Actions are the four compass
 moves ``N, E, S, W`` (0..3). A move into a wall or off the map leaves the state unchanged, so
 the whole dynamics is one precomputed table ``next_state[s, a]``.
+
+A map file may begin with header lines ``key: value`` that place the grid in a building's
+metric frame (ROS map_server's convention: x to the east, y to the north, the origin being the
+lower-left corner of the lower-left cell)::
+
+    resolution: 0.5          metres per cell side
+    origin: -12.0 4.5 0.0    x and y of that corner in metres, and the grid's yaw in radians
 """
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
@@ -44,6 +52,7 @@ class MapError(ValueError):
         if line is not None:
             where = f"line {line}" + (f", column {column}" if column is not None else "") + ": "
         super().__init__(where + message)
+        self.message = message
         self.line = line
         self.column = column
 
@@ -82,6 +91,89 @@ def bfs_distances(next_state: IntArray, sources: Iterable[int]) -> IntArray:
     return dist
 
 
+@dataclass(frozen=True)
+class Frame:
+    """Where a grid lies in metres: ``resolution`` (cell side) and ``origin`` (x, y of the
+    lower-left corner of the lower-left cell, and the yaw of the grid's columns axis)."""
+
+    resolution: float
+    origin: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.resolution) and self.resolution > 0):
+            raise MapError(f"resolution must be a positive number of metres, got {self.resolution}")
+        if len(self.origin) != 3 or not all(math.isfinite(v) for v in self.origin):
+            raise MapError(f"origin must be three finite numbers (x, y, yaw), got {self.origin}")
+        object.__setattr__(self, "resolution", float(self.resolution))
+        object.__setattr__(self, "origin", tuple(float(v) for v in self.origin))
+
+    def cell_at(self, x: float, y: float, n_rows: int) -> tuple[int, int]:
+        """The (row, col) holding the point (x, y) on a grid of ``n_rows`` rows (it may lie
+        off the map: the caller checks)."""
+        ox, oy, yaw = self.origin
+        u, v = x - ox, y - oy
+        cos, sin = math.cos(yaw), math.sin(yaw)
+        lx, ly = cos * u + sin * v, -sin * u + cos * v
+        return n_rows - 1 - math.floor(ly / self.resolution), math.floor(lx / self.resolution)
+
+    def centre(self, row: int, col: int, n_rows: int) -> tuple[float, float]:
+        """The (x, y) of the centre of cell (row, col)."""
+        ox, oy, yaw = self.origin
+        lx, ly = (col + 0.5) * self.resolution, (n_rows - 1 - row + 0.5) * self.resolution
+        cos, sin = math.cos(yaw), math.sin(yaw)
+        return ox + cos * lx - sin * ly, oy + sin * lx + cos * ly
+
+    def header(self) -> list[str]:
+        """The map file's header lines."""
+        return [f"resolution: {self.resolution!r}", "origin: " + " ".join(map(repr, self.origin))]
+
+
+def parse_header(lines: Sequence[str]) -> tuple[Frame | None, int]:
+    """The frame that a map text's leading ``key: value`` lines give, and how many there are."""
+    values: dict[str, tuple[int, str]] = {}
+    n = 0
+    for n, line in enumerate(lines):
+        if ":" not in line:
+            break
+        key, _, value = line.partition(":")
+        key = key.strip().lower()
+        if key not in ("resolution", "origin"):
+            raise MapError(f"unknown header {key!r}: a map header has resolution and origin", n + 1)
+        if key in values:
+            raise MapError(f"{key} given twice", n + 1)
+        values[key] = (n + 1, value.strip())
+    else:
+        n = len(lines)
+    if not values:
+        return None, 0
+    if "resolution" not in values:
+        raise MapError(
+            "origin without resolution: give the cell side in metres", values["origin"][0]
+        )
+    res_line, res_text = values["resolution"]
+    try:
+        resolution = float(res_text)
+    except ValueError:
+        raise MapError(f"resolution {res_text!r} is not a number of metres", res_line) from None
+    if not (math.isfinite(resolution) and resolution > 0):
+        raise MapError(f"resolution must be a positive number of metres, got {res_text}", res_line)
+    origin: tuple[float, ...] = (0.0, 0.0, 0.0)
+    if "origin" in values:
+        o_line, o_text = values["origin"]
+        try:
+            origin = tuple(float(v) for v in o_text.replace(",", " ").split())
+        except ValueError:
+            raise MapError(f"origin {o_text!r}: give x y (and yaw) in metres", o_line) from None
+        if len(origin) == 2:
+            origin = (*origin, 0.0)
+        if len(origin) != 3:
+            raise MapError(f"origin {o_text!r}: give x y (and yaw) in metres", o_line)
+    try:
+        return Frame(resolution, (origin[0], origin[1], origin[2])), n
+    except MapError as exc:
+        raise MapError(exc.message, values["origin"][0]) from None
+
+
 @dataclass(frozen=True, eq=False)
 class GridDomain:
     """A grid world D = (S, A, T) shared by many tasks; a task only picks the goal.
@@ -91,6 +183,7 @@ class GridDomain:
 
     rows_text: tuple[str, ...]
     name: str = "maze"
+    frame: Frame | None = None
     walls: BoolArray = field(init=False, repr=False)
     state_of: IntArray = field(init=False, repr=False)
     cells: IntArray = field(init=False, repr=False)
@@ -132,10 +225,24 @@ class GridDomain:
 
     # ---- construction -------------------------------------------------------------------
     @classmethod
-    def from_strings(cls, rows: Sequence[str], name: str = "maze") -> GridDomain:
+    def from_strings(
+        cls, rows: Sequence[str], name: str = "maze", frame: Frame | None = None
+    ) -> GridDomain:
         """Validate ``rows`` (see :func:`validate_map`) and build the domain."""
         cleaned = validate_map(rows)
-        return cls(tuple(cleaned), name=name)
+        return cls(tuple(cleaned), name=name, frame=frame)
+
+    @classmethod
+    def from_text(cls, text: str, name: str = "maze") -> GridDomain:
+        """A map file's text: optional header lines (the frame), then the rows."""
+        lines = text.splitlines()
+        frame, skip = parse_header(lines)
+        try:
+            return cls.from_strings(lines[skip:], name=name, frame=frame)
+        except MapError as exc:
+            if exc.line is None or not skip:
+                raise
+            raise MapError(exc.message, exc.line + skip, exc.column) from None
 
     @classmethod
     def from_file(cls, path: str | Path, name: str | None = None) -> GridDomain:
@@ -144,7 +251,17 @@ class GridDomain:
             text = p.read_text(encoding="utf-8")
         except OSError as exc:
             raise MapError(f"cannot read map file {p}: {exc.strerror or exc}") from exc
-        return cls.from_strings(text.splitlines(), name=name or p.stem)
+        except UnicodeDecodeError:
+            raise MapError(
+                f"{p} is not a text map (use `maze import` for images and other formats)"
+            ) from None
+        return cls.from_text(text, name=name or p.stem)
+
+    def to_text(self) -> str:
+        """The map file's text (header lines when the grid has a frame); :meth:`from_text`
+        reads it back."""
+        head = self.frame.header() if self.frame is not None else []
+        return "\n".join([*head, *self.rows_text])
 
     # ---- shape --------------------------------------------------------------------------
     @property
@@ -174,6 +291,17 @@ class GridDomain:
         """Every state's cell as plain ints (a list lookup is a tenth of a numpy row's cost,
         and the service answers every event with one)."""
         return [(r, c) for r, c in self.cells.tolist()]
+
+    def state_at(self, x: float, y: float) -> int:
+        """The state holding the point (x, y) in metres; ``ValueError`` if the grid has no
+        frame or the point is in a wall or off the map."""
+        if self.frame is None:
+            raise ValueError(f"domain {self.name!r} has no resolution and origin: send cells")
+        row, col = self.frame.cell_at(x, y, self.shape[0])
+        try:
+            return self.state(row, col)
+        except ValueError as exc:
+            raise ValueError(f"position ({x:g}, {y:g}) m: {exc}") from None
 
     def step(self, state: int, action: int) -> int:
         return int(self.next_state[state, action])

@@ -1,0 +1,78 @@
+"""Maps from other formats: Moving AI benchmarks, ROS map_server, plain floor-plan images.
+
+Each reader returns an :class:`Imported` grid of passable cells (and the metric frame, when the
+format has one); :func:`app.domain.place.largest_region` and :func:`app.domain.place.place` make
+a domain of it. Errors are :class:`MapImportError` (a :class:`~app.domain.grid.MapError`)
+naming the file and the problem.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal
+
+from app.domain.grid import BoolArray, Frame, MapError
+
+Format = Literal["auto", "movingai", "ros", "image"]
+FORMATS: tuple[str, ...] = ("auto", "movingai", "ros", "image")
+IMAGE_SUFFIXES = (".png", ".pgm", ".bmp", ".gif", ".jpg", ".jpeg", ".tif", ".tiff")
+
+
+class MapImportError(MapError):
+    """A file that cannot be imported; the message names the file and the problem."""
+
+
+@dataclass
+class Imported:
+    """A passability grid (row 0 at the top) and what the reader noticed."""
+
+    free: BoolArray
+    frame: Frame | None = None
+    notes: list[str] = field(default_factory=list)
+
+
+def detect(path: Path) -> Format:
+    """The format a file's name suggests."""
+    suffix = path.suffix.lower()
+    if suffix == ".map":
+        return "movingai"
+    if suffix in (".yaml", ".yml"):
+        return "ros"
+    if suffix in IMAGE_SUFFIXES:
+        return "image"
+    raise MapImportError(
+        f"{path}: cannot tell the format from the name {path.name!r} "
+        "(.map Moving AI, .yaml ROS map_server, .png/.pgm image): give --format"
+    )
+
+
+def read_map(
+    path: Path,
+    kind: Format = "auto",
+    *,
+    merge: int = 1,
+    threshold: int = 128,
+    seal: int = 0,
+) -> Imported:
+    """Read ``path`` in format ``kind``; ``merge``: pixels per cell side (images, ROS maps);
+    ``threshold``: the grey level below which a floor-plan pixel is wall; ``seal``: openings of
+    the outline up to this many pixels are closed while a floor plan's outside is found."""
+    if merge < 1:
+        raise MapImportError(f"merge must be at least 1 pixel per cell, got {merge}")
+    if not path.is_file():
+        raise MapImportError(f"{path}: no such file")
+    fmt = detect(path) if kind == "auto" else kind
+    if fmt == "movingai":
+        from app.mapio.movingai import read_movingai
+
+        return read_movingai(path)
+    if fmt == "ros":
+        from app.mapio.ros import read_ros
+
+        return read_ros(path, merge=merge)
+    if fmt == "image":
+        from app.mapio.image import read_plan
+
+        return read_plan(path, merge=merge, threshold=threshold, seal=seal)
+    raise MapImportError(f"unknown format {kind!r}: use one of {', '.join(FORMATS)}")
