@@ -1,9 +1,12 @@
-"""``python -m app train``: learn an action prior from simulated experts, write it as .npz."""
+"""``python -m app train``: learn an action prior from simulated experts and show it.
+
+A served domain learns the same prior from the same experts with ``PUT /domains/{name}`` and
+``experts`` (source, per_goal, seed), which stores their trajectories with their goals, as the
+store keeps every prior (counts are a recount of trajectories)."""
 
 from __future__ import annotations
 
 import json
-from pathlib import Path
 from typing import Annotated, cast
 
 import numpy as np
@@ -28,10 +31,11 @@ def train(
         float, typer.Option(min=0.0, max=1.0, help="Experts' chance of a random move per step.")
     ] = 0.0,
     seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
-    out: Annotated[Path, typer.Option(help="Where to write the prior (.npz).")] = Path("prior.npz"),
     as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
 ) -> None:
-    """Learn an action prior from simulated optimal experts and write it as .npz."""
+    """Learn an action prior from simulated optimal experts; print what it holds and each
+    cell's most advised direction. (A service domain learns it with PUT /domains/{name} and
+    "experts": {"source", "per_goal", "seed"}.)"""
     from app.advice.text import direction_map
     from app.agents.experts import EXPERT_SOURCES, ExpertSource, train_prior
 
@@ -46,7 +50,6 @@ def train(
     except ValueError as exc:
         typer.echo(f"error: {exc}", err=True)
         raise typer.Exit(code=2) from None
-    prior.save(out)
     summary = prior.summary() | {
         "maze": str(maze),
         "experts": experts,
@@ -55,7 +58,6 @@ def train(
         "delta": delta,
         "epsilon": epsilon,
         "seed": seed,
-        "out": str(out),
     }
     if as_json:
         typer.echo(json.dumps(summary, indent=2))
@@ -68,5 +70,5 @@ def train(
         f"{summary['states']} states have expert data; mean entropy "
         f"{summary['mean_entropy_nats']:.3f} nats (uniform {np.log(len(ACTIONS)):.3f})"
     )
-    typer.echo(f"wrote {out}\nmost advised direction (· no data, + tie):")
+    typer.echo("most advised direction (· no data, + tie):")
     typer.echo(direction_map(domain, prior.theta()))

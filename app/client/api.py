@@ -72,8 +72,23 @@ def domain(name: str) -> Call:
     return Call("GET", f"/domains/{_name(name)}")
 
 
-def put_domain(name: str, rows: Sequence[str], alpha0: float = 1.0) -> Call:
-    return Call("PUT", f"/domains/{_name(name)}", {"map": list(rows), "alpha0": alpha0}, admin=True)
+def put_domain(
+    name: str,
+    rows: Sequence[str],
+    alpha0: float = 1.0,
+    *,
+    resolution: float | None = None,
+    origin: Sequence[float] | None = None,
+    experts: Mapping[str, Any] | None = None,
+) -> Call:
+    body: dict[str, Any] = {"map": list(rows), "alpha0": alpha0}
+    if resolution is not None:
+        body["resolution"] = resolution
+    if origin is not None:
+        body["origin"] = [float(v) for v in origin]
+    if experts is not None:
+        body["experts"] = dict(experts)
+    return Call("PUT", f"/domains/{_name(name)}", body, admin=True)
 
 
 def delete_domain(name: str) -> Call:
@@ -110,6 +125,11 @@ def create_session(
 def events(session: Session, batch: EventLike | Sequence[EventLike]) -> Call:
     body = dict(batch) if isinstance(batch, Mapping) else [dict(e) for e in batch]
     return Call("POST", f"/sessions/{session.session_id}/events", body, headers=session.auth)
+
+
+def positions(session: Session, points: Sequence[Sequence[float]]) -> Call:
+    body = {"positions": [[float(p[0]), float(p[1])] for p in points]}
+    return Call("POST", f"/sessions/{session.session_id}/positions", body, headers=session.auth)
 
 
 def read_session(session: Session) -> Call:

@@ -126,8 +126,13 @@ class AdvisorClient(_Base):
     def domain(self, name: str) -> dict[str, Any]:
         return cast(dict[str, Any], self.call(api.domain(name)))
 
-    def put_domain(self, name: str, rows: Sequence[str], alpha0: float = 1.0) -> dict[str, Any]:
-        return cast(dict[str, Any], self.call(api.put_domain(name, rows, alpha0)))
+    def put_domain(
+        self, name: str, rows: Sequence[str], alpha0: float = 1.0, **frame_and_experts: Any
+    ) -> dict[str, Any]:
+        """Create or replace a domain; keywords ``resolution``, ``origin`` (metres) and
+        ``experts`` (``{"source", "per_goal", "seed"}``) as the PUT body has them."""
+        call = api.put_domain(name, rows, alpha0, **frame_and_experts)
+        return cast(dict[str, Any], self.call(call))
 
     def delete_domain(self, name: str) -> None:
         self.call(api.delete_domain(name))
@@ -156,6 +161,10 @@ class AdvisorClient(_Base):
     def events(self, session: Session, events: EventLike | Sequence[EventLike]) -> Any:
         """Decisions over REST: one event -> one decision, a list -> a list."""
         return self.call(api.events(session, events))
+
+    def positions(self, session: Session, points: Sequence[Sequence[float]]) -> list[Decision]:
+        """Positions in metres -> one decision per move they make (see the route)."""
+        return cast(list[Decision], self.call(api.positions(session, points)))
 
     def step(self, session: Session, event: EventLike) -> Decision:
         return cast(Decision, self.events(session, event))
@@ -242,9 +251,10 @@ class AsyncAdvisorClient(_Base):
         return cast(dict[str, Any], await self.call(api.domain(name)))
 
     async def put_domain(
-        self, name: str, rows: Sequence[str], alpha0: float = 1.0
+        self, name: str, rows: Sequence[str], alpha0: float = 1.0, **frame_and_experts: Any
     ) -> dict[str, Any]:
-        return cast(dict[str, Any], await self.call(api.put_domain(name, rows, alpha0)))
+        call = api.put_domain(name, rows, alpha0, **frame_and_experts)
+        return cast(dict[str, Any], await self.call(call))
 
     async def delete_domain(self, name: str) -> None:
         await self.call(api.delete_domain(name))
@@ -272,6 +282,11 @@ class AsyncAdvisorClient(_Base):
 
     async def events(self, session: Session, events: EventLike | Sequence[EventLike]) -> Any:
         return await self.call(api.events(session, events))
+
+    async def positions(
+        self, session: Session, points: Sequence[Sequence[float]]
+    ) -> list[Decision]:
+        return cast(list[Decision], await self.call(api.positions(session, points)))
 
     async def session(self, session: Session) -> dict[str, Any]:
         return cast(dict[str, Any], await self.call(api.read_session(session)))

@@ -62,10 +62,12 @@ def expert_trajectory(
     rng: np.random.Generator,
     epsilon: float = 0.0,
     max_steps: int = 10_000,
+    optimal: BoolArray | None = None,
 ) -> IntArray:
     """(state, action) pairs of an expert from ``start`` to ``goal``: a shortest path with
-    random tie-breaks; with probability ``epsilon`` per step a uniformly random move instead."""
-    opt = optimal_actions(domain, goal)
+    random tie-breaks; with probability ``epsilon`` per step a uniformly random move instead.
+    ``optimal``: :func:`optimal_actions` of ``goal``, if already known."""
+    opt = optimal_actions(domain, goal) if optimal is None else optimal
     s = start
     pairs: list[tuple[int, int]] = []
     while s != goal and len(pairs) < max_steps:
@@ -96,7 +98,36 @@ def expert_trajectories(
         raise ValueError(f"epsilon must be in [0, 1), got {epsilon}")
     out = []
     for goal in domain.goals:
+        opt = optimal_actions(domain, goal)
         for _ in range(per_goal):
             start = domain.start if source == "start" else int(rng.integers(domain.n_states))
-            out.append(ExpertTrajectory(goal, expert_trajectory(domain, start, goal, rng, epsilon)))
+            pairs = expert_trajectory(domain, start, goal, rng, epsilon, optimal=opt)
+            out.append(ExpertTrajectory(goal, pairs))
     return out
+
+
+def path_within(domain: GridDomain, source: int, target: int, limit: int) -> list[int] | None:
+    """A shortest path ``[source, ..., target]`` of at most ``limit`` moves, or ``None`` if
+    ``target`` is farther. Breadth-first from ``source``, moves tried in the order N, E, S, W
+    (so the path is the same every time); it visits only cells within ``limit`` moves."""
+    if source == target:
+        return [source]
+    parent = {source: source}
+    frontier = [source]
+    nxt = domain.next_state
+    for _ in range(limit):
+        new: list[int] = []
+        for s in frontier:
+            for t in nxt[s].tolist():
+                if t not in parent:
+                    parent[t] = s
+                    if t == target:
+                        path = [t]
+                        while path[-1] != source:
+                            path.append(parent[path[-1]])
+                        return path[::-1]
+                    new.append(t)
+        if not new:
+            return None
+        frontier = new
+    return None

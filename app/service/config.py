@@ -38,6 +38,15 @@ class Settings(BaseSettings):
     max_batch_events: int = Field(5_000, ge=1, description="Events per request or message.")
     max_trajectory_steps: int = Field(200_000, ge=1, description="Steps per ingest request.")
     max_window: int = Field(10_000, ge=1, description="Largest history window W a session may ask.")
+    max_jump: int = Field(
+        8, ge=1, le=64,
+        description="Positions in metres: a reading this many moves or fewer from the last "
+        "cell is walked along a shortest path; a farther one is refused (422).",
+    )  # fmt: skip
+    max_expert_pairs: int = Field(
+        2_000_000, ge=1,
+        description="Simulated experts of a PUT: at most this many (state, action) pairs.",
+    )  # fmt: skip
     max_map_cells: int = Field(250_000, ge=4, description="Largest map (rows x cols).")
     recent_path: int = Field(100, ge=1, description="Cells of recent path kept per session.")
     recent_p_normal: int = Field(200, ge=1, description="p_normal values kept per session.")

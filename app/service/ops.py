@@ -13,16 +13,28 @@ import numpy as np
 from app.advice.advisor import Decision
 from app.advice.models import AdviceTables
 from app.advice.strategies import strategy_params
-from app.domain.grid import ACTIONS, GridDomain, MapError
-from app.service.data.domains import DomainState
+from app.domain.grid import ACTIONS, Frame, GridDomain, MapError
+from app.domain.paths import expert_trajectories, path_within
+from app.service.data.domains import DomainNotFound, DomainState
 from app.service.data.ingest import parse_trajectories, to_trajectories
+from app.service.data.store import POOLED, Trajectory
 from app.service.live.registry import LiveSession, TooManySessions
 from app.service.live.stream import StreamAdvisor
 from app.service.problems import BadInput
-from app.service.schemas import Cell, DomainPut, SessionCreate, TrajectoriesAccepted
+from app.service.schemas import (
+    Cell,
+    DomainPut,
+    ExpertsIn,
+    PositionsIn,
+    SessionCreate,
+    TrajectoriesAccepted,
+)
 from app.service.state import ServiceState
 from app.service.wire.encode import batch_binary, batch_json, decision_json, theta_text
 from app.service.wire.events import read_move, read_moves
+
+#: an expert walk's longest (``expert_trajectory``'s default ``max_steps``)
+EXPERT_MAX_STEPS = 10_000
 
 
 def cell_state(domain: GridDomain, cell: Cell, what: str) -> int:
@@ -69,6 +81,52 @@ def apply_events(state: ServiceState, session: LiveSession, raw: bytes | str) ->
     return batch_json(state.registry.observe_batch(session, moves), grid)
 
 
+def apply_positions(state: ServiceState, session: LiveSession, body: PositionsIn) -> bytes:
+    """Positions in metres -> decisions (JSON list), one per move. Each reading is snapped to
+    the cell holding it; a reading in the cell of the one before adds no move; a reading up to
+    ``max_jump`` moves away is walked along a shortest path (one decision per cell of it); a
+    reading farther away, in a wall or off the map refuses the whole batch (nothing applied)."""
+    grid = session.domain.domain
+    if grid.frame is None:
+        raise BadInput(
+            f"domain {session.domain.name!r} has no resolution: send events with cells, or PUT "
+            "the domain with resolution (and origin) to send positions in metres"
+        )
+    limit, most = state.settings.max_jump, state.settings.max_batch_events
+    here = session.position
+    visited: list[int] = [here]
+    neighbours = grid.next_state
+    for i, (x, y) in enumerate(body.positions):
+        try:
+            target = grid.state_at(x, y)
+        except ValueError as exc:
+            raise BadInput(f"positions[{i}]: {exc}") from None
+        if target == here:
+            continue
+        if target in neighbours[here]:
+            visited.append(target)
+        else:
+            path = path_within(grid, here, target, limit)
+            if path is None:
+                r, c = grid.cell(target)
+                r0, c0 = grid.cell(here)
+                raise BadInput(
+                    f"positions[{i}]: ({x:g}, {y:g}) m is cell [{r}, {c}], more than {limit} "
+                    f"moves from the last cell [{r0}, {c0}]: a jump this far is refused "
+                    "(send the readings in between, or start a new session)"
+                )
+            visited.extend(path[1:])
+        here = target
+        if len(visited) - 1 > most:
+            raise BadInput(f"too many moves: the positions walk more than {most} in one batch", 413)
+    if len(visited) == 1:
+        return b"[]"
+    s = np.array(visited[:-1], dtype=np.int64)
+    s2 = np.array(visited[1:], dtype=np.int64)
+    a = np.argmax(grid.next_state[s] == s2[:, None], axis=1).astype(np.int64)
+    return batch_json(state.registry.observe_batch(session, (s, a, s2)), grid)
+
+
 def apply_events_binary(state: ServiceState, session: LiveSession, raw: bytes | str) -> bytes:
     """Events (JSON text: one or a list) -> decisions as one binary frame
     (:mod:`app.protocol`), the same decisions as :func:`apply_events` gives."""
@@ -78,14 +136,57 @@ def apply_events_binary(state: ServiceState, session: LiveSession, raw: bytes | 
 
 
 def put_domain(state: ServiceState, name: str, body: DomainPut) -> tuple[DomainState, bool, bool]:
-    """*Worker thread.* Create or replace a domain: (state, created, kept_data)."""
+    """*Worker thread.* Create or replace a domain: (state, created, kept_data). With
+    ``experts``, a domain whose prior is empty after the put learns it from simulated experts
+    (made before the put, so a bad request changes nothing)."""
+    frame = None
+    if body.resolution is not None:
+        ox, oy, *yaw = body.origin if body.origin is not None else (0.0, 0.0)
+        frame = Frame(body.resolution, (ox, oy, yaw[0] if yaw else 0.0))
     try:
-        grid = state.catalog.parse_map(body.map, name)
+        grid = state.catalog.parse_map(body.map, name, frame)
     except MapError as exc:
         raise BadInput(f"map: {exc}") from None
+    experts = None
+    if body.experts is not None and not _keeps_data(state, name, grid):
+        experts = simulated_experts(grid, body.experts, state.settings.max_expert_pairs)
     domain, created, kept = state.catalog.put(name, grid, body.alpha0)
+    if body.experts is not None and domain.view.trajectories.get(POOLED, 0) == 0:
+        if experts is None:  # the data it would have kept went meanwhile
+            experts = simulated_experts(grid, body.experts, state.settings.max_expert_pairs)
+        state.catalog.add_trajectories(domain, experts)
     prepare_answers(domain)
     return domain, created, kept
+
+
+def _keeps_data(state: ServiceState, name: str, grid: GridDomain) -> bool:
+    """Whether a put of ``grid`` as ``name`` keeps trajectories (the same map, with data)."""
+    try:
+        old = state.catalog.get(name)
+    except DomainNotFound:
+        return False
+    same = old.domain.rows_text == grid.rows_text
+    return same and old.view.trajectories.get(POOLED, 0) > 0
+
+
+def simulated_experts(grid: GridDomain, experts: ExpertsIn, max_pairs: int) -> list[Trajectory]:
+    """*Worker thread.* The experts' trajectories, each with its goal; BadInput when they
+    would be more than ``max_pairs`` pairs (bounded before any is walked)."""
+    n = experts.per_goal * len(grid.goals)
+    dist = grid.distances_to(grid.start)
+    if experts.source == "start":  # exact: each walk is a shortest path from the start
+        bound = experts.per_goal * int(dist[list(grid.goals)].sum())
+    else:  # from anywhere to a goal: at most twice the start's farthest distance
+        bound = n * 2 * int(dist.max())
+    bound = min(bound, n * EXPERT_MAX_STEPS)
+    if bound > max_pairs:
+        raise BadInput(
+            f"experts: {n} walks of up to {bound} (state, action) pairs in all; this service "
+            f"learns from at most {max_pairs} (fewer per_goal, or post trajectories)"
+        )
+    rng = np.random.default_rng(experts.seed)
+    walks = expert_trajectories(grid, rng, experts.source, experts.per_goal)
+    return [Trajectory(None, w.pairs, w.goal) for w in walks]
 
 
 def after_put(state: ServiceState, domain: DomainState, kept: bool) -> None:

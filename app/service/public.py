@@ -32,7 +32,9 @@ def domain_public(d: DomainState) -> DomainPublic:
     g = d.domain
     rows, cols = g.shape
     return DomainPublic(
-        name=d.name, rows=rows, cols=cols, map=list(g.rows_text), start=_cell(g, g.start),
+        name=d.name, rows=rows, cols=cols, map=list(g.rows_text),
+        resolution=g.frame.resolution if g.frame else None,
+        origin=list(g.frame.origin) if g.frame else None, start=_cell(g, g.start),
         goals=[_cell(g, s) for s in g.goals], actions=list(ACTIONS),
         alpha0=d.view.alpha0, n_states=g.n_states,
         trajectories=d.view.trajectories.get(POOLED, 0),

@@ -12,7 +12,15 @@ from dataclasses import fields
 from datetime import datetime
 from typing import TYPE_CHECKING, Annotated, Any, Literal, NotRequired
 
-from pydantic import BaseModel, ConfigDict, Field, StringConstraints, create_model, with_config
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    StringConstraints,
+    create_model,
+    model_validator,
+    with_config,
+)
 from typing_extensions import TypedDict
 
 from app.advice.strategies import StrategyParams as CoreStrategyParams
@@ -54,6 +62,8 @@ Kappa = Annotated[
     ),
 ]  # fmt: skip
 Window = Annotated[int, Field(strict=True, ge=1, description="History window W (pairs).")]
+Metres = Annotated[float, Field(strict=True, allow_inf_nan=False, ge=-1e9, le=1e9)]
+RESOLUTION_MAX = 1e4
 #: alpha0 bounds: beyond them theta over- or underflows (4 alpha0 is inf, alpha0 / count is 0)
 #: and a prior's tables cannot be built; the store must never hold such a domain.
 ALPHA0_MIN, ALPHA0_MAX = 1e-6, 1e6
@@ -94,10 +104,53 @@ class DomainBase(Strict):
         description=f"Dirichlet hyperprior alpha0 ({ALPHA0_MIN:g} to {ALPHA0_MAX:g}).",
     )
 
+    resolution: float | None = Field(
+        None,
+        strict=True,  # true is not a length
+        gt=0,
+        le=RESOLUTION_MAX,
+        allow_inf_nan=False,
+        description="Metres per cell side. With it the domain's sessions also take positions in "
+        "metres (POST /sessions/{id}/positions).",
+        examples=[0.5],
+    )
+    origin: list[Metres] | None = Field(
+        None,
+        min_length=2,
+        max_length=3,
+        description="x and y in metres of the lower-left corner of the lower-left cell, and "
+        "the grid's yaw in radians (default 0): ROS map_server's convention, y up. Needs "
+        "resolution; default [0, 0, 0].",
+        examples=[[-12.0, 4.5, 0.0]],
+    )
+
+    @model_validator(mode="after")
+    def _origin_needs_resolution(self) -> DomainBase:
+        if self.origin is not None and self.resolution is None:
+            raise ValueError("origin needs resolution (the cell side in metres)")
+        return self
+
+
+class ExpertsIn(Strict):
+    """Simulated experts: for every goal, ``per_goal`` walks along shortest paths (random
+    tie-breaks) from the start (``start``) or from uniformly random cells (``anywhere``)."""
+
+    source: Literal["start", "anywhere"] = Field("start", description="Where experts start.")
+    per_goal: int = Field(10, strict=True, ge=1, le=1000, description="Walks per goal.")
+    seed: int = Field(0, strict=True, ge=0, le=2**32 - 1, description="Random seed.")
+
 
 class DomainPut(DomainBase):
     """Create or replace a domain. A new map drops the old map's trajectories; the same map
-    keeps them (only ``alpha0`` changes)."""
+    keeps them (only ``alpha0``, ``resolution`` or ``origin`` change)."""
+
+    experts: ExpertsIn | None = Field(
+        None,
+        description="Learn the prior from simulated experts on the map, stored as ordinary "
+        "trajectories with their goals: done when the domain's prior is empty after this PUT "
+        "(a new domain or a new map), so repeating the PUT adds nothing.",
+        examples=[{"source": "anywhere", "per_goal": 10, "seed": 0}],
+    )
 
 
 class DomainPublic(BaseModel):
@@ -105,6 +158,10 @@ class DomainPublic(BaseModel):
     rows: int
     cols: int
     map: list[str]
+    resolution: float | None = Field(description="Metres per cell side (null: cells only).")
+    origin: list[float] | None = Field(
+        description="x, y (metres) of the lower-left corner of the lower-left cell, yaw."
+    )
     start: Cell
     goals: list[Cell]
     actions: list[ActionName]
@@ -250,6 +307,18 @@ class EventIn(TypedDict):
     state: Cell
     action: NotRequired[ActionIn | None]
     next_state: NotRequired[Cell | None]
+
+
+Point = Annotated[
+    list[Metres],
+    Field(min_length=2, max_length=2, description="[x, y] in metres.", examples=[[3.2, 7.9]]),
+]
+
+
+class PositionsIn(Strict):
+    """Where the explorer was seen, in metres, oldest first (a positioning system's readings)."""
+
+    positions: list[Point] = Field(min_length=1)
 
 
 class SessionCreated(BaseModel):

@@ -181,3 +181,25 @@ def test_async_clients_in_parallel(server: Server) -> None:
             return list(await asyncio.gather(*(explorer(client) for _ in range(8))))
 
     assert run_async(scenario()) == [40] * 8
+
+
+def test_client_domains_in_metres_with_experts(server: Server) -> None:
+    with AdvisorClient(server.url, admin_key=server.admin_key) as client:
+        made = client.put_domain(
+            "tiny-m", TINY, resolution=1.0, origin=(0.0, 0.0), experts={"per_goal": 2}
+        )
+        assert made["resolution"] == 1.0 and made["trajectories"] == 4
+        session = client.create_session("tiny-m", kappa=0.0)
+        # the start is [5, 1]: x 1.5, y 1.5 (row 5 of 7 is the second from the bottom)
+        walked = client.positions(session, [(1.5, 1.5), (3.4, 1.2)])
+        assert [d["state"] for d in walked] == [[5, 2], [5, 3]]
+        with pytest.raises(AdvisorError, match="is a wall"):
+            client.positions(session, [(0.5, 0.5)])
+
+        async def scenario() -> list[Any]:
+            async with AsyncAdvisorClient(server.url, admin_key=server.admin_key) as aclient:
+                s = await aclient.create_session("tiny-m")
+                return await aclient.positions(s, [(2.5, 1.5)])
+
+        assert [d["state"] for d in run_async(scenario())] == [[5, 2]]
+        client.delete_domain("tiny-m")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from itertools import pairwise
 
 import numpy as np
 import pytest
@@ -240,3 +241,21 @@ def test_map_text_with_header_round_trips() -> None:
 def test_map_header_errors_name_the_line(text: str, message: str) -> None:
     with pytest.raises(MapError, match=message):
         GridDomain.from_text(text)
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.integers(0, 2**31), st.integers(0, 12))
+def test_path_within_is_a_shortest_path_or_none(seed: int, limit: int) -> None:
+    from app.domain.generate import generate_maze
+    from app.domain.paths import path_within
+
+    rng = np.random.default_rng(seed)
+    d = GridDomain.from_strings(generate_maze(11, 11, rng, braid=0.5, n_goals=1))
+    a, b = (int(v) for v in rng.integers(d.n_states, size=2))
+    dist = int(d.distances_to(b)[a])
+    path = path_within(d, a, b, limit)
+    if dist > limit:
+        assert path is None
+        return
+    assert path is not None and path[0] == a and path[-1] == b and len(path) == dist + 1
+    assert all(d.move_between(s, t) is not None for s, t in pairwise(path))

@@ -54,6 +54,7 @@ ROUTES = [
     Route("GET", "/domains/{name}/prior", "anyone"),
     Route("POST", "/domains/{name}/sessions", "anyone", {}),
     Route("POST", "/sessions/{session_id}/events", "token", E),
+    Route("POST", "/sessions/{session_id}/positions", "token", {"positions": [[2.5, 1.5]]}),
     Route("GET", "/sessions/{session_id}", "token or admin"),
     Route("DELETE", "/sessions/{session_id}", "token or admin"),
     Route("GET", "/sessions", "admin"),
@@ -90,7 +91,8 @@ class Service:
         self.client = client
         self.admin_key: str = client.app.state.service.admin_key  # type: ignore[attr-defined]
         self.counter = 0
-        r = client.put("/domains/tiny", json={"map": TINY}, headers=self.admin)
+        body = {"map": TINY, "resolution": 1.0}  # in metres too: positions are valid
+        r = client.put("/domains/tiny", json=body, headers=self.admin)
         assert r.status_code == 201, r.text
 
     @property

@@ -52,6 +52,10 @@ SEMANTIC = (
     "is a wall", "is off the", "map:", "is not where the previous step leads",
     "is not one move from", "ambiguous", "give an action", "larger than this service allows",
     "does not read",  # a parameter of another strategy (the schema lists every strategy's)
+    "has no resolution",  # positions in metres to a domain placed in cells only
+    "a jump this far is refused",  # a reading more than max_jump moves from the last
+    "experts:",  # more simulated experts than the service learns from
+    "origin needs resolution",  # a rule between two fields
 )  # fmt: skip
 #: JSON Schema's "integer" admits 1.0; the service takes only 1 (on purpose: a float is not a
 #: cell or a move, see schemas.py). Refusals that say so are allowed when the body has one.

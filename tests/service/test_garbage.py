@@ -24,7 +24,8 @@ CONTRACT = {
     ("GET", "/health"), ("GET", "/domains"), ("GET", "/domains/{name}"), ("PUT", "/domains/{name}"),
     ("DELETE", "/domains/{name}"), ("POST", "/domains/{name}/trajectories"),
     ("GET", "/domains/{name}/prior"), ("POST", "/domains/{name}/sessions"),
-    ("POST", "/sessions/{session_id}/events"), ("GET", "/sessions/{session_id}"),
+    ("POST", "/sessions/{session_id}/events"), ("POST", "/sessions/{session_id}/positions"),
+    ("GET", "/sessions/{session_id}"),
     ("DELETE", "/sessions/{session_id}"), ("GET", "/sessions"), ("GET", "/overview"),
     ("GET", "/viewer"),  # where the viser viewer runs (app/service/viewer_feed.py)
 }  # fmt: skip

@@ -118,6 +118,7 @@ def test_session_routes_need_the_sessions_own_token(
     _, other, _ = open_session(client)
     for method, path, body in [
         ("POST", f"/sessions/{sid}/events", E),
+        ("POST", f"/sessions/{sid}/positions", {"positions": [[0.5, 0.5]]}),
         ("GET", f"/sessions/{sid}", None),
         ("DELETE", f"/sessions/{sid}", None),
     ]:

@@ -16,7 +16,7 @@ from datetime import datetime
 
 from app.advice.models import AdviceTables
 from app.advice.priors import ActionPrior, GoalPriors
-from app.domain.grid import GridDomain, MapError
+from app.domain.grid import Frame, GridDomain, MapError
 from app.service.data.store import POOLED, DomainRecord, Store, TableCounts, Trajectory
 
 
@@ -73,7 +73,7 @@ class DomainState:
 
     @property
     def map_text(self) -> str:
-        return "\n".join(self.domain.rows_text)
+        return self.domain.to_text()
 
 
 class DomainCatalog:
@@ -88,7 +88,7 @@ class DomainCatalog:
     def load(self) -> None:
         """Read every domain and its counts from the store (at start)."""
         for rec in self.store.domains():
-            domain = GridDomain.from_strings(rec.map_text.splitlines(), name=rec.name)
+            domain = GridDomain.from_text(rec.map_text, name=rec.name)
             prior = restore_prior(rec.alpha0, domain.n_states, self.store.counts(rec.name))
             self._domains[rec.name] = DomainState(
                 rec.name, domain, prior, rec.created_at, rec.updated_at
@@ -107,11 +107,11 @@ class DomainCatalog:
         except KeyError:
             raise DomainNotFound(name) from None
 
-    def parse_map(self, rows: Sequence[str], name: str) -> GridDomain:
+    def parse_map(self, rows: Sequence[str], name: str, frame: Frame | None = None) -> GridDomain:
         """A validated grid; :class:`MapError` names the problem (line and column)."""
         if len(rows) * max((len(r) for r in rows), default=0) > self.max_cells:
             raise MapError(f"the map is larger than {self.max_cells} cells")
-        return GridDomain.from_strings(rows, name=name)
+        return GridDomain.from_strings(rows, name=name, frame=frame)
 
     def put(self, name: str, domain: GridDomain, alpha0: float) -> tuple[DomainState, bool, bool]:
         """Create or replace ``name`` (store first); returns (state, created, kept_data): the
@@ -119,9 +119,7 @@ class DomainCatalog:
         with self._lock:
             old = self._domains.get(name)
             with old.lock if old else nullcontext():
-                rec, created, kept = self.store.put_domain(
-                    name, "\n".join(domain.rows_text), alpha0
-                )
+                rec, created, kept = self.store.put_domain(name, domain.to_text(), alpha0)
                 state = self._state(rec, domain, old if old and kept else None)
                 self._domains[name] = state
         return state, created, kept

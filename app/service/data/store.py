@@ -132,6 +132,11 @@ def _record(row: Any) -> DomainRecord:
     )
 
 
+def _rows(map_text: str) -> list[str]:
+    """A stored map's rows, without the header lines of its frame (they hold ':')."""
+    return [line for line in map_text.splitlines() if ":" not in line]
+
+
 def table_increments(items: Sequence[Trajectory], n_states: int) -> dict[str, TableCounts]:
     """What ``items`` add to each table: every trajectory to ``"*"``, typed ones to their type
     (eq. (1) with delta = 0, as :class:`ActionPrior` counts them)."""
@@ -201,7 +206,7 @@ class Store:
                     )
                 )
                 return DomainRecord(name, map_text, alpha0, now, now), True, False
-            kept = old.map_text == map_text
+            kept = _rows(old.map_text) == _rows(map_text)  # a new frame keeps the states
             if not kept:
                 self._delete_data(conn, old.id)
             conn.execute(

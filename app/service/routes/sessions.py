@@ -10,6 +10,7 @@ from app.service.deps import (
     BEARER,
     AdminDep,
     DomainDep,
+    SessionDep,
     SessionId,
     SessionOrAdminDep,
     StateDep,
@@ -21,6 +22,7 @@ from app.service.public import session_created, session_public
 from app.service.schemas import (
     DecisionPublic,
     ErrorPublic,
+    PositionsIn,
     SessionCreate,
     SessionCreated,
     SessionList,
@@ -74,6 +76,21 @@ def add_event_route(app: FastAPI) -> None:
         openapi_extra=body("Events") | BEARER,
         responses=ERRORS | {413: {"model": ErrorPublic}},
     )
+
+
+@router.post(
+    "/sessions/{session_id}/positions",
+    response_model=list[DecisionPublic],
+    openapi_extra=BEARER,
+    responses=ERRORS | {413: {"model": ErrorPublic}},
+)
+async def post_positions(session: SessionDep, body: PositionsIn, state: StateDep) -> Response:
+    """Positions in metres (domains with a resolution): each reading is snapped to its cell; a
+    reading in the same cell as the one before adds no move, one up to ``max_jump`` moves away
+    (ADVISOR_MAX_JUMP, default 8) is walked along a shortest path, one decision per cell; a
+    farther jump, a wall or a point off the map refuses the batch whole (422)."""
+    text = ops.apply_positions(state, session, body)
+    return Response(text, media_type="application/json")
 
 
 @router.get("/sessions/{session_id}", responses=ERRORS)
