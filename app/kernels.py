@@ -40,11 +40,16 @@ KeyArray = npt.NDArray[np.int32]
 FlagArray = npt.NDArray[np.uint8]
 Tables = tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]
 GoalTables = tuple[IntArray, float, FloatArray, FloatArray, FloatArray]
+#: (next_state (S, 4), open moves per state (S,), cells (S, 2), distance to each destination
+#: (G, S), destination of each state (S,), the experts' goal counts (G, S * 4))
+GuideArrays = tuple[IntArray, IntArray, IntArray, IntArray, IntArray, FloatArray]
+#: (lam, p_lost, slack, spread, bump)
+GuideParams = tuple[float, float, float, float, float]
 
 #: explorer kinds, in the order of app.agents.explorers.FIXED_EXPLORERS
 RANDOM, RANDOM_AVOID, LEFT, BUG, OPTIMAL = 0, 1, 2, 3, 4
 #: strategies, in the order of app.advice.strategies.STRATEGIES
-PAPER, GOAL_AWARE, EARLY, IMPORTANCE, MISTAKE, RANDOM_RULE, ALWAYS = 0, 1, 2, 3, 4, 5, 6
+PAPER, GOAL_AWARE, EARLY, IMPORTANCE, MISTAKE, RANDOM_RULE, ALWAYS, GUIDE = 0, 1, 2, 3, 4, 5, 6, 7
 
 
 # ---- the paper's advisor ----------------------------------------------------------------------
@@ -314,6 +319,265 @@ def keep_values(
     return n
 
 
+# ---- guide: leading lost explorers to a destination ---------------------------------------------
+@njit(cache=True)
+def guide_open(gmap: GuideArrays, s: int, out: FloatArray) -> None:  # pragma: no cover
+    """``GuideMap.open_policy``: uniform over the open moves of ``s`` into ``out`` (4,)."""
+    next_state, n_open = gmap[0], gmap[1]
+    n = n_open[s]
+    for a in range(4):
+        if n == 0:
+            out[a] = 0.25
+        elif next_state[s, a] != s:
+            out[a] = 1.0 / n
+        else:
+            out[a] = 0.0
+
+
+@njit(cache=True)
+def guide_policy(gmap: GuideArrays, g: int, s: int, out: FloatArray) -> None:  # pragma: no cover
+    """``GuideMap.policy``: pi_g(. | s) into ``out`` (4,)."""
+    next_state, _, _, dist, _, counts = gmap
+    d = dist[g, s]
+    if d > 0:
+        tot = 0.0
+        for a in range(4):
+            if dist[g, next_state[s, a]] == d - 1:
+                out[a] = 1.0 + counts[g, s * 4 + a]
+                tot += out[a]
+            else:
+                out[a] = 0.0
+        for a in range(4):
+            out[a] = out[a] / tot
+    else:
+        guide_open(gmap, s, out)
+
+
+@njit(cache=True)
+def guide_compass(
+    gmap: GuideArrays, goal: int, s: int, out: FloatArray
+) -> None:  # pragma: no cover
+    """``GuideMap.compass``: c_g(. | s) for the destination in state ``goal``, into ``out``."""
+    next_state, _, cells, _, _, _ = gmap
+    dr = cells[goal, 0] - cells[s, 0]
+    dc = cells[goal, 1] - cells[s, 1]
+    n = 0
+    for a in range(4):
+        ok = (dr < 0) if a == 0 else ((dc > 0) if a == 1 else ((dr > 0) if a == 2 else dc < 0))
+        out[a] = 1.0 if ok and next_state[s, a] != s else 0.0
+        n += int(out[a])
+    for a in range(4):  # no way closer: nothing said (uniform over the four)
+        out[a] = 0.25 if n == 0 else (1.0 / n if out[a] > 0.0 else 0.0)
+
+
+@njit(cache=True)
+def guide_append(
+    gmap: GuideArrays, params: GuideParams, goals: IntArray, ll: FloatArray, alive: BoolArray,
+    s: int, a: int, advised: bool, advice: FloatArray, heading: int, pi: FloatArray,
+) -> int:  # pragma: no cover - compiled  # fmt: skip
+    """``GuideAdvisor.append``: fade the evidence, add log P(a | s, k), rule out a destination
+    the explorer stood on. ``goals`` holds each destination's state; ``advised``: the last
+    decision, for ``s``, gave ``advice`` (4,); ``pi`` is scratch (4,)."""
+    lam, _, slack, _, bump = params
+    next_state = gmap[0]
+    guide_open(gmap, s, pi)
+    lo = (1.0 - bump) * pi[a] + bump / 4.0
+    ll[0] = lam * ll[0] + math.log(0.25)
+    ll[1] = lam * ll[1] + math.log(lo)
+    for w in range(2):  # the left-hand (w = 0) and right-hand wall followers
+        rule = guide_wall(next_state, s, heading, w)
+        ind = 1.0 if a == rule else 0.0
+        if advised:
+            ind = 0.5 * (ind + advice[a])
+        ll[2 + w] = lam * ll[2 + w] + math.log((1.0 - slack) * ind + slack * lo)
+    for g in range(alive.shape[0]):
+        guide_policy(gmap, g, s, pi)
+        pa = pi[a]
+        guide_compass(gmap, goals[g], s, pi)
+        ca = pi[a]
+        if advised:  # C_g follows advice or its compass where advice is given
+            ca = 0.5 * (ca + advice[a])
+        k = 4 + 3 * g
+        ll[k] = lam * ll[k] + math.log((1.0 - slack) * pa + slack / 4.0)
+        ll[k + 1] = lam * ll[k + 1] + math.log((1.0 - slack) * pa + slack * lo)
+        ll[k + 2] = lam * ll[k + 2] + math.log((1.0 - slack) * ca + slack * lo)
+    gi = gmap[4][s]
+    if gi >= 0:
+        alive[gi] = False
+    return a if next_state[s, a] != s else heading
+
+
+@njit(cache=True)
+def guide_wall(next_state: IntArray, s: int, heading: int, w: int) -> int:  # pragma: no cover
+    """The move of a wall follower at ``s`` heading ``heading`` (-1: none yet, then it goes
+    its first open way, N E S W): the left hand's (w = 0: left, straight, right, back) or the
+    right hand's (w = 1: right, straight, left, back); -1 where every way is shut."""
+    h = 0 if heading < 0 else heading
+    for i in range(4):
+        if heading < 0:
+            turn = i
+        elif w == 0:
+            turn = (3, 0, 1, 2)[i]
+        else:
+            turn = (1, 0, 3, 2)[i]
+        a = (h + turn) % 4
+        if next_state[s, a] != s:
+            return a
+    return -1
+
+
+@njit(cache=True)
+def guide_decide(
+    gmap: GuideArrays, params: GuideParams, goals: IntArray, ll: FloatArray, alive: BoolArray,
+    target: int, heading: int, s: int, theta: FloatArray, scratch: FloatArray,
+) -> tuple[float, float, int]:  # pragma: no cover - compiled  # fmt: skip
+    """``GuideAdvisor.decide``: fills ``theta`` (4,) with the advice; returns (KL, 1 - P(lost |
+    H), the target). ``heading``: the last move that moved (-1: none). ``scratch`` is
+    (4 + 3 G + 8 G + 4,)."""
+    _, p_lost, slack, spread, bump = params
+    dist = gmap[3]
+    n_goals = alive.shape[0]
+    n_models = 4 + 3 * n_goals
+    any_alive = False
+    for g in range(n_goals):
+        any_alive = any_alive or alive[g]
+    n_alive = 0
+    for g in range(n_goals):
+        if alive[g] or not any_alive:
+            n_alive += 1
+    # P(k | H)
+    lw_lost = math.log(p_lost / 4.0)
+    lw_dir = math.log((1.0 - p_lost) / (3.0 * n_alive))
+    post = scratch[:n_models]
+    mx = -math.inf
+    for k in range(4):
+        post[k] = ll[k] + lw_lost
+        if post[k] > mx:
+            mx = post[k]
+    for k in range(4, n_models):
+        g = (k - 4) // 3
+        if alive[g] or not any_alive:
+            post[k] = ll[k] + lw_dir
+            if post[k] > mx:
+                mx = post[k]
+    tot = 0.0
+    for k in range(n_models):
+        if k >= 4 and not (alive[(k - 4) // 3] or not any_alive):
+            post[k] = 0.0
+        else:
+            post[k] = 1.0 if post[k] == mx else math.exp(post[k] - mx)
+        tot += post[k]
+    for k in range(n_models):
+        post[k] = post[k] / tot
+    lost = post[0] + post[1] + post[2] + post[3]
+    # each destination's policies here, and the target
+    pis = scratch[n_models : n_models + 4 * n_goals].reshape((n_goals, 4))
+    cs = scratch[n_models + 4 * n_goals : n_models + 8 * n_goals].reshape((n_goals, 4))
+    best = -1
+    best_score = -1.0
+    cur = -1.0
+    for g in range(n_goals):
+        if not (alive[g] or not any_alive):
+            continue
+        guide_policy(gmap, g, s, pis[g])
+        guide_compass(gmap, goals[g], s, cs[g])
+        d = dist[g, s]
+        if d < 0:
+            continue
+        k = 4 + 3 * g
+        score = (post[k] + post[k + 1] + post[k + 2] + lost / n_alive) / (d + 1.0)
+        if score > best_score:
+            best = g
+            best_score = score
+        if g == target:
+            cur = score
+    if target < 0 or cur < 0.0 or best_score > 2.0 * cur:
+        target = best
+    pi_t = scratch[n_models + 8 * n_goals :]
+    if target >= 0:
+        for a in range(4):
+            pi_t[a] = pis[target, a]
+    else:
+        guide_open(gmap, s, pi_t)
+    op = theta  # the open moves' policy, read before theta is written in its place
+    guide_open(gmap, s, op)
+    wl = guide_wall(gmap[0], s, heading, 0)
+    wr = guide_wall(gmap[0], s, heading, 1)
+    kl = 0.0
+    for a in range(4):
+        lo = (1.0 - bump) * op[a] + bump / 4.0
+        v = lost * pi_t[a]
+        m = post[0] * 0.25 + post[1] * lo
+        m += post[2] * ((1.0 - slack) * (1.0 if a == wl else 0.0) + slack * lo)
+        m += post[3] * ((1.0 - slack) * (1.0 if a == wr else 0.0) + slack * lo)
+        for g in range(n_goals):
+            if alive[g] or not any_alive:
+                k = 4 + 3 * g
+                v += (post[k] + post[k + 1] + post[k + 2]) * pis[g, a]
+                m += post[k] * ((1.0 - slack) * pis[g, a] + slack / 4.0)
+                m += post[k + 1] * ((1.0 - slack) * pis[g, a] + slack * lo)
+                m += post[k + 2] * ((1.0 - slack) * cs[g, a] + slack * lo)
+        th = (1.0 - spread) * v + spread / 4.0
+        theta[a] = th
+        if th > 0.0:
+            kl += th * (math.log(th) - math.log(m))
+    return (kl if kl > 0.0 else 0.0), 1.0 - lost, target
+
+
+@njit(cache=True)
+def guide_stream(
+    gmap: GuideArrays,
+    params: GuideParams,
+    goals: IntArray,
+    ll: FloatArray,
+    alive: BoolArray,
+    target: int,
+    last: int,
+    heading: int,
+    advice: FloatArray,
+    kappa: float,
+    count: int,
+    benefit: float,
+    moves: tuple[IntArray, IntArray, IntArray],
+    out: tuple[FloatArray, FloatArray, BoolArray, IntArray, FloatArray, FloatArray],
+) -> tuple[int, int, int, int, float]:  # pragma: no cover - compiled
+    """A batch of ``GuideAdvisor.observe``; ``last`` is the state the last decision advised
+    (-1 if it did not), ``advice`` (4,) that advice, updated in place, ``heading`` the last
+    move that moved. Fills ``out`` (kl, p_normal, advise, count, benefit, advice (n, 4));
+    returns (target, last, heading, advice count, benefit)."""
+    states, actions, next_states = moves
+    kl_out, p_out, advise_out, count_out, benefit_out, advice_out = out
+    n_goals = alive.shape[0]
+    scratch = np.empty(4 + 11 * n_goals + 4)
+    pi = np.empty(4)
+    theta = np.empty(4)
+    for i in range(states.shape[0]):
+        heading = guide_append(
+            gmap, params, goals, ll, alive, states[i], actions[i], last == states[i], advice,
+            heading, pi,
+        )  # fmt: skip
+        kl, p0, target = guide_decide(
+            gmap, params, goals, ll, alive, target, heading, next_states[i], theta, scratch
+        )
+        if kl >= kappa:
+            count += 1
+            benefit += kl
+            advise_out[i] = True
+            last = next_states[i]
+            for a in range(4):
+                advice[a] = theta[a]
+        else:
+            advise_out[i] = False
+            last = -1
+        for a in range(4):
+            advice_out[i, a] = theta[a]
+        kl_out[i] = kl
+        p_out[i] = p0
+        count_out[i] = count
+        benefit_out[i] = benefit
+    return target, last, heading, count, benefit
+
+
 # ---- explorers ----------------------------------------------------------------------------------
 @njit(cache=True)
 def sample_action(weights: FloatArray, u: float, mask: BoolArray) -> int:  # pragma: no cover
@@ -429,6 +693,7 @@ def episode(
     rule_params: tuple[int, float, float, float],
     tables: Tables,
     goals: GoalTables,
+    guide: tuple[GuideArrays, GuideParams, IntArray],
     rng: np.random.Generator,
     rule_rng: np.random.Generator,
     out: tuple[IntArray, FloatArray, BoolArray],
@@ -441,7 +706,8 @@ def episode(
     each move, the state, P(M1 | H) (when ``out[1]`` is not empty) and the decision (given to
     the explorer only if ``advised``). The explorer's draws come from ``rng``, the ``random``
     rule's from ``rule_rng``, in the reference's order. ``goals`` is read by ``goal_aware``
-    only (G may be 0 for the others)."""
+    only (G may be 0 for the others), ``guide`` (its map, parameters and destination states)
+    by ``guide`` only."""
     next_state, open_moves, cells, optimal = world
     beta = rule_params[3]
     log_probs, _, _, theta, _ = tables
@@ -459,6 +725,14 @@ def episode(
     alive = np.ones(n_goals, dtype=np.bool_)
     w = np.empty(n_goals)
     theta_w = np.empty(4)
+    gmap, gparams, g_goals = guide
+    n_dest = g_goals.shape[0] if rule == GUIDE else 0
+    g_ll = np.zeros(4 + 3 * n_dest)
+    g_alive = np.ones(n_dest, dtype=np.bool_)
+    g_target = -1
+    g_heading = -1
+    g_scratch = np.empty(4 + 11 * n_dest + 4)
+    g_pi = np.empty(4)
     heading = 0
     if kind == LEFT:
         heading = int(rng.random() * 4)
@@ -473,6 +747,12 @@ def episode(
         if rule == GOAL_AWARE:
             goal_posterior(goal_ll, alive, beta, w)
             kl, p = goal_decide(loglik, tables, goals, w, s, theta_w, z)
+            advise = kl >= kappa
+        elif rule == GUIDE:
+            kl, p, g_target = guide_decide(
+                gmap, gparams, g_goals, g_ll, g_alive, g_target, g_heading, s, theta_w,
+                g_scratch,
+            )  # fmt: skip
             advise = kl >= kappa
         else:
             says = rule == PAPER or rule_says(
@@ -491,7 +771,7 @@ def episode(
         advise_out[t] = advise
         # ---- the explorer acts --------------------------------------------------------------
         if advised and advise:  # two calls: one merged row variable cost a quarter (measured)
-            if rule == GOAL_AWARE:
+            if rule in (GOAL_AWARE, GUIDE):
                 a = sample_action(theta_w, rng.random(), all_moves)
             else:
                 a = sample_action(theta[s * 4 : s * 4 + 4], rng.random(), all_moves)
@@ -501,7 +781,8 @@ def episode(
         if kind == LEFT and s2 != s:
             heading = a
         if s2 == goal:
-            return t + 1, True, advice_count, benefit, n_goals - int(alive.sum())
+            ruled = n_goals - int(alive.sum()) + n_dest - int(g_alive.sum())
+            return t + 1, True, advice_count, benefit, ruled
         # ---- the advisor appends (s, a) to H ------------------------------------------------
         if rule == GOAL_AWARE:
             gi = goal_of_state[s]
@@ -516,10 +797,16 @@ def episode(
                 if pos + 1 == window and (t + 1) % period == 0:
                     for g in range(n_goals):
                         goal_ll[g] = fsum(goal_ring[g])
-        pos = push(ring, loglik, pos, t + 1, period, log_probs, s, a)
+        if rule == GUIDE:  # guide keeps its own evidence, not the paper's window
+            g_heading = guide_append(
+                gmap, gparams, g_goals, g_ll, g_alive, s, a, advise, theta_w, g_heading, g_pi
+            )
+        else:
+            pos = push(ring, loglik, pos, t + 1, period, log_probs, s, a)
         last_s, last_a = s, a
         s = s2
-    return max_steps, False, advice_count, benefit, n_goals - int(alive.sum())
+    ruled = n_goals - int(alive.sum()) + n_dest - int(g_alive.sum())
+    return max_steps, False, advice_count, benefit, ruled
 
 
 @njit(cache=True)
@@ -537,6 +824,8 @@ def q_learning(
     window: int,
     period: int,
     tables: Tables,
+    rule: int,
+    guide: tuple[GuideArrays, GuideParams, IntArray],
     rng: np.random.Generator,
     q: FloatArray,
     out: tuple[IntArray, BoolArray, IntArray, IntArray, FloatArray],
@@ -546,7 +835,8 @@ def q_learning(
 
     ``learner`` is (alpha, gamma, epsilon, ties broken by the advice). Per episode ``out``
     receives: moves, success, advice given and decisions made at the states it acted in (one
-    per move), mean P(M1 | H) over those decisions."""
+    per move), mean P(M1 | H) over those decisions. ``rule`` is PAPER or GUIDE (then
+    ``guide`` is read, as :func:`episode` reads it)."""
     alpha, gamma, epsilon, ties_advice = learner
     steps_out, success_out, advice_out, decisions_out, p_mean_out = out
     log_probs, _, _, theta, _ = tables
@@ -558,6 +848,15 @@ def q_learning(
     appended = 0  # pairs in this advisor session
     all_moves = np.ones(4, dtype=np.bool_)
     best = np.zeros(4, dtype=np.bool_)
+    gmap, gparams, g_goals = guide
+    n_dest = g_goals.shape[0] if rule == GUIDE else 0
+    g_ll = np.zeros(4 + 3 * n_dest)
+    g_alive = np.ones(n_dest, dtype=np.bool_)
+    g_target = -1
+    g_heading = -1
+    g_scratch = np.empty(4 + 11 * n_dest + 4)
+    g_pi = np.empty(4)
+    theta_w = np.empty(4)
     total_steps = 0
     for e in range(episodes):
         if not keep_history:
@@ -565,18 +864,29 @@ def q_learning(
             loglik[:] = 0.0
             pos = 0
             appended = 0
+            g_ll[:] = 0.0
+            g_alive[:] = True
+            g_target = -1
+            g_heading = -1
         s = start
         n_advice = 0
         p_sum = 0.0
         success = False
         t = 0
         while t < max_steps:
-            kl, p = decide(loglik, tables, s, z)
+            if rule == GUIDE:
+                kl, p, g_target = guide_decide(
+                    gmap, gparams, g_goals, g_ll, g_alive, g_target, g_heading, s, theta_w,
+                    g_scratch,
+                )  # fmt: skip
+                row = theta_w
+            else:
+                kl, p = decide(loglik, tables, s, z)
+                row = theta[s * 4 : s * 4 + 4]
             advise = kl >= kappa
             n_advice += advise
             p_sum += p
             give = advised and advise
-            row = theta[s * 4 : s * 4 + 4]
             if rng.random() < epsilon:
                 u = rng.random()
                 a = sample_action(row, u, all_moves) if give else int(u * 4)
@@ -602,7 +912,13 @@ def q_learning(
                 break
             q[s, a] += alpha * (gamma * q[s2].max() - q[s, a])
             appended += 1
-            pos = push(ring, loglik, pos, appended, period, log_probs, s, a)
+            if rule == GUIDE:
+                g_heading = guide_append(
+                    gmap, gparams, g_goals, g_ll, g_alive, s, a, advise, theta_w, g_heading,
+                    g_pi,
+                )  # fmt: skip
+            else:
+                pos = push(ring, loglik, pos, appended, period, log_probs, s, a)
             s = s2
             if step_budget > 0 and total_steps + t >= step_budget:
                 break

@@ -16,8 +16,30 @@
 
   const walk = {
     map: null, cell: 20, pos: null, path: [], session: null, socket: null, pending: 0,
-    decision: null, advice: null, advisedCells: [],
+    decision: null, advice: null, advisedCells: [], background: null,
   };
+  const NOTES = {
+    paper: "The experts' action prior θ for this cell: how often people who know the building " +
+      "moved each way here.",
+    goal_aware: "The experts' prior for this cell, narrowed to the destinations you may still " +
+      "be heading for.",
+    guide: "The way to the destination you most likely want (or the nearest one left): the " +
+      "moves along a shortest path there.",
+  };
+
+  // The walls and floor drawn once per walk (a 256 x 256 map is 65,536 cells), then copied.
+  function background() {
+    if (!walk.background) {
+      const off = document.createElement("canvas");
+      off.width = canvas.width;
+      off.height = canvas.height;
+      const octx = off.getContext("2d");
+      octx.setTransform(ctx.getTransform());
+      drawMaze(octx, walk.map, walk.cell);
+      walk.background = off;
+    }
+    return walk.background;
+  }
 
   function setStatus(text, isError = false) {
     const el = $("status");
@@ -40,7 +62,10 @@
   function draw() {
     if (!walk.map) return;
     const cell = walk.cell;
-    drawMaze(ctx, walk.map, cell);
+    ctx.save();
+    ctx.setTransform(1, 0, 0, 1, 0, 0);
+    ctx.drawImage(background(), 0, 0);
+    ctx.restore();
     ctx.fillStyle = "rgba(214, 69, 69, 0.35)";
     for (const rc of walk.advisedCells) {
       const [x, y] = centre(rc, cell);
@@ -98,6 +123,9 @@
     $("cost").textContent = fmt(d.cost.total, 2);
     const g = goalIndex(walk.map, d.state);
     $("goal-note").textContent = g >= 0 ? `You are on goal G${g}.` : "";
+    document.body.dataset.goal = g >= 0 ? `G${g}` : "";
+    document.body.dataset.position = JSON.stringify(d.state);
+    document.body.dataset.step = d.step;
     const panel = $("advice");
     if (d.advise && d.advice) {
       walk.advice = d.advice;
@@ -119,6 +147,7 @@
       walk.advice = null;
       panel.hidden = true;
     }
+    document.body.dataset.advice = walk.advice ? JSON.stringify(walk.advice) : "";
   }
 
   function onMessage(event) {
@@ -138,6 +167,7 @@
     }
     for (const d of Array.isArray(data) ? data : [data]) {
       walk.pending = Math.max(0, walk.pending - 1);
+      document.body.dataset.pending = walk.pending;
       showDecision(d);
       if (walk.pending === 0 && (d.state[0] !== walk.pos[0] || d.state[1] !== walk.pos[1])) {
         walk.pos = d.state; // the service is the truth
@@ -154,6 +184,7 @@
     walk.pos = stepLocal(from, a);
     walk.path.push(walk.pos);
     walk.pending += 1;
+    document.body.dataset.pending = walk.pending;
     socket.send(JSON.stringify({ state: from, action: a }));
     draw();
   }
@@ -188,17 +219,20 @@
     try {
       const domain = await fetchJSON(`/domains/${encodeURIComponent(name)}`);
       const kappa = Number($("kappa").value);
-      const body = Number.isFinite(kappa) && kappa >= 0 ? { kappa } : {};
+      const strategy = $("strategy").value;
+      const body = Number.isFinite(kappa) && kappa >= 0 ? { kappa, strategy } : { strategy };
       const created = await fetchJSON(`/domains/${encodeURIComponent(name)}/sessions`, {
         method: "POST", body: JSON.stringify(body),
       });
       Object.assign(walk, {
         map: domain.map, pos: created.decision.state, path: [created.decision.state],
-        session: created, pending: 0, advice: null, advisedCells: [],
+        session: created, pending: 0, advice: null, advisedCells: [], background: null,
       });
       walk.cell = fitCanvas(canvas, domain.rows, domain.cols, 640);
-      $("session").textContent = `Session ${created.session_id} · κ = ${created.kappa} · ` +
-        `window ${created.window}`;
+      $("advice-note").textContent = NOTES[created.strategy] || NOTES.paper;
+      $("session").textContent = `Session ${created.session_id} · ${created.strategy} · ` +
+        `κ = ${created.kappa} · window ${created.window}`;
+      document.body.dataset.pending = 0;
       document.body.dataset.sessionId = created.session_id;
       showDecision(created.decision);
       draw();
@@ -213,7 +247,10 @@
     const select = $("domain");
     const listed = await fetchJSON("/domains");
     const domains = Array.isArray(listed) ? listed : listed.domains;
-    const wanted = new URLSearchParams(location.search).get("domain");
+    const query = new URLSearchParams(location.search);
+    const wanted = query.get("domain");
+    const strategy = query.get("strategy");
+    if ([...$("strategy").options].some((o) => o.value === strategy)) $("strategy").value = strategy;
     select.replaceChildren(...domains.map((d) => new Option(d.name, d.name)));
     const names = domains.map((d) => d.name);
     select.value = names.includes(wanted) ? wanted : (names.includes("default") ? "default" : names[0]);
@@ -227,6 +264,7 @@
   });
   $("restart").addEventListener("click", newWalk);
   $("domain").addEventListener("change", newWalk);
+  $("strategy").addEventListener("change", newWalk);
 
   loadDomains()
     .then(newWalk)

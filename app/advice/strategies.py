@@ -2,8 +2,10 @@
 
 ``paper`` is the rule of eq. (6). The others are the teacher-student literature's budgeted rules
 (early, importance, mistake correcting, random) and ``always``, plus ``goal_aware``
-(:mod:`app.advice.goals`). All give theta_s as advice, count kappa per piece of advice and report
-the paper's KL and P(M1 | H) for comparison, whatever rule decided.
+(:mod:`app.advice.goals`) and ``guide`` (:mod:`app.advice.guide`, beyond the paper: it reads the
+map and its destinations). The rules give theta_s as advice and report the paper's KL and
+P(M1 | H) for comparison, whatever rule decided; ``goal_aware`` and ``guide`` give their own
+advice and KL. All count kappa per piece of advice.
 
 :class:`StrategyParams` is the one definition of the strategies' parameters: names, defaults,
 bounds, which strategy reads which (:data:`READS`) and what each means. The service's request
@@ -21,11 +23,14 @@ import numpy as np
 
 from app.advice.advisor import DEFAULT_KAPPA, DEFAULT_WINDOW, Advisor, Decision
 from app.advice.goals import GoalAwareAdvisor
+from app.advice.guide import GuideAdvisor, GuideMap, GuideParams
 from app.advice.models import AdviceTables
 from app.advice.priors import GoalPriors
 from app.domain.grid import N_ACTIONS
 
-STRATEGIES = ("paper", "goal_aware", "early", "importance", "mistake", "random", "always")
+STRATEGIES = (
+    "paper", "goal_aware", "early", "importance", "mistake", "random", "always", "guide",
+)  # fmt: skip
 RULES = ("early", "importance", "mistake", "random", "always")
 
 
@@ -53,6 +58,20 @@ class StrategyParams:
         "goal_aware: weight of each goal's likelihood of the window (0: ruling goals out only).",
     )  # fmt: skip
     seed: int = _param(0, 0, 2**32 - 1, ("random",), "random: seed of its draws.")
+    p_lost: float = _param(
+        0.15, 0.001, 0.999, ("guide",),
+        "guide: prior probability that an explorer is lost (the rest: heading for a destination).",
+    )  # fmt: skip
+    slack: float = _param(
+        0.5, 0.01, 1.0, ("guide",),
+        "guide: how far an explorer heading for a destination may stray: the share of its moves "
+        "drawn uniformly (1: no better than lost).",
+    )  # fmt: skip
+    spread: float = _param(
+        0.1, 0.0, 1.0, ("guide",),
+        "guide: share of the advice spread evenly over the four actions (0: only moves towards "
+        "the destination).",
+    )  # fmt: skip
 
     def check(self) -> None:
         """Raise ValueError naming the first parameter outside its bounds."""
@@ -164,8 +183,9 @@ def make_advisor(
     window: int = DEFAULT_WINDOW,
     params: StrategyParams | None = None,
     goal_priors: GoalPriors | None = None,
+    guide_map: GuideMap | None = None,
 ) -> Advisor:
-    """An advisor for ``strategy`` (one of :data:`STRATEGIES`)."""
+    """An advisor for ``strategy`` (one of :data:`STRATEGIES`); ``guide`` needs ``guide_map``."""
     if strategy == "paper":
         return Advisor(tables, kappa, window)
     if strategy == "goal_aware":
@@ -173,6 +193,15 @@ def make_advisor(
             raise ValueError("goal_aware advice needs the experts' goals (goal priors)")
         beta = (params or StrategyParams()).beta
         return GoalAwareAdvisor(tables, goal_priors, kappa, window, beta)
+    if strategy == "guide":
+        if guide_map is None:
+            raise ValueError("guide advice needs the map's destinations (a guide map)")
+        return GuideAdvisor(tables, guide_map, kappa, window, params=guide_params(params))
     if strategy in RULES:
         return RuleAdvisor(tables, strategy, kappa, window, params)
     raise ValueError(f"unknown strategy {strategy!r}: use one of {', '.join(STRATEGIES)}")
+
+
+def guide_params(params: StrategyParams | None) -> GuideParams:
+    p = params or StrategyParams()
+    return GuideParams(p.p_lost, p.slack, p.spread)

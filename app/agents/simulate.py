@@ -19,6 +19,7 @@ import numpy.typing as npt
 
 from app import kernels
 from app.advice.advisor import DEFAULT_KAPPA, DEFAULT_WINDOW, check_kappa_window, resync_period
+from app.advice.guide import LOST_BUMP, GuideError, GuideMap
 from app.advice.models import AdviceTables
 from app.advice.priors import GoalPriors
 from app.advice.strategies import STRATEGIES, StrategyParams
@@ -39,11 +40,22 @@ EXPLORER_CODES = {
 STRATEGY_CODES = {
     "paper": kernels.PAPER, "goal_aware": kernels.GOAL_AWARE, "early": kernels.EARLY,
     "importance": kernels.IMPORTANCE, "mistake": kernels.MISTAKE,
-    "random": kernels.RANDOM_RULE, "always": kernels.ALWAYS,
+    "random": kernels.RANDOM_RULE, "always": kernels.ALWAYS, "guide": kernels.GUIDE,
 }  # fmt: skip
 _NOTHING = np.zeros(0)
 _DEFAULTS = StrategyParams()
 _UNUSED_RNG = np.random.default_rng(0)  # the random rule's generator, for the other rules
+_NO_GUIDE: kernels.GuideArrays = (
+    np.zeros((0, 4), dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, 2), dtype=np.int64),
+    np.zeros((0, 0), dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, 0)),
+)  # fmt: skip
+_NO_GOALS = np.zeros(0, dtype=np.int64)
+
+
+def guide_arrays(
+    window: int, params: StrategyParams
+) -> kernels.GuideParams:  # the kernels' (lam, p_lost, slack, spread, bump)
+    return (1.0 - 1.0 / window, params.p_lost, params.slack, params.spread, LOST_BUMP)
 
 
 @dataclass(frozen=True)
@@ -133,10 +145,22 @@ class Simulator:
         self.tables = tables
         self.goals = goal_tables(domain, goal_priors)
         self.has_goals = goal_priors is not None
+        try:
+            self.guide: GuideMap | None = GuideMap.of(domain, goal_priors)
+        except GuideError:
+            self.guide = None
         self.next_state = np.ascontiguousarray(domain.next_state)
         self.open_moves = np.ascontiguousarray(domain.open_moves)
         self.cells = np.ascontiguousarray(domain.cells)
         self._worlds: dict[int, tuple[IntArray, BoolArray, IntArray, BoolArray]] = {}
+
+    def _guide(
+        self, strategy: str, window: int, p: StrategyParams
+    ) -> tuple[kernels.GuideArrays, kernels.GuideParams, IntArray]:
+        if strategy == "guide" and self.guide is not None:
+            goals = np.array(self.guide.goals, dtype=np.int64)
+            return self.guide.arrays, guide_arrays(window, p), goals
+        return _NO_GUIDE, guide_arrays(window, p), _NO_GOALS
 
     def optimal(self, goal: int) -> BoolArray:
         return self._world(goal)[3]
@@ -172,6 +196,8 @@ class Simulator:
             raise ValueError(f"unknown strategy {strategy!r}: use one of {', '.join(STRATEGIES)}")
         if strategy == "goal_aware" and not self.has_goals:
             raise ValueError("goal_aware advice needs the experts' goals (goal priors)")
+        if strategy == "guide" and self.guide is None:
+            GuideMap.of(self.domain)  # raises GuideError saying why
         check_kappa_window(kappa, window)
         p = _DEFAULTS if params is None else params
         if params is not None:
@@ -197,6 +223,7 @@ class Simulator:
             (int(p.n_steps), float(p.threshold), float(p.rate), float(p.beta)),
             self.tables.arrays,
             self.goals,
+            self._guide(strategy, int(window), p),
             rng,
             rule_rng,
             (states, p_out, advise),
@@ -219,10 +246,19 @@ class Simulator:
         kappa: float = DEFAULT_KAPPA,
         window: int = DEFAULT_WINDOW,
         step_budget: int = 0,
+        strategy: str = "paper",
+        guide_params: StrategyParams | None = None,
     ) -> LearningRun:
         """``episodes`` episodes of one Q-learning task (a fresh Q-table), advised by the
-        paper's rule. ``step_budget`` > 0 stops after that many moves in total (Figure 7)."""
+        paper's rule or by ``guide`` (``strategy``; ``guide_params`` its parameters).
+        ``step_budget`` > 0 stops after that many moves in total (Figure 7)."""
         check_kappa_window(kappa, window)
+        if strategy not in ("paper", "guide"):
+            raise ValueError(f"Q-learning runs with strategy paper or guide, not {strategy!r}")
+        if strategy == "guide" and self.guide is None:
+            GuideMap.of(self.domain)  # raises GuideError saying why
+        p = _DEFAULTS if guide_params is None else guide_params
+        p.check()
         if episodes < 1 or max_steps < 1:
             raise ValueError("episodes and max_steps must be at least 1")
         q = np.zeros((self.domain.n_states, 4))
@@ -245,6 +281,8 @@ class Simulator:
             int(window),
             resync_period(int(window)),
             self.tables.arrays,
+            STRATEGY_CODES[strategy],
+            self._guide(strategy, int(window), p),
             rng,
             q,
             (steps, success, advice, decisions, p_mean),

@@ -36,6 +36,7 @@ EXPERIMENTS = {
     "difficulty": ("difficulty", "How hard the maze is: random walkers' odds, dead ends."),
     "ablations": ("ablations", "One setting changed at a time: alpha0, experts, kappa, ..."),
     "strategies": ("strategies", "Every advising strategy on a suite of maps."),
+    "buildings": ("buildings", "Lost explorers in buildings: paper, goal_aware and guide."),
     "all": ("paper", "The paper's protocol end to end: Table I, Figures 5-7, difficulty."),
 }
 

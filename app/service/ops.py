@@ -11,6 +11,7 @@ import json
 import numpy as np
 
 from app.advice.advisor import Decision
+from app.advice.guide import GuideError
 from app.advice.models import AdviceTables
 from app.advice.strategies import strategy_params
 from app.domain.grid import ACTIONS, Frame, GridDomain, MapError
@@ -59,6 +60,11 @@ def create_session(
         raise BadInput(f"params: {exc}") from None
     if body.strategy == "goal_aware" and domain.goal_priors is None:
         state.catalog.goal_priors(domain)  # reads the store once; routes call it off the loop
+    if body.strategy == "guide" and domain.guide_map is None:
+        try:
+            state.catalog.guide_map(domain)  # BFS from each destination, once per map
+        except GuideError as exc:
+            raise BadInput(f"strategy guide: {exc}") from None
     try:
         return state.registry.create(
             domain, body.kappa, body.window, body.agent_type, start, body.strategy, params

@@ -210,14 +210,19 @@ class PriorPublic(BaseModel):
 
 
 # ---- sessions, events and decisions ----------------------------------------------------------
-StrategyName = Literal["paper", "goal_aware", "early", "importance", "mistake", "random", "always"]
+StrategyName = Literal[
+    "paper", "goal_aware", "early", "importance", "mistake", "random", "always", "guide"
+]
 STRATEGY_DOC = (
     "When to advise (docs/ARCHITECTURE.md, 'Advising strategies'): 'paper' (default): iff "
     "KL[theta_s || P(A|s,H)] >= kappa; 'goal_aware': the same rule with theta narrowed by a "
     "posterior over the experts' goals; 'early': the first n_steps decisions; 'importance': "
     "where KL[theta_s || uniform] >= threshold; 'mistake': after an action with theta_s(a) < "
-    "threshold; 'random': with probability rate; 'always'. Every strategy advises theta_s "
-    "(goal_aware: its narrowed theta) and costs kappa per piece of advice."
+    "threshold; 'random': with probability rate; 'always'; 'guide' (beyond the paper; the one "
+    "to deploy in a building): leads explorers that look lost to a destination of the map "
+    "along shortest paths, advice in every cell, ruling out destinations passed. Every "
+    "strategy advises theta_s (goal_aware and guide: their own advice) and costs kappa per "
+    "piece of advice."
 )
 
 

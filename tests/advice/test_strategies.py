@@ -9,9 +9,11 @@ from hypothesis import strategies as st
 
 from app.advice.advisor import Advisor, kl_divergence
 from app.advice.goals import GoalAwareAdvisor
+from app.advice.guide import GuideMap
 from app.advice.models import AdviceTables
 from app.advice.priors import ActionPrior, GoalPriors
 from app.advice.strategies import STRATEGIES, RuleAdvisor, StrategyParams, make_advisor
+from app.domain.grid import GridDomain
 
 
 @st.composite
@@ -142,14 +144,18 @@ def test_make_advisor_builds_each_strategy_and_rejects_unknown() -> None:
     theta = np.full((3, 4), 0.25)
     tables = AdviceTables.paper(theta)
     gp = GoalPriors(3, [2], 1.0)
+    guide = GuideMap.of(GridDomain.from_strings(["S.G"]), gp)
     for name in STRATEGIES:
-        adv = make_advisor(name, tables, goal_priors=gp)
+        adv = make_advisor(name, tables, goal_priors=gp, guide_map=guide)
         assert adv.start(0).step == 0
+        assert adv.strategy == name
     assert type(make_advisor("paper", tables)) is Advisor
     with pytest.raises(ValueError, match="unknown strategy 'loud'"):
         make_advisor("loud", tables)
     with pytest.raises(ValueError, match="needs the experts' goals"):
         make_advisor("goal_aware", tables)
+    with pytest.raises(ValueError, match="needs the map's destinations"):
+        make_advisor("guide", tables)
 
 
 @pytest.mark.parametrize(

@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 
 from app import kernels
 from app.advice.advisor import Advisor
+from app.advice.guide import GuideMap
 from app.advice.models import AdviceTables
 from app.advice.priors import GoalPriors
 from app.advice.strategies import STRATEGIES, StrategyParams, make_advisor
@@ -78,6 +79,9 @@ def test_compiled_episode_follows_the_reference_loop(
         rate=float(rng.choice([0.05, 0.3])),
         beta=beta,
         seed=seed,
+        p_lost=float(rng.choice([0.05, 0.5, 0.9])),
+        slack=float(rng.choice([0.1, 0.5, 1.0])),
+        spread=float(rng.choice([0.0, 0.1, 0.6])),
     )
     goal = d.goals[seed % len(d.goals)]
     fast = Simulator(d, tables, goal_priors).fixed(
@@ -85,7 +89,8 @@ def test_compiled_episode_follows_the_reference_loop(
         kappa=kappa, window=window, params=params,
         max_steps=1200,  # past the exact re-sum (1,024 pairs) when the task is not solved
     )  # fmt: skip
-    advisor = make_advisor(strategy, tables, kappa, window, params, goal_priors)
+    guide = GuideMap.of(d, goal_priors)
+    advisor = make_advisor(strategy, tables, kappa, window, params, goal_priors, guide)
     ref = run_episode(
         d, make_explorer(explorer, d), advisor, goal, np.random.default_rng(seed),
         advised=advised, max_steps=1200,
@@ -96,7 +101,7 @@ def test_compiled_episode_follows_the_reference_loop(
     assert fast.advise.tolist() == [dec.advise for dec in ref.decisions]
     assert fast.advice_count == ref.advice_count
     assert fast.benefit == ref.decisions[-1].benefit
-    if strategy in ("paper", "goal_aware"):  # the others compute P(M1 | H) where it is read
+    if strategy in ("paper", "goal_aware", "guide"):  # the others: P(M1 | H) where it is read
         assert fast.p_normal.tolist() == [dec.p_normal for dec in ref.decisions]
     beliefs = advisor.goal_beliefs()
     assert fast.goals_ruled_out == (sum(out for *_, out in beliefs) if beliefs else 0)

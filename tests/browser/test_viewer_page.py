@@ -50,15 +50,16 @@ def test_viewer_page_connects_and_shows_maze_prior_and_sessions(
         ),
         what="the pump to draw the sessions",
     )
-    scene = viewer.scene
-    assert scene is not None
-    domain = scene.domain
-    names = set(server.scene._handle_from_node_name)
-    assert names >= SCENE_NODES, SCENE_NODES - names
-    assert scene.walls.batched_positions.shape == (int(domain.walls.sum()), 3)
-    assert scene.prior_arrows.batched_positions.shape == (4 * domain.n_states, 3)
-    drawn: dict[str, Any] = scene.session_nodes  # handles of several kinds
-    assert drawn["/markers/points"].points.shape[0] == len(scene.session_ids) >= 7
+    with viewer._lock:  # the pump's tick holds it: a scene read between two of its updates
+        scene = viewer.scene
+        assert scene is not None
+        domain = scene.domain
+        names = set(server.scene._handle_from_node_name)
+        assert names >= SCENE_NODES, SCENE_NODES - names
+        assert scene.walls.batched_positions.shape == (int(domain.walls.sum()), 3)
+        assert scene.prior_arrows.batched_positions.shape == (4 * domain.n_states, 3)
+        drawn: dict[str, Any] = scene.session_nodes  # handles of several kinds
+        assert drawn["/markers/points"].points.shape[0] == len(scene.session_ids) >= 7
 
     # pick a session in the GUI (server side: the browser's panel follows). The pick wakes the
     # pump, which shows the session at once (not after its paced wait); then the browser

@@ -2,10 +2,16 @@
 
 from __future__ import annotations
 
+import json
+import random
+
 import pytest
 from playwright.sync_api import Page, expect
 
+from app.domain.generate import generate_building_domain
 from tests.browser.conftest import ADMIN, Service, screenshot
+
+KEY = {"N": "ArrowUp", "E": "ArrowRight", "S": "ArrowDown", "W": "ArrowLeft"}
 
 pytestmark = pytest.mark.browser
 
@@ -60,3 +66,44 @@ def test_walk_keys_move_the_explorer_and_advice_appears_when_lost(
     shown = {li.get_attribute("data-action"): li.inner_text() for li in items.all()}
     assert f"{100 * max(prior):.1f}%" in shown[best]
     screenshot(page, "walk-advised")
+
+
+def test_a_walker_in_a_128_building_is_led_to_a_destination_by_guide(
+    service: Service, page: Page
+) -> None:
+    """A generated 128 x 128 building, its prior learned from simulated experts at PUT; the
+    walker does not know the way: it follows the advice when it is given and otherwise takes
+    a random open way. guide leads it to a destination (the nearest is 80 moves away)."""
+    grid = generate_building_domain(128, 128, 5)
+    body = {"map": grid.to_text().splitlines(), "experts": {"per_goal": 3, "seed": 1}}
+    r = service.http.put("/domains/hall128", json=body, headers={"X-API-Key": ADMIN})
+    assert r.status_code in (200, 201), r.text
+    page.goto(service.base + "/walk?domain=hall128&strategy=guide")
+    expect(page.locator("#status")).to_contain_text("Connected")
+    expect(page.locator("#session")).to_contain_text("guide")
+    rng = random.Random(5)
+    advised = 0
+    for _ in range(3000):
+        page.wait_for_function("document.body.dataset.pending === '0'")
+        seen = page.evaluate("() => ({...document.body.dataset})")
+        if seen["goal"]:
+            break
+        state = grid.state(*json.loads(seen["position"]))
+        if seen["advice"]:
+            advice = json.loads(seen["advice"])
+            heading = max("NESW", key=lambda a: advice[a])
+            advised += 1
+        else:
+            heading = rng.choice([a for i, a in enumerate("NESW") if grid.open_moves[state, i]])
+        page.keyboard.press(KEY[heading])
+    else:
+        pytest.fail("the walker did not reach a destination in 3,000 moves")
+    assert advised > 0
+    cell = json.loads(seen["position"])
+    assert grid.state(*cell) in grid.goals
+    sid = page.evaluate("document.body.dataset.sessionId")
+    summary_ = summary(service, sid)
+    assert summary_["strategy"] == "guide" and summary_["position"] == cell
+    advice_count = summary_["advice_count"]
+    assert isinstance(advice_count, int) and advice_count >= advised
+    screenshot(page, "walk-guide-128")

@@ -21,6 +21,7 @@ from fastapi.testclient import TestClient
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from app.advice.guide import GuideMap
 from app.advice.priors import GoalPriors
 from app.advice.strategies import READS, STRATEGIES, StrategyParams, make_advisor
 from app.domain.grid import ACTIONS, GridDomain
@@ -78,7 +79,7 @@ def moves(grid: GridDomain, s: int, rng: np.random.Generator) -> list[int]:
 @settings(max_examples=40, deadline=None)
 @given(
     seed=st.integers(0, 2**32 - 1),
-    strategy=st.sampled_from([*STRATEGIES, "goal_aware", "goal_aware"]),
+    strategy=st.sampled_from([*STRATEGIES, "goal_aware", "goal_aware", "guide", "guide"]),
     kappa=st.sampled_from([0.0, 0.3, 0.5, 1.0]),
     window=st.sampled_from([1, 7, 60, 300]),
     params=st.fixed_dictionaries(
@@ -88,6 +89,9 @@ def moves(grid: GridDomain, s: int, rng: np.random.Generator) -> list[int]:
             "rate": st.sampled_from([0.0, 0.2, 1.0]),
             "beta": st.sampled_from([0.0, 0.5, 1.0]),
             "seed": st.integers(0, 1000),
+            "p_lost": st.sampled_from([0.001, 0.3, 0.5, 0.9]),
+            "slack": st.sampled_from([0.01, 0.5, 1.0]),
+            "spread": st.sampled_from([0.0, 0.1, 1.0]),
         }
     ),
     transport=st.sampled_from(["rest", "websocket", "binary"]),
@@ -112,9 +116,10 @@ def test_strategy_sessions_decide_as_the_core(
     )  # fmt: skip
     assert created["strategy"] == strategy
     assert created["params"] == given  # exactly the parameters in force
+    goal_priors = core_goal_priors(service)
     core = make_advisor(
-        strategy, core_tables(service), kappa, window, StrategyParams(**params),
-        core_goal_priors(service),
+        strategy, core_tables(service), kappa, window, StrategyParams(**params), goal_priors,
+        GuideMap.of(grid, goal_priors),
     )  # fmt: skip
     assert created["decision"] == expected_json(core.start(start), service)
     token = auth["Authorization"].removeprefix("Bearer ")

@@ -14,6 +14,7 @@ from contextlib import nullcontext
 from dataclasses import dataclass, field
 from datetime import datetime
 
+from app.advice.guide import GuideMap
 from app.advice.models import AdviceTables
 from app.advice.priors import ActionPrior, GoalPriors
 from app.domain.grid import Frame, GridDomain, MapError
@@ -67,6 +68,9 @@ class DomainState:
     # per-goal counts for goal-aware sessions: built from the stored trajectories when the
     # first such session starts, then kept up to date (replaced whole, never changed)
     goal_priors: GoalPriors | None = None
+    # guide sessions: distances to every destination, with the experts' counts of
+    # ``goal_priors``; built with them when the first guide session starts
+    guide_map: GuideMap | None = None
 
     def __post_init__(self) -> None:
         self.view = _view(self.prior, None, set())
@@ -130,11 +134,20 @@ class DomainCatalog:
         stored = keep.prior.stored_counts() if keep is not None else {}
         prior = ActionPrior.from_counts(rec.alpha0, stored, domain.n_states)
         goals = keep.goal_priors if keep is not None else None
+        guide = None
         if goals is not None:
             goals = goals.copy(alpha0=rec.alpha0)
             goals.rows()  # built here, in the worker thread, not at a session's first event
+            if keep is not None and keep.guide_map is not None:  # the same map: same distances
+                guide = keep.guide_map.replace_counts(goals)
         return DomainState(
-            rec.name, domain, prior, rec.created_at, rec.updated_at, goal_priors=goals
+            rec.name,
+            domain,
+            prior,
+            rec.created_at,
+            rec.updated_at,
+            goal_priors=goals,
+            guide_map=guide,
         )
 
     def goal_priors(self, state: DomainState) -> GoalPriors:
@@ -147,6 +160,15 @@ class DomainCatalog:
                 priors = GoalPriors(state.domain.n_states, state.domain.goals, state.view.alpha0)
                 state.goal_priors = add_goals(priors, self.store.trajectories(state.name))
             return state.goal_priors
+
+    def guide_map(self, state: DomainState) -> GuideMap:
+        """*Worker thread* the first time: the goal priors (:meth:`goal_priors`) and a BFS
+        from every destination. :class:`GuideError` says why a map cannot be guided."""
+        goals = self.goal_priors(state)
+        with state.lock:
+            if state.guide_map is None:
+                state.guide_map = GuideMap.of(state.domain, goals)
+            return state.guide_map
 
     def delete(self, name: str) -> None:
         with self._lock:
@@ -171,6 +193,8 @@ class DomainCatalog:
             state.view = _view(state.prior, state.view, changed)
             if state.goal_priors is not None:
                 state.goal_priors = add_goals(state.goal_priors.copy(), items)
+                if state.guide_map is not None:
+                    state.guide_map = state.guide_map.replace_counts(state.goal_priors)
 
 
 def add_goals(priors: GoalPriors, items: Sequence[Trajectory]) -> GoalPriors:

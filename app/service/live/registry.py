@@ -25,12 +25,13 @@ import numpy as np
 import numpy.typing as npt
 
 from app.advice.advisor import Advisor, Decision, DecisionBatch
+from app.advice.guide import GuideMap
 from app.advice.models import AdviceTables
 from app.advice.priors import GoalPriors
-from app.advice.strategies import StrategyParams, make_advisor
+from app.advice.strategies import StrategyParams, guide_params, make_advisor
 from app.service.data.domains import DomainState
 from app.service.live.history import Advice, AdviceLog, Recent
-from app.service.live.stream import StreamAdvisor
+from app.service.live.stream import StreamAdvisor, StreamGuide
 
 IntArray = npt.NDArray[np.int64]
 RECENT_ADVICE = 50
@@ -47,11 +48,16 @@ class TooManySessions(RuntimeError):
 def new_advisor(
     strategy: str, tables: AdviceTables, kappa: float, window: int,
     params: StrategyParams | None, goal_priors: GoalPriors | None,
+    guide_map: GuideMap | None = None,
 ) -> Advisor:  # fmt: skip
-    """The advisor of a session: the paper's rule with compiled batches, or the core's
-    advisor of the strategy (one call per event)."""
+    """The advisor of a session: the paper's rule and guide with compiled batches, or the
+    core's advisor of the strategy (one call per event)."""
     if strategy == "paper":
         return StreamAdvisor(tables, kappa, window)
+    if strategy == "guide":
+        if guide_map is None:
+            raise ValueError("guide advice needs the map's destinations (a guide map)")
+        return StreamGuide(tables, guide_map, kappa, window, params=guide_params(params))
     return make_advisor(strategy, tables, kappa, window, params, goal_priors)
 
 
@@ -175,11 +181,14 @@ class SessionRegistry:
         params: StrategyParams | None = None,
     ) -> tuple[LiveSession, Decision]:
         """A new session and the decision for its start state (empty history). A goal_aware
-        session needs ``domain.goal_priors`` built (:meth:`DomainCatalog.goal_priors`)."""
+        session needs ``domain.goal_priors`` built (:meth:`DomainCatalog.goal_priors`), a guide
+        session ``domain.guide_map`` too (:meth:`DomainCatalog.guide_map`)."""
         view = domain.view
         key = view.resolve(agent_type)
         tables = view.tables[key]
-        advisor = new_advisor(strategy, tables, kappa, window, params, domain.goal_priors)
+        advisor = new_advisor(
+            strategy, tables, kappa, window, params, domain.goal_priors, domain.guide_map
+        )
         decision = advisor.start(start)
         now = time.monotonic()
         with self.lock:

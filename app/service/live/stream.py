@@ -18,6 +18,7 @@ import numpy.typing as npt
 
 from app import kernels
 from app.advice.advisor import Advisor, DecisionBatch, resync_period
+from app.advice.guide import LOST_BUMP, GuideAdvisor
 from app.domain.grid import N_ACTIONS
 
 IntArray = npt.NDArray[np.int64]
@@ -145,4 +146,43 @@ class StreamAdvisor(Advisor):
         return DecisionBatch(
             self.steps - n + 1, next_states, advise, kl, p_normal, count, benefit, advice,
             self.kappa, count_before, benefit_before, tables,
+        )  # fmt: skip
+
+
+class StreamGuide(GuideAdvisor):
+    """A :class:`GuideAdvisor` whose batches run in one call of
+    :func:`app.kernels.guide_stream`: the core's arithmetic in the core's order, leaving the
+    advisor in the state the sequential calls leave it in, so single events (the core's own
+    :meth:`observe`) and batches mix freely (``tests/service/live/test_stream.py``)."""
+
+    __slots__ = ()
+
+    def observe_batch(
+        self, states: IntArray, actions: IntArray, next_states: IntArray
+    ) -> DecisionBatch:
+        n = len(states)
+        count_before, benefit_before = self.advice_count, self.benefit
+        g = self.guide
+        ll = np.array(self._loglik, dtype=np.float64)
+        alive = np.array(self.alive, dtype=np.bool_)
+        last_advice = np.array(self._last_advice, dtype=np.float64)
+        kl, p_normal, benefit = np.empty(n), np.empty(n), np.empty(n)
+        advise, count = np.empty(n, dtype=np.bool_), np.empty(n, dtype=np.int64)
+        rows = np.empty((n, N_ACTIONS))
+        params = (self._lam, self.p_lost, self.slack, self.spread, LOST_BUMP)
+        got = kernels.guide_stream(
+            g.arrays, params, g.goal_states, ll, alive, self._target, self._last, self._heading,
+            last_advice, self.kappa, count_before, benefit_before,
+            (states, actions, next_states), (kl, p_normal, advise, count, benefit, rows),
+        )  # fmt: skip
+        self._target, self._last, self._heading, self.advice_count, self.benefit = got
+        self._loglik = ll.tolist()
+        self.alive = alive.tolist()
+        a = last_advice.tolist()
+        self._last_advice = (a[0], a[1], a[2], a[3])
+        self.steps += n
+        self.decisions += n
+        return DecisionBatch(
+            self.steps - n + 1, next_states, advise, kl, p_normal, count, benefit, rows[advise],
+            self.kappa, count_before, benefit_before, None,
         )  # fmt: skip

@@ -5,6 +5,7 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Body, FastAPI, Query, Request, Response
 from starlette.concurrency import run_in_threadpool
 
+from app.advice.guide import GuideError
 from app.service import ops
 from app.service.deps import (
     BEARER,
@@ -18,6 +19,7 @@ from app.service.deps import (
     session_for,
 )
 from app.service.openapi import body
+from app.service.problems import BadInput
 from app.service.public import session_created, session_public
 from app.service.schemas import (
     DecisionPublic,
@@ -50,6 +52,11 @@ async def create_session(
     body = body or SessionCreate()
     if body.strategy == "goal_aware" and domain.goal_priors is None:
         await run_in_threadpool(state.catalog.goal_priors, domain)  # first one: reads the store
+    if body.strategy == "guide" and domain.guide_map is None:
+        try:  # the first one: reads the store and runs a BFS from each destination
+            await run_in_threadpool(state.catalog.guide_map, domain)
+        except GuideError as exc:
+            raise BadInput(f"strategy guide: {exc}") from None
     session, decision = ops.create_session(state, domain, body)
     return session_created(session, decision)
 

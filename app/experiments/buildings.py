@@ -1,0 +1,559 @@
+"""Advice in buildings: does a lost visitor who follows the advice arrive, and at what cost?
+
+Beyond the paper. A suite of building-like maps: generated rooms-and-corridors floors
+(``--buildings``: sizes, each with its own seed) and any map files (``--mazes``, the project's
+text format, e.g. written by ``maze import`` from a public benchmark map; ``--maze`` too when
+it is not the shipped maze). On each map, experts walk from the start to every destination
+(``--per-goal``, ``--experts``), as the service's PUT ``experts`` does, so most cells of a big
+map have no expert data.
+
+For every fixed-policy explorer, ``--tasks`` one-shot tasks per map (the goal drawn uniformly
+from the map's destinations, start at 'S', at most ``--steps`` moves), without advice and
+advised by ``paper``, ``goal_aware`` and ``guide``, each at several kappas (the curve of
+success against advice per 100 steps as the cost of advice varies). Every configuration sees
+the same tasks with the same explorer streams, so every change is paired task by task.
+
+Q-learning: per map ``--q-tasks`` learners, each ``--episodes`` episodes of at most
+``q_steps`` = ``--q-reach`` x the farthest destination's BFS distance from the start (long
+enough to reach it, stated in the report), advised or not by ``paper`` and ``guide`` at the
+default kappa; measured by the share of episodes that reach the goal.
+
+Targets (``guide`` at its defaults: the session defaults, kappa 0.5 and window 300):
+random and random-avoid >= 90 % success, bug >= 80 %, each at <= 25 advice per 100 steps,
+on every map; left, optimal and Q-learning never significantly worse than without advice
+(the paired 95 % interval of the change includes 0 or lies above it); for random and
+random-avoid, guide's curve above paper's and goal_aware's over the advice rates both reach.
+
+    python -m app experiment buildings --mazes den312d.txt --mazes den308d.txt
+"""
+
+from __future__ import annotations
+
+import math
+import multiprocessing
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import numpy.typing as npt
+from matplotlib.figure import Figure
+from tqdm import tqdm
+
+from app.advice.models import AdviceTables
+from app.agents.experts import train_goal_priors
+from app.agents.explorers import FIXED_EXPLORERS
+from app.agents.simulate import Simulator
+from app.domain.generate import generate_building_domain
+from app.domain.grid import GridDomain
+from app.domain.maps import DEFAULT_MAP
+from app.experiments.common import CommonArgs, LearningArgs, rng_for, wilson
+from app.experiments.output import RunDir, header, markdown_table
+
+FloatArray = npt.NDArray[np.float64]
+Z95 = 1.959963984540054
+CURVES = ("none", "paper", "goal_aware", "guide")
+COLOURS = {"paper": "tab:blue", "goal_aware": "tab:red", "guide": "tab:green"}
+#: the target explorers and their success targets
+TARGETS = {"random": 0.9, "random-avoid": 0.9, "bug": 0.8}
+MAX_ADVICE_PER_100 = 25.0
+#: explorers that advice must not make significantly worse
+UNHARMED = ("left", "optimal")
+
+
+@dataclass
+class Args(CommonArgs, LearningArgs):
+    """Buildings arguments (``--tasks``: tasks per map, explorer and configuration)."""
+
+    tasks: int = 100
+    """One-shot tasks per map and explorer; every configuration sees the same tasks."""
+    steps: int = 5000
+    """Step limit of a one-shot task."""
+    buildings: tuple[int, ...] = (64, 64, 128, 128)
+    """Generated buildings: the side of each (rows = columns), each with its own seed."""
+    mazes: tuple[Path, ...] = ()
+    """More maps of the suite: map files in the project's text format (``maze import``)."""
+    kappas: tuple[float, ...] = (0.25, 0.5, 1.0, 2.0)
+    """paper and goal_aware: kappa levels (the default ``--kappa`` is always among them)."""
+    guide_kappas: tuple[float, ...] = (0.1, 0.25, 0.5, 1.0, 2.0)
+    """guide: kappa levels (the default ``--kappa`` is always among them)."""
+    q_tasks: int = 20
+    """Q-learning tasks per map (0: none), at the default kappa."""
+    episodes: int = 100
+    """Q-learning episodes per task."""
+    episode_steps: int = 0
+    """Step limit of one Q-learning episode (0: --q-reach x the farthest destination's BFS
+    distance from the start, so that every destination can be reached)."""
+    q_reach: float = 3.0
+    """With --episode-steps 0: episodes this many times the farthest destination's distance."""
+    workers: int = 2
+    """Processes (1: run in this process)."""
+
+    def check(self) -> None:
+        super().check()
+        if self.experts == "policy":
+            raise ValueError("buildings needs expert trajectories: experts start or anywhere")
+        if self.steps < 1 or self.workers < 1 or self.q_tasks < 0 or self.episodes < 1:
+            raise ValueError("need steps >= 1, workers >= 1, q-tasks >= 0 and episodes >= 1")
+        if self.episode_steps < 0:
+            raise ValueError("episode-steps must be >= 0 (0: from --q-reach)")
+        if any(b < 16 for b in self.buildings):
+            raise ValueError("a generated building needs a side of at least 16")
+        if not (math.isfinite(self.q_reach) and self.q_reach >= 1.0):
+            raise ValueError("q-reach must be at least 1")
+        if not self.buildings and not self.map_files():
+            raise ValueError("the suite is empty: give --buildings sizes or --mazes files")
+        for k in (*self.kappas, *self.guide_kappas):
+            if not (math.isfinite(k) and k >= 0):
+                raise ValueError(f"kappa levels must be finite numbers >= 0, got {k}")
+        for p in self.map_files():
+            if not p.is_file():
+                raise ValueError(f"no map file {p}")
+
+    def map_files(self) -> list[Path]:
+        extra = [self.maze] if Path(self.maze) != DEFAULT_MAP else []
+        return [Path(p) for p in (*extra, *self.mazes)]
+
+
+@dataclass(frozen=True)
+class Config:
+    """One point of one curve: a strategy at one kappa."""
+
+    curve: str
+    kappa: float
+    default: bool = False
+
+    @property
+    def key(self) -> str:
+        return "none" if self.curve == "none" else f"{self.curve}@{self.kappa:g}"
+
+    @property
+    def strategy(self) -> str:
+        return "paper" if self.curve == "none" else self.curve
+
+
+def configs(args: Args) -> list[Config]:
+    out = [Config("none", args.kappa, True)]
+    for curve, levels in (
+        ("paper", args.kappas), ("goal_aware", args.kappas), ("guide", args.guide_kappas),
+    ):  # fmt: skip
+        out += [Config(curve, k, k == args.kappa) for k in sorted({*levels, args.kappa})]
+    return out
+
+
+@dataclass(frozen=True)
+class MapSpec:
+    index: int
+    kind: Literal["building", "file"]
+    size: int  # the side of a generated building (0 for a file)
+    seed: int  # the generator's seed (-1 for a file)
+    path: str  # the file ("" for a generated building)
+
+    @property
+    def name(self) -> str:
+        if self.kind == "file":
+            return Path(self.path).stem
+        return f"building-{self.size}-s{self.seed}"
+
+
+def map_suite(args: Args) -> list[MapSpec]:
+    out: list[MapSpec] = []
+    for i, size in enumerate(args.buildings):
+        seed = int(rng_for(args.seed, "buildings-maps", i).integers(2**31))
+        out.append(MapSpec(len(out), "building", size, seed, ""))
+    for p in args.map_files():
+        out.append(MapSpec(len(out), "file", 0, -1, str(p)))
+    return out
+
+
+def load_map(spec: MapSpec) -> GridDomain:
+    if spec.kind == "file":
+        return GridDomain.from_file(spec.path)
+    return generate_building_domain(spec.size, spec.size, spec.seed)
+
+
+@dataclass
+class World:
+    spec: MapSpec
+    domain: GridDomain
+    sim: Simulator
+    goals: list[int]
+    states_with_data: int
+    q_steps: int
+
+
+def prepare_world(args: Args, spec: MapSpec) -> World:
+    domain = load_map(spec)
+    source: Literal["start", "anywhere"] = "anywhere" if args.experts == "anywhere" else "start"
+    prior, goal_priors = train_goal_priors(
+        domain, rng_for(args.seed, "buildings-experts", spec.index), source, args.per_goal,
+        args.alpha0,
+    )  # fmt: skip
+    sim = Simulator(domain, AdviceTables.paper(prior.theta()), goal_priors)
+    goals = rng_for(args.seed, "buildings-tasks", spec.index).choice(
+        np.array(domain.goals, dtype=np.int64), size=args.tasks
+    )
+    with_data = int((prior.pooled_increments_.sum(axis=1) > 0).sum())
+    far = int(domain.goal_distances[:, domain.start].max())
+    q_steps = args.episode_steps or math.ceil(args.q_reach * far)
+    return World(spec, domain, sim, goals.tolist(), with_data, q_steps)
+
+
+_WORLDS: dict[tuple[Any, ...], World] = {}
+
+
+def cached_world(args: Args, spec: MapSpec) -> World:
+    key = (args.seed, args.experts, args.per_goal, args.alpha0, args.tasks, args.q_reach,
+           args.episode_steps, spec)  # fmt: skip
+    if key not in _WORLDS:
+        _WORLDS.clear()
+        _WORLDS[key] = prepare_world(args, spec)
+    return _WORLDS[key]
+
+
+def run_fixed(args: Args, spec: MapSpec, explorer: str) -> dict[str, dict[str, FloatArray]]:
+    """config key -> measure -> one value per task, for one map and explorer."""
+    world = cached_world(args, spec)
+    out: dict[str, dict[str, FloatArray]] = {}
+    for c in configs(args):
+        m = {name: np.zeros(args.tasks) for name in ("success", "steps", "advice")}
+        for i, goal in enumerate(world.goals):
+            run = world.sim.fixed(
+                explorer, goal, rng_for(args.seed, "buildings", spec.index, explorer, i),
+                advised=c.curve != "none", strategy=c.strategy, kappa=c.kappa,
+                window=args.window, max_steps=args.steps, record_p=False,
+            )  # fmt: skip
+            m["success"][i] = run.success
+            m["steps"][i] = run.steps
+            m["advice"][i] = run.advice_count if c.curve != "none" else 0
+        out[c.key] = m
+    return out
+
+
+def run_learning(args: Args, spec: MapSpec) -> dict[str, dict[str, FloatArray]]:
+    """Q-learning: none, paper and guide at the default kappa; per task the share of
+    episodes that reached the goal, and advice per 100 steps."""
+    world = cached_world(args, spec)
+    out: dict[str, dict[str, FloatArray]] = {}
+    for curve in ("none", "paper", "guide"):
+        m = {name: np.zeros(args.q_tasks) for name in ("success", "steps", "advice")}
+        for i in range(args.q_tasks):
+            goal = world.goals[i % len(world.goals)]
+            run = world.sim.learning(
+                goal, rng_for(args.seed, "buildings-q", spec.index, i), advised=curve != "none",
+                params=args.q_params(), episodes=args.episodes, max_steps=world.q_steps,
+                kappa=args.kappa, window=args.window,
+                strategy="paper" if curve == "none" else curve,
+            )  # fmt: skip
+            m["success"][i] = run.success.mean()
+            m["steps"][i] = run.steps.sum()
+            m["advice"][i] = run.advice_count.sum() if curve != "none" else 0
+        out[curve] = m
+    return out
+
+
+@dataclass
+class Results:
+    """``fixed[explorer][config key][measure]`` and ``learning[curve][measure]``: one row per
+    map, one column per task."""
+
+    maps: list[MapSpec]
+    configs: list[Config]
+    fixed: dict[str, dict[str, dict[str, FloatArray]]]
+    learning: dict[str, dict[str, FloatArray]] = field(default_factory=dict)
+
+
+def run_all(args: Args) -> Results:
+    suite, todo = map_suite(args), configs(args)
+    fixed = {
+        e: {c.key: {m: np.zeros((len(suite), args.tasks)) for m in ("success", "steps", "advice")}
+            for c in todo}
+        for e in FIXED_EXPLORERS
+    }  # fmt: skip
+    learning = {
+        c: {m: np.zeros((len(suite), args.q_tasks)) for m in ("success", "steps", "advice")}
+        for c in ("none", "paper", "guide")
+    }
+    jobs: list[tuple[MapSpec, str]] = [(s, e) for s in suite for e in FIXED_EXPLORERS]
+    if args.q_tasks:
+        jobs += [(s, "q-learning") for s in suite]
+
+    def store(spec: MapSpec, who: str, got: dict[str, dict[str, FloatArray]]) -> None:
+        into = learning if who == "q-learning" else fixed[who]
+        for key, measures in got.items():
+            for name, values in measures.items():
+                into[key][name][spec.index] = values
+
+    def job(spec: MapSpec, who: str) -> dict[str, dict[str, FloatArray]]:
+        return run_learning(args, spec) if who == "q-learning" else run_fixed(args, spec, who)
+
+    with tqdm(total=len(jobs), desc="buildings", unit="job", disable=not args.progress) as bar:
+        if args.workers == 1:
+            for spec, who in jobs:
+                store(spec, who, job(spec, who))
+                bar.update()
+        else:
+            ctx = multiprocessing.get_context("spawn")  # no fork of a process with threads
+            with ProcessPoolExecutor(args.workers, mp_context=ctx) as pool:
+                futures = {
+                    pool.submit(run_learning, args, s) if w == "q-learning"
+                    else pool.submit(run_fixed, args, s, w): (s, w)
+                    for s, w in jobs
+                }  # fmt: skip
+                for fut in as_completed(futures):
+                    store(*futures[fut], fut.result())
+                    bar.update()
+    return Results(suite, todo, fixed, learning)
+
+
+# ---- the summary ------------------------------------------------------------------------------
+def paired(a: FloatArray, b: FloatArray) -> tuple[float, float, float]:
+    """Mean of a - b over paired tasks with a 95% normal interval, clipped to [-1, 1]."""
+    d = (np.asarray(a, dtype=np.float64) - b).ravel()
+    mean = float(d.mean())
+    se = float(d.std(ddof=1)) / math.sqrt(d.size) if d.size > 1 else math.inf
+    return mean, max(-1.0, mean - Z95 * se), min(1.0, mean + Z95 * se)
+
+
+def rate(m: dict[str, FloatArray]) -> float:
+    """Advice per 100 steps: the mean over tasks of 100 x advice / moves, as in Table I."""
+    return float((100.0 * m["advice"] / np.maximum(m["steps"], 1)).mean())
+
+
+def rows(results: Results) -> list[dict[str, Any]]:
+    """One row per map (and the whole suite), explorer and configuration."""
+    out = []
+    scopes = [(s.name, [s.index]) for s in results.maps]
+    scopes.append(("suite", [s.index for s in results.maps]))
+    for scope, idx in scopes:
+        for explorer, by_key in results.fixed.items():
+            none = by_key["none"]
+            for c in results.configs:
+                m = {k: v[idx] for k, v in by_key[c.key].items()}
+                n, k = int(m["success"].size), int(m["success"].sum())
+                lo, hi = wilson(k, n)
+                diff = paired(m["success"], none["success"][idx])
+                out.append({
+                    "map": scope, "explorer": explorer, "curve": c.curve, "kappa": c.kappa,
+                    "key": c.key, "default": c.default, "tasks": n, "success": k / n,
+                    "success_ci_low": lo, "success_ci_high": hi,
+                    "advice_per_100_steps": rate(m), "mean_steps": float(m["steps"].mean()),
+                    "change_vs_none": diff[0], "change_ci_low": diff[1],
+                    "change_ci_high": diff[2],
+                })  # fmt: skip
+    return out
+
+
+def learning_rows(results: Results) -> list[dict[str, Any]]:
+    out: list[dict[str, Any]] = []
+    if not results.learning or results.learning["none"]["success"].shape[1] == 0:
+        return out
+    scopes = [(s.name, [s.index]) for s in results.maps]
+    scopes.append(("suite", [s.index for s in results.maps]))
+    for scope, idx in scopes:
+        none = results.learning["none"]["success"][idx]
+        for curve, by in results.learning.items():
+            m = {k: v[idx] for k, v in by.items()}
+            diff = paired(m["success"], none)
+            out.append({
+                "map": scope, "curve": curve, "tasks": int(m["success"].size),
+                "episodes_reaching_goal": float(m["success"].mean()),
+                "advice_per_100_steps": rate(m), "change_vs_none": diff[0],
+                "change_ci_low": diff[1], "change_ci_high": diff[2],
+            })  # fmt: skip
+    return out
+
+
+def find(table: list[dict[str, Any]], **match: Any) -> dict[str, Any]:
+    return next(r for r in table if all(r[k] == v for k, v in match.items()))
+
+
+def curve_points(table: list[dict[str, Any]], scope: str, explorer: str, curve: str) -> FloatArray:
+    """(advice per 100 steps, success) of a curve's levels, sorted by advice."""
+    pts = [(r["advice_per_100_steps"], r["success"]) for r in table
+           if r["map"] == scope and r["explorer"] == explorer and r["curve"] == curve]  # fmt: skip
+    out: FloatArray = np.array(sorted(pts), dtype=np.float64).reshape(-1, 2)
+    return out
+
+
+def curve_above(mine: FloatArray, other: FloatArray) -> dict[str, Any]:
+    """Whether ``mine`` lies at or above ``other`` wherever both reach (linear between
+    levels): the smallest margin over the shared range of advice rates, on a fine grid."""
+    lo = max(mine[:, 0].min(), other[:, 0].min())
+    hi = min(mine[:, 0].max(), other[:, 0].max())
+    if lo > hi:
+        return {"shared_range": None, "min_margin": None, "above": None}
+    grid = np.linspace(lo, hi, 200)
+    margin = np.interp(grid, mine[:, 0], mine[:, 1]) - np.interp(grid, other[:, 0], other[:, 1])
+    worst = float(margin.min())
+    return {"shared_range": [float(lo), float(hi)], "min_margin": worst, "above": worst >= 0.0}
+
+
+def targets(results: Results, table: list[dict[str, Any]], q: list[dict[str, Any]],
+            kappa: float) -> dict[str, Any]:  # fmt: skip
+    key = f"guide@{kappa:g}"
+    checks: list[dict[str, Any]] = []
+    for spec in results.maps:
+        for explorer, need in TARGETS.items():
+            r = find(table, map=spec.name, explorer=explorer, key=key)
+            ok = r["success"] >= need and r["advice_per_100_steps"] <= MAX_ADVICE_PER_100
+            checks.append({
+                "map": spec.name, "what": f"{explorer} >= {need:.0%} at <= 25 advice / 100",
+                "value": f"{r['success']:.0%} at {r['advice_per_100_steps']:.1f}", "ok": ok,
+            })  # fmt: skip
+        for explorer in UNHARMED:
+            r = find(table, map=spec.name, explorer=explorer, key=key)
+            checks.append({
+                "map": spec.name, "what": f"{explorer} not significantly worse",
+                "value": f"{r['change_vs_none']:+.0%} [{r['change_ci_low']:+.0%}, "
+                f"{r['change_ci_high']:+.0%}]",
+                "ok": r["change_ci_high"] >= 0.0,
+            })  # fmt: skip
+        if q:
+            r = find(q, map=spec.name, curve="guide")
+            checks.append({
+                "map": spec.name, "what": "Q-learning not significantly worse",
+                "value": f"{r['change_vs_none']:+.1%} [{r['change_ci_low']:+.1%}, "
+                f"{r['change_ci_high']:+.1%}]",
+                "ok": r["change_ci_high"] >= 0.0,
+            })  # fmt: skip
+        for explorer in ("random", "random-avoid"):
+            mine = curve_points(table, spec.name, explorer, "guide")
+            for other in ("paper", "goal_aware"):
+                c = curve_above(mine, curve_points(table, spec.name, explorer, other))
+                value = (
+                    "no shared range" if c["shared_range"] is None
+                    else f"min margin {c['min_margin']:+.0%} over "
+                    f"{c['shared_range'][0]:.1f}-{c['shared_range'][1]:.1f} / 100"
+                )  # fmt: skip
+                checks.append({
+                    "map": spec.name, "what": f"{explorer}: guide's curve above {other}'s",
+                    "value": value, "ok": c["above"] is not False,
+                })  # fmt: skip
+    return {"checks": checks, "all_hold": all(c["ok"] for c in checks)}
+
+
+def map_info(world: World) -> dict[str, Any]:
+    d = world.domain
+    return {
+        **asdict(world.spec), "name": world.spec.name, "rows": d.shape[0], "cols": d.shape[1],
+        "states": d.n_states, "goals": len(d.goals),
+        "states_with_expert_data": world.states_with_data,
+        "farthest_goal": int(d.goal_distances[:, d.start].max()), "q_steps": world.q_steps,
+    }  # fmt: skip
+
+
+# ---- the report -------------------------------------------------------------------------------
+def plots(results: Results, table: list[dict[str, Any]]) -> Figure:
+    """Success against advice per 100 steps as kappa varies: a panel per map (and the suite)
+    and explorer, a curve per strategy; the cross is the unadvised explorer."""
+    scopes = [s.name for s in results.maps] + ["suite"]
+    explorers = list(FIXED_EXPLORERS)
+    fig = Figure(figsize=(3.0 * len(explorers), 2.6 * len(scopes)), layout="constrained")
+    axes = fig.subplots(len(scopes), len(explorers), squeeze=False, sharey=True)
+    for i, scope in enumerate(scopes):
+        for j, explorer in enumerate(explorers):
+            ax = axes[i, j]
+            for curve, colour in COLOURS.items():
+                pts = curve_points(table, scope, explorer, curve)
+                ax.plot(pts[:, 0], pts[:, 1], "o-", color=colour, label=curve, ms=3)
+                d = find(table, map=scope, explorer=explorer, curve=curve, default=True)
+                ax.plot(d["advice_per_100_steps"], d["success"], "s", color=colour, ms=6)
+            base = find(table, map=scope, explorer=explorer, curve="none")
+            ax.plot(0, base["success"], "kx", ms=7, label="no advice")
+            ax.set_ylim(-0.03, 1.03)
+            ax.grid(alpha=0.3)
+            if i == 0:
+                ax.set_title(explorer)
+            if j == 0:
+                ax.set_ylabel(f"{scope}\nsuccess")
+            if i == len(scopes) - 1:
+                ax.set_xlabel("advice per 100 steps")
+    axes[0, 0].legend(fontsize=7, loc="lower right")
+    fig.suptitle("Success against advice as kappa varies (square: the default kappa)")
+    return fig
+
+
+def markdown(
+    table: list[dict[str, Any]], q: list[dict[str, Any]], t: dict[str, Any],
+    maps: list[dict[str, Any]], args: Args, elapsed: float,
+) -> str:  # fmt: skip
+    lines = [
+        "# Advice in buildings", "",
+        f"{args.tasks} tasks per map and explorer, at most {args.steps} moves; experts "
+        f"{args.experts}, {args.per_goal} per destination; window {args.window}; seed "
+        f"{args.seed}; {elapsed:.0f} s.", "",
+        markdown_table(
+            ["map", "rows x cols", "cells", "destinations", "cells with expert data",
+             "farthest destination", "Q episode length"],
+            [[m["name"], f"{m['rows']} x {m['cols']}", m["states"], m["goals"],
+              m["states_with_expert_data"], m["farthest_goal"], m["q_steps"]] for m in maps],
+        ), "",
+        f"## At the default kappa ({args.kappa:g}): success (advice per 100 steps)", "",
+    ]  # fmt: skip
+    scopes = [m["name"] for m in maps] + ["suite"]
+    head = ["explorer", "map", "none", "paper", "goal_aware", "guide", "guide - none [95%]"]
+    body = []
+    for explorer in FIXED_EXPLORERS:
+        for scope in scopes:
+            cells = []
+            for curve in CURVES:
+                r = find(table, map=scope, explorer=explorer, curve=curve, default=True)
+                rate_text = "" if curve == "none" else f" ({r['advice_per_100_steps']:.1f})"
+                cells.append(f"{r['success']:.0%}{rate_text}")
+            g = find(table, map=scope, explorer=explorer, curve="guide", default=True)
+            change = (f"{g['change_vs_none']:+.0%} [{g['change_ci_low']:+.0%}, "
+                      f"{g['change_ci_high']:+.0%}]")  # fmt: skip
+            body.append([explorer, scope, *cells, change])
+    lines += [markdown_table(head, body), ""]
+    if q:
+        lines += [
+            f"## Q-learning ({args.episodes} episodes per task, {args.q_tasks} tasks per map)",
+            "", "Share of episodes that reached the goal (advice per 100 steps).", "",
+            markdown_table(
+                ["map", "none", "paper", "guide", "guide - none [95%]"],
+                [[s,
+                  *[f"{find(q, map=s, curve=c)['episodes_reaching_goal']:.1%}"
+                    + ("" if c == "none" else
+                       f" ({find(q, map=s, curve=c)['advice_per_100_steps']:.1f})")
+                    for c in ("none", "paper", "guide")],
+                  f"{find(q, map=s, curve='guide')['change_vs_none']:+.1%} "
+                  f"[{find(q, map=s, curve='guide')['change_ci_low']:+.1%}, "
+                  f"{find(q, map=s, curve='guide')['change_ci_high']:+.1%}]"]
+                 for s in scopes],
+            ), "",
+        ]  # fmt: skip
+    lines += [
+        "## Targets", "",
+        f"All hold: **{'yes' if t['all_hold'] else 'no'}**", "",
+        markdown_table(["map", "target", "measured", "holds"],
+                       [[c["map"], c["what"], c["value"], "yes" if c["ok"] else "**no**"]
+                        for c in t["checks"]]),
+        "", "Curves: buildings.png (success against advice per 100 steps as kappa varies).",
+    ]  # fmt: skip
+    return "\n".join(lines) + "\n"
+
+
+def run(args: Args, out: RunDir) -> dict[str, Any]:
+    """Run the suite and write JSON, CSV, markdown and PNG files."""
+    args.check()
+    started = time.perf_counter()
+    results = run_all(args)
+    elapsed = time.perf_counter() - started
+    table, q = rows(results), learning_rows(results)
+    t = targets(results, table, q, args.kappa)
+    maps = [map_info(cached_world(args, s)) for s in results.maps]
+    result = {
+        **header("buildings", args, elapsed), "maps": maps,
+        "configs": [{"key": c.key, **asdict(c)} for c in results.configs],
+        "rows": table, "learning": q, "targets": t,
+    }  # fmt: skip
+    out.json("buildings", result)
+    out.csv("buildings", table)
+    if q:
+        out.csv("buildings_learning", q)
+    out.markdown("buildings", markdown(table, q, t, maps, args, elapsed))
+    out.figure("buildings", plots(results, table))
+    return result

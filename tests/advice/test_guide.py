@@ -1,0 +1,166 @@
+"""``guide`` (app/advice/guide.py): its compiled form equals the core bit for bit, its policies
+say what they claim, and it does what it is for: it leads lost explorers to a destination and
+leaves competent ones alone."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from app.advice import guide
+from app.advice.guide import GuideError, GuideMap
+from app.advice.models import AdviceTables
+from app.advice.priors import GoalPriors
+from app.advice.strategies import StrategyParams, make_advisor
+from app.agents.episodes import run_episode, run_learning
+from app.agents.experts import train_goal_priors
+from app.agents.explorers import FIXED_EXPLORERS, make_explorer
+from app.agents.qlearning import QLearningExplorer
+from app.agents.simulate import QParams, Simulator
+from app.domain.generate import generate_building_domain, generate_domain
+from app.domain.grid import GridDomain
+
+
+def world(seed: int, building: bool) -> tuple[GridDomain, AdviceTables, GoalPriors]:
+    if building:
+        d = generate_building_domain(24, 28, seed, n_goals=1 + seed % 5)
+    else:
+        d = generate_domain(9, 11, seed, braid=0.3, n_goals=1 + seed % 4)
+    prior, goal_priors = train_goal_priors(d, np.random.default_rng(seed), "start", 2, 1.0)
+    return d, AdviceTables.paper(prior.theta()), goal_priors
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    st.integers(0, 10_000),
+    st.booleans(),
+    st.sampled_from(FIXED_EXPLORERS),
+    st.sampled_from([0.0, 0.2, 0.5, 1.5]),
+    st.integers(1, 400),
+    st.booleans(),
+    st.floats(0.001, 0.999),
+    st.floats(0.01, 1.0),
+    st.floats(0.0, 1.0),
+)
+def test_compiled_guide_episode_is_the_core_s(
+    seed: int, building: bool, explorer: str, kappa: float, window: int, advised: bool,
+    p_lost: float, slack: float, spread: float,
+) -> None:  # fmt: skip
+    """Any map, any number of destinations, any parameters: the same moves and decisions."""
+    d, tables, goal_priors = world(seed, building)
+    params = StrategyParams(p_lost=p_lost, slack=slack, spread=spread)
+    goal = d.goals[seed % len(d.goals)]
+    fast = Simulator(d, tables, goal_priors).fixed(
+        explorer, goal, np.random.default_rng(seed), advised=advised, strategy="guide",
+        kappa=kappa, window=window, params=params, max_steps=600,
+    )  # fmt: skip
+    advisor = make_advisor(
+        "guide", tables, kappa, window, params, goal_priors, GuideMap.of(d, goal_priors)
+    )
+    ref = run_episode(
+        d, make_explorer(explorer, d), advisor, goal, np.random.default_rng(seed),
+        advised=advised, max_steps=600,
+    )  # fmt: skip
+    assert fast.steps == ref.steps and fast.success == ref.success
+    assert fast.states.tolist() == ref.states
+    assert fast.advise.tolist() == [x.advise for x in ref.decisions]
+    assert fast.p_normal.tolist() == [x.p_normal for x in ref.decisions]
+    assert fast.benefit == ref.decisions[-1].benefit
+    assert fast.goals_ruled_out == sum(out for *_, out in advisor.goal_beliefs() or [])
+
+
+def test_policies_lead_along_shortest_paths_and_as_the_crow_flies() -> None:
+    d, _, goal_priors = world(3, True)
+    gm = GuideMap.of(d, goal_priors)
+    dist = d.goal_distances
+    for g, cell in enumerate(d.goals):
+        for s in range(d.n_states):
+            pi = gm.policy(g, s)
+            assert sum(pi) == pytest.approx(1.0)
+            for a in range(4):
+                if pi[a] > 0 and dist[g, s] > 0:
+                    assert dist[g, d.next_state[s, a]] == dist[g, s] - 1
+            c = gm.compass(g, s)
+            assert sum(c) == pytest.approx(1.0)
+            gone = np.abs(d.cells[cell] - d.cells[d.next_state[s]]).sum(axis=1)
+            here = np.abs(d.cells[cell] - d.cells[s]).sum()
+            closer = [a for a in range(4) if gone[a] < here]
+            if closer:
+                assert {a for a in range(4) if c[a] > 0} == set(closer)
+
+
+def test_experts_routes_break_ties_among_shortest_moves() -> None:
+    d, _, goal_priors = world(5, True)
+    plain, taught = GuideMap.of(d), GuideMap.of(d, goal_priors)
+    differ = 0
+    for g in range(len(d.goals)):
+        for s in range(d.n_states):
+            a, b = plain.policy(g, s), taught.policy(g, s)
+            assert [x > 0 for x in a] == [x > 0 for x in b]  # the same shortest moves
+            differ += a != b
+    assert differ > 0
+
+
+def test_too_many_destinations_times_cells_is_refused_clearly(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    d = GridDomain.from_strings(["SGG", "GG."])
+    assert len(d.goals) * d.n_states == 24
+    monkeypatch.setattr(guide, "MAX_GUIDE_CELLS", 23)
+    with pytest.raises(GuideError, match="4 destinations x 6 cells is more than 23"):
+        GuideMap.of(d)
+    monkeypatch.setattr(guide, "MAX_GUIDE_CELLS", 24)
+    assert GuideMap.of(d).n_goals == 4
+
+
+@pytest.mark.parametrize("size", [48, 80])
+def test_lost_explorers_arrive_and_competent_ones_are_left_alone(size: int) -> None:
+    """On generated buildings with experts from the start only (most cells unvisited): random
+    walkers that follow the advice arrive, the optimal explorer is never advised."""
+    d = generate_building_domain(size, size, size)
+    prior, goal_priors = train_goal_priors(d, np.random.default_rng(0), "start", 10, 1.0)
+    sim = Simulator(d, AdviceTables.paper(prior.theta()), goal_priors)
+    results: dict[str, list[bool]] = {"random": [], "random-avoid": []}
+    for t in range(20):
+        goal = d.goals[t % len(d.goals)]
+        for ex in results:
+            run = sim.fixed(ex, goal, np.random.default_rng(t), advised=True, strategy="guide")
+            results[ex].append(run.success)
+        best = sim.fixed("optimal", goal, np.random.default_rng(t), advised=True, strategy="guide")
+        assert best.success and best.advice_count == 0
+    assert sum(results["random"]) >= 18 and sum(results["random-avoid"]) >= 18
+
+
+@settings(max_examples=20, deadline=None)
+@given(
+    st.integers(0, 10_000),
+    st.booleans(),
+    st.booleans(),
+    st.sampled_from(["advice", "uniform"]),
+    st.sampled_from([0.0, 0.5, 1.0]),
+)
+def test_compiled_guide_q_learning_is_the_core_s(
+    seed: int, advised: bool, keep_history: bool, ties: str, kappa: float
+) -> None:
+    d, tables, goal_priors = world(seed, seed % 2 == 0)
+    goal = d.goals[seed % len(d.goals)]
+    params = StrategyParams(p_lost=0.3, slack=0.4, spread=0.2)
+    fast = Simulator(d, tables, goal_priors).learning(
+        goal, np.random.default_rng(seed), advised=advised, episodes=15, max_steps=80,
+        keep_history=keep_history, kappa=kappa, window=40, strategy="guide",
+        guide_params=params, params=QParams(alpha=0.3, gamma=0.9, epsilon=0.2, ties=ties),
+    )  # fmt: skip
+    learner = QLearningExplorer(d, 0.3, 0.9, 0.2, ties)  # type: ignore[arg-type]
+    advisor = make_advisor(
+        "guide", tables, kappa, 40, params, goal_priors, GuideMap.of(d, goal_priors)
+    )
+    ref = run_learning(
+        d, learner, advisor, goal, np.random.default_rng(seed), episodes=15, advised=advised,
+        max_steps=80, keep_history=keep_history,
+    )  # fmt: skip
+    assert fast.steps.tolist() == [r.steps for r in ref]
+    assert fast.success.tolist() == [r.success for r in ref]
+    assert fast.advice_count.tolist() == [r.advice_count for r in ref]
+    np.testing.assert_array_equal(fast.q, learner.q)
