@@ -199,14 +199,16 @@ def bench_ws(grid: GridDomain, rounds: int) -> dict[str, Any]:
     }  # fmt: skip
 
 
-def bench_experiment(maps_dir: Path | None) -> dict[str, Any]:
-    files = sorted(maps_dir.glob("*.txt")) if maps_dir else []
+def bench_experiment(maps_dir: Path | None, keep: Path | None) -> dict[str, Any]:
+    files = sorted(maps_dir.resolve().glob("*.txt")) if maps_dir else []
     cmd = [sys.executable, "-m", "app", "experiment", "buildings", "--no-progress"]
     for f in files:
         cmd += ["--mazes", str(f)]
     with tempfile.TemporaryDirectory() as tmp:
+        where = keep.resolve() if keep else Path(tmp)
+        where.mkdir(parents=True, exist_ok=True)
         t0 = time.perf_counter()
-        subprocess.run(cmd, cwd=tmp, check=True, stdout=subprocess.DEVNULL)
+        subprocess.run(cmd, cwd=where, check=True, stdout=subprocess.DEVNULL)
         took = time.perf_counter() - t0
     return {"seconds": took, "files": [f.stem for f in files]}
 
@@ -250,16 +252,25 @@ def main() -> None:
     ap.add_argument("--maps-dir", type=Path, default=None,
                     help="map files (*.txt) for the experiment's suite")  # fmt: skip
     ap.add_argument("--no-experiment", action="store_true", help="skip part 3")
+    ap.add_argument(
+        "--keep",
+        type=Path,
+        default=None,
+        help="run the experiment here and keep its results/ (default: a temp dir)",
+    )
+    ap.add_argument("--only-experiment", action="store_true", help="part 3 only")
     ap.add_argument("--write", type=Path, default=None, help="docs file to rewrite a section of")
     args = ap.parse_args()
+    e = None if args.no_experiment else bench_experiment(args.maps_dir, args.keep)
+    if e:
+        print(json.dumps(e, indent=1))
+    if args.only_experiment:
+        return
     grid = generate_building_domain(SIDE, SIDE, 3)
     v = bench_viewer(grid, args.sessions, args.ticks)
     print(json.dumps(v, indent=1))
     w = bench_ws(grid, args.rounds)
     print(json.dumps(w, indent=1))
-    e = None if args.no_experiment else bench_experiment(args.maps_dir)
-    if e:
-        print(json.dumps(e, indent=1))
     text = report(args, v, w, e)
     print(text)
     if args.write:

@@ -107,3 +107,23 @@ def test_a_walker_in_a_128_building_is_led_to_a_destination_by_guide(
     advice_count = summary_["advice_count"]
     assert isinstance(advice_count, int) and advice_count >= advised
     screenshot(page, "walk-guide-128")
+
+
+def test_walk_draws_a_256_map_and_answers_moves(service: Service, page: Page) -> None:
+    """A 256 x 256 building: the page draws it (scrolling), and a move comes back decided."""
+    grid = generate_building_domain(256, 256, 2)
+    body = {"map": grid.to_text().splitlines()}
+    r = service.http.put("/domains/hall256", json=body, headers={"X-API-Key": ADMIN})
+    assert r.status_code in (200, 201), r.text
+    page.goto(service.base + "/walk?domain=hall256&strategy=guide")
+    expect(page.locator("#status")).to_contain_text("Connected")
+    size = page.evaluate("() => [document.getElementById('maze').clientWidth, "
+                         "document.getElementById('maze').clientHeight]")  # fmt: skip
+    assert size == [256 * 6, 256 * 6]  # six pixels a cell, in a scrolling board
+    start = json.loads(page.evaluate("document.body.dataset.position"))
+    open_way = next(i for i in range(4) if grid.open_moves[grid.state(*start), i])
+    page.keyboard.press(KEY["NESW"[open_way]])
+    expect(page.locator("#steps")).to_have_text("1")
+    page.wait_for_function("document.body.dataset.pending === '0'")
+    moved = json.loads(page.evaluate("document.body.dataset.position"))
+    assert grid.state(*moved) == grid.next_state[grid.state(*start), open_way]

@@ -85,6 +85,11 @@ def test_curve_above_compares_where_both_reach() -> None:
     assert worse["above"] is False and worse["min_margin"] < 0
     apart = buildings.curve_above(np.array([[30.0, 1.0]]), other)
     assert apart["shared_range"] is None and apart["above"] is None
+    # a task's difference at the unadvised success is noise at 100 tasks, not at 10,000
+    base, one_less = np.array([[0.0, 0.02], [5.0, 0.02]]), np.array([[0.0, 0.01], [5.0, 0.01]])
+    noisy = buildings.curve_above(one_less, base, tasks=100)
+    assert noisy["above"] and not noisy["strictly_above"]
+    assert not buildings.curve_above(one_less, base, tasks=10_000)["above"]
 
 
 def test_reproducible_across_worker_counts(floor: Path, tmp_path: Path) -> None:
