@@ -54,6 +54,7 @@ bench: venv wrk
 	$(BIN)/python benchmarks/bench_experiments.py --write docs/PERFORMANCE.md
 	$(BIN)/python benchmarks/bench_viewer.py --write docs/PERFORMANCE.md
 	$(BIN)/python benchmarks/bench_service.py --write docs/PERFORMANCE.md
+	$(BIN)/python benchmarks/bench_buildings.py --write docs/PERFORMANCE.md
 	$(BIN)/python benchmarks/rest_inprocess.py
 	$(BIN)/python benchmarks/sessions_inprocess.py
 

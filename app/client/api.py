@@ -149,13 +149,19 @@ def overview(limit: int = 100) -> Call:
 
 
 def stream_url(base_url: str, session: Session, binary: bool = False) -> str:
-    """``ws(s)://.../sessions/{id}/stream?token=...`` for an ``http(s)://`` base URL (with
-    ``&format=binary`` for binary answers, :mod:`app.protocol`)."""
+    """``ws(s)://.../sessions/{id}/stream`` for an ``http(s)://`` base URL (with
+    ``?format=binary`` for binary answers, :mod:`app.protocol`). The token goes in a header
+    (:func:`stream_headers`), not in the URL, which proxies and servers log."""
     parts = urlsplit(base_url)
     scheme = "wss" if parts.scheme == "https" else "ws"
     path = parts.path.rstrip("/") + f"/sessions/{session.session_id}/stream"
-    query = {"token": session.token} | ({"format": "binary"} if binary else {})
+    query = {"format": "binary"} if binary else {}
     return urlunsplit((scheme, parts.netloc, path, urlencode(query), ""))
+
+
+def stream_headers(session: Session) -> dict[str, str]:
+    """The websocket's credentials: the session token as a bearer token."""
+    return session.auth
 
 
 def result(status: int, body: Any, text: str) -> Any:

@@ -185,8 +185,9 @@ class AdvisorClient(_Base):
         """The session's websocket (use as a context manager); ``binary``: decisions come as
         :class:`~app.protocol.DecisionFrame` arrays, about a tenth of the bytes of JSON."""
         url = api.stream_url(self.base_url, session, binary)
+        headers = api.stream_headers(session)
         try:
-            return Stream(connect(url, compression=None, max_size=None))
+            return Stream(connect(url, compression=None, max_size=None, additional_headers=headers))
         except ConnectionClosed as exc:
             raise _closed(exc) from None
 
@@ -304,7 +305,12 @@ class AsyncAdvisorClient(_Base):
         """The session's websocket (``async with await client.stream(s) as stream``);
         ``binary`` as in :meth:`AdvisorClient.stream`."""
         url = api.stream_url(self.base_url, session, binary)
+        headers = api.stream_headers(session)
         try:
-            return AsyncStream(await async_connect(url, compression=None, max_size=None))
+            return AsyncStream(
+                await async_connect(
+                    url, compression=None, max_size=None, additional_headers=headers
+                )
+            )
         except ConnectionClosed as exc:
             raise _closed(exc) from None

@@ -18,7 +18,7 @@ from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from app.service.data.domains import DomainNotFound
+from app.service.data.domains import DomainChanged, DomainNotFound
 from app.service.live.registry import SessionNotFound
 from app.service.problems import BadInput, describe_errors
 from app.service.security import AuthError
@@ -97,6 +97,14 @@ async def _no_session(_: Request, exc: Exception) -> JSONResponse:
     return _json(404, f"no live session {exc.args[0]!r} (it never existed, ended or expired)")
 
 
+async def _domain_changed(_: Request, exc: Exception) -> JSONResponse:
+    return _json(
+        409,
+        f"the map of domain {exc.args[0]!r} was replaced by another while these trajectories "
+        "were on their way; nothing was stored: check them against the new map and send again",
+    )
+
+
 TOO_DEEP = "the JSON body is nested too deeply to parse"
 
 
@@ -110,6 +118,7 @@ def install_error_handlers(app: FastAPI) -> None:
     app.add_exception_handler(BadInput, _bad_input)
     app.add_exception_handler(AuthError, _auth)
     app.add_exception_handler(DomainNotFound, _no_domain)
+    app.add_exception_handler(DomainChanged, _domain_changed)
     app.add_exception_handler(SessionNotFound, _no_session)
     app.add_exception_handler(RecursionError, _too_deep)
 

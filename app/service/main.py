@@ -19,6 +19,7 @@ from app.service.openapi import install_openapi
 from app.service.ops import warm_up
 from app.service.routes import ROUTERS
 from app.service.routes.sessions import add_event_route
+from app.service.security import redact_access_log
 from app.service.state import ServiceState, open_state
 
 Stop = Callable[[], Awaitable[None]]
@@ -41,6 +42,7 @@ async def _expire_idle(state: ServiceState) -> None:
 @asynccontextmanager
 async def lifespan(app: FastAPI) -> AsyncIterator[None]:
     settings: Settings = app.state.settings
+    redact_access_log()  # uvicorn has configured its loggers by now
     state, messages = await run_in_threadpool(open_state, settings)
     for message in messages:
         print(message, file=sys.stderr, flush=True)

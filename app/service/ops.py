@@ -203,13 +203,18 @@ def after_put(state: ServiceState, domain: DomainState, kept: bool) -> None:
         state.registry.end_domain(domain.name)
 
 
-def ingest(state: ServiceState, domain: DomainState, raw: bytes) -> TrajectoriesAccepted:
-    """*Worker thread.* Parse, check and durably store trajectories; update the prior."""
+def ingest(
+    state: ServiceState, domain: DomainState, raw: bytes
+) -> tuple[TrajectoriesAccepted, DomainState]:
+    """*Worker thread.* Parse, check and durably store trajectories; update the prior. Returns
+    the answer and the domain state they went to (``domain``, or the same map put again
+    meanwhile)."""
     body = parse_trajectories(raw)
     items = to_trajectories(domain.domain, body, state.settings.max_trajectory_steps)
-    state.catalog.add_trajectories(domain, items)
+    domain = state.catalog.add_trajectories(domain, items)  # the same map put again: its state
     prepare_answers(domain)
-    return TrajectoriesAccepted(accepted=len(items), pairs=sum(len(t.pairs) for t in items))
+    accepted = TrajectoriesAccepted(accepted=len(items), pairs=sum(len(t.pairs) for t in items))
+    return accepted, domain
 
 
 def prepare_answers(domain: DomainState) -> None:

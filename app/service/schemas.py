@@ -54,11 +54,14 @@ AgentType = Annotated[
     StringConstraints(pattern=NAME_PATTERN),
     Field(description=f"A kind of agent ({NAME_RULE}).", examples=["visitor"]),
 ]
+KAPPA_MAX = 1e6
 Kappa = Annotated[
     float,
     Field(
-        strict=True, ge=0.0, allow_inf_nan=False,
-        description="Cost of one piece of advice (nats); 0 always advises.",
+        strict=True, ge=0.0, le=KAPPA_MAX, allow_inf_nan=False,
+        description="Cost of one piece of advice (nats); 0 always advises. At most 1e6 (a KL "
+        "over four actions is at most log 4 = 1.39 nats), so that a session's total cost, "
+        "kappa x advice count, stays a finite number.",
     ),
 ]  # fmt: skip
 Window = Annotated[int, Field(strict=True, ge=1, description="History window W (pairs).")]

@@ -7,7 +7,9 @@ generated, written with mode 0600 and shown once. Comparisons are constant-time.
 from __future__ import annotations
 
 import hmac
+import logging
 import os
+import re
 import secrets
 import stat
 from pathlib import Path
@@ -79,3 +81,33 @@ def check_session_token(given: str | None, expected: str, session_id: str) -> No
         )
     if not same_secret(given, expected):
         raise AuthError(403, f"this token does not belong to session {session_id}")
+
+
+_TOKEN = re.compile(r"([?&](?:token|api_key|key)=)[^&#\s]*", re.IGNORECASE)
+
+
+def redact(text: str) -> str:
+    """``text`` with the value of every ``token=`` (and ``key=``, ``api_key=``) query parameter
+    replaced by ``***``."""
+    return _TOKEN.sub(r"\1***", text)
+
+
+class RedactTokens(logging.Filter):
+    """Keeps secrets out of uvicorn's access log: a websocket URL carries its session token as
+    ``?token=...`` (browsers cannot set headers on a websocket), and the access log writes
+    every URL. Rewrites the record's arguments; never drops a record."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if isinstance(record.args, tuple) and record.args:
+            record.args = tuple(redact(a) if isinstance(a, str) else a for a in record.args)
+        elif isinstance(record.msg, str):
+            record.msg = redact(record.msg)
+        return True
+
+
+def redact_access_log() -> None:
+    """Install :class:`RedactTokens` on uvicorn's access and error loggers (once)."""
+    for name in ("uvicorn.access", "uvicorn.error"):
+        logger = logging.getLogger(name)
+        if not any(isinstance(f, RedactTokens) for f in logger.filters):
+            logger.addFilter(RedactTokens())

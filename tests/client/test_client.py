@@ -12,7 +12,7 @@ import pytest
 
 from app.advice.advisor import Advisor
 from app.advice.models import AdviceTables
-from app.client import AdvisorClient, AdvisorError, AsyncAdvisorClient, DecisionFrame
+from app.client import AdvisorClient, AdvisorError, AsyncAdvisorClient, DecisionFrame, api
 from tests.client.conftest import Server
 
 TINY = ["#######", "#G..#G#", "#.#.#.#", "#...#.#", "###...#", "#S....#", "#######"]
@@ -203,3 +203,13 @@ def test_client_domains_in_metres_with_experts(server: Server) -> None:
 
         assert [d["state"] for d in run_async(scenario())] == [[5, 2]]
         client.delete_domain("tiny-m")
+
+
+def test_the_stream_url_carries_no_token_the_header_does() -> None:
+    """Proxies and servers log URLs: the websocket's token goes in its Authorization header."""
+    decision: Any = {}
+    session = api.Session("ab12", "t0k3n", "default", 0.5, 300, decision)
+    url = api.stream_url("https://example.org/base/", session, binary=True)
+    assert url == "wss://example.org/base/sessions/ab12/stream?format=binary"
+    assert "t0k3n" not in url
+    assert api.stream_headers(session) == {"Authorization": "Bearer t0k3n"}

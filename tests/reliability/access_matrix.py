@@ -46,6 +46,7 @@ class Route:
 
 ROUTES = [
     Route("GET", "/health", "anyone"),
+    Route("HEAD", "/health", "anyone"),
     Route("GET", "/domains", "anyone"),
     Route("GET", "/domains/{name}", "anyone"),
     Route("PUT", "/domains/{new}", "admin", {"map": TINY}),

@@ -40,15 +40,19 @@ class Live:
         return self.process.pid
 
 
-def start(data_dir: Path, port: int | None = None, timeout: float = 60.0, **env: str) -> Live:
+def start(
+    data_dir: Path, port: int | None = None, timeout: float = 60.0, log_level: str = "warning",
+    **env: str,
+) -> Live:  # fmt: skip
     """Start the service on 127.0.0.1 and wait until ``/health`` answers (or fail, showing its
-    log). ``env``: extra settings, e.g. ``ADVISOR_MAX_SESSIONS="5"``."""
+    log). ``env``: extra settings, e.g. ``ADVISOR_MAX_SESSIONS="5"``; ``log_level`` "info"
+    writes uvicorn's access log too."""
     port = port or free_port()
     data_dir.mkdir(parents=True, exist_ok=True)
     log = data_dir.parent / f"server-{port}.log"
     environ = os.environ | {"ADVISOR_BOOTSTRAP_PER_GOAL": "2"} | env
     cmd = [sys.executable, "-m", "app", "serve", "--host", "127.0.0.1", "--port", str(port),
-           "--data-dir", str(data_dir), "--no-viewer", "--log-level", "warning"]  # fmt: skip
+           "--data-dir", str(data_dir), "--no-viewer", "--log-level", log_level]  # fmt: skip
     with log.open("ab") as out:
         proc = subprocess.Popen(cmd, cwd=REPO, env=environ, stdout=out, stderr=out)
     url = f"http://127.0.0.1:{port}"
@@ -65,7 +69,8 @@ def start(data_dir: Path, port: int | None = None, timeout: float = 60.0, **env:
                 proc.wait(10)
                 raise RuntimeError(f"server at {url} did not answer /health: {log.read_text()}")
             time.sleep(0.05)
-    key = (data_dir / "admin_key").read_text().strip()
+    configured = environ.get("ADVISOR_ADMIN_KEY")
+    key = configured or (data_dir / "admin_key").read_text().strip()
     return Live(url, port, key, data_dir, proc, log)
 
 

@@ -16,6 +16,8 @@ def test_health(client: TestClient) -> None:
     body = r.json()
     assert body["status"] == "ok" and body["database"] == "sqlite"
     assert body["domains"] == 1 and body["sessions"] == 0 and body["uptime_seconds"] >= 0
+    head = client.head("/health")  # load balancers and probes ask HEAD
+    assert head.status_code == 200 and head.content == b""
 
 
 def test_overview_shows_figures_and_never_tokens(client: TestClient) -> None:

@@ -46,6 +46,7 @@ def test_create_session_with_options(client: TestClient) -> None:
         ('{"kappa": Infinity}', "kappa: Input should be a finite number"),
         ('{"kappa": 1e999}', "kappa: Input should be a finite number"),
         ('{"kappa": -0.1}', "kappa: Input should be greater than or equal to 0"),
+        ('{"kappa": 1e308}', "kappa: Input should be less than or equal to 1000000"),
         ('{"kappa": "0.5"}', "kappa: Input should be a valid number"),
         ('{"window": 0}', "window: Input should be greater than or equal to 1"),
         ('{"window": -5}', "window: Input should be greater than or equal to 1"),
@@ -226,3 +227,16 @@ def test_bodies_over_the_size_limit_get_413(client: TestClient, service: Service
 
     r = client.post(f"/sessions/{sid}/events", content=chunks(), headers=auth | JSON)
     assert r.status_code == 413
+
+
+def test_the_largest_kappa_keeps_every_figure_a_finite_json_number(client: TestClient) -> None:
+    """kappa 1e6 with the 'always' rule: the total cost grows with every event and stays a
+    number JSON can carry (a larger kappa is refused, above)."""
+    created = client.post(
+        "/domains/default/sessions", json={"kappa": 1e6, "strategy": "always"}
+    ).json()
+    auth = {"Authorization": f"Bearer {created['token']}"}
+    events = [{"state": created["decision"]["state"], "action": "W"}] * 50
+    r = client.post(f"/sessions/{created['session_id']}/events", json=events, headers=auth)
+    assert r.status_code == 200 and "Infinity" not in r.text
+    assert r.json()[-1]["cost"]["total"] == 1e6 * 51

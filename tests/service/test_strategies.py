@@ -21,6 +21,7 @@ from fastapi.testclient import TestClient
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from app.advice import guide as guide_module
 from app.advice.guide import GuideMap
 from app.advice.priors import GoalPriors
 from app.advice.strategies import READS, STRATEGIES, StrategyParams, make_advisor
@@ -301,3 +302,19 @@ def test_the_schema_s_strategies_and_parameters_are_the_core_s(
         assert prop.get("maximum", math.inf) == f.metadata["high"]
         assert f"Default {f.default}." in schema["properties"][name]["description"]
     assert {s for names in READS.values() for s in names} == set(core)  # each is read by one
+
+
+def test_a_guide_session_on_a_map_too_big_for_guide_is_refused_saying_why(
+    live: tuple[TestClient, ServiceState], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    client, service = live
+    rows = ["#######", "#G..#G#", "#.#.#.#", "#...#.#", "###...#", "#S....#", "#######"]
+    admin = {"X-API-Key": service.admin_key}
+    assert client.put("/domains/small", json={"map": rows}, headers=admin).status_code == 201
+    monkeypatch.setattr(guide_module, "MAX_GUIDE_CELLS", 20)  # 2 destinations x 19 cells
+    r = client.post("/domains/small/sessions", json={"strategy": "guide"})
+    assert r.status_code == 422
+    assert "strategy guide" in r.json()["detail"] and "more than 20" in r.json()["detail"]
+    monkeypatch.undo()
+    r = client.post("/domains/small/sessions", json={"strategy": "guide"})
+    assert r.status_code == 201 and r.json()["strategy"] == "guide"

@@ -25,6 +25,10 @@ class DomainNotFound(KeyError):
     """No domain of that name."""
 
 
+class DomainChanged(RuntimeError):
+    """The domain's map was replaced by another while trajectories for it were in flight."""
+
+
 @dataclass(frozen=True)
 class PriorView:
     """What sessions and readers use of a prior: its tables (pooled ``"*"`` plus every agent
@@ -177,24 +181,39 @@ class DomainCatalog:
                 self.store.delete_domain(name)
                 del self._domains[name]
 
-    def add_trajectories(self, state: DomainState, items: Sequence[Trajectory]) -> None:
+    def add_trajectories(self, state: DomainState, items: Sequence[Trajectory]) -> DomainState:
         """Store ``items`` (checked against ``state``'s map) durably, then add them to the
-        prior and publish a new view."""
-        with state.lock:
-            if self._domains.get(state.name) is not state:  # replaced or deleted meanwhile
+        prior and publish a new view; returns the domain state they went to.
+
+        If ``state`` was replaced meanwhile by a put of the same map (another alpha0 or
+        frame), they go to the domain now of that name: its map is theirs. A put of another
+        map refuses them (:class:`DomainChanged`), a delete too (:class:`DomainNotFound`)."""
+        while True:
+            with state.lock:
+                current = self._domains.get(state.name)
+                if current is state:
+                    self._add(state, items)
+                    return state
+            if current is None:
                 raise DomainNotFound(state.name)
-            self.store.add_trajectories(state.name, items, state.domain.n_states)
-            groups: dict[str | None, list[Trajectory]] = {}
-            for t in items:
-                groups.setdefault(t.agent_type, []).append(t)
-            for agent_type, group in groups.items():
-                state.prior.partial_fit([t.pairs for t in group], agent_type=agent_type)
-            changed = {POOLED, *(t for t in groups if t is not None)}
-            state.view = _view(state.prior, state.view, changed)
-            if state.goal_priors is not None:
-                state.goal_priors = add_goals(state.goal_priors.copy(), items)
-                if state.guide_map is not None:
-                    state.guide_map = state.guide_map.replace_counts(state.goal_priors)
+            if current.domain.rows_text != state.domain.rows_text:
+                raise DomainChanged(state.name)
+            state = current  # the same map, put again: the trajectories fit it as they are
+
+    def _add(self, state: DomainState, items: Sequence[Trajectory]) -> None:
+        """Under ``state.lock``, ``state`` being the current domain of its name."""
+        self.store.add_trajectories(state.name, items, state.domain.n_states)
+        groups: dict[str | None, list[Trajectory]] = {}
+        for t in items:
+            groups.setdefault(t.agent_type, []).append(t)
+        for agent_type, group in groups.items():
+            state.prior.partial_fit([t.pairs for t in group], agent_type=agent_type)
+        changed = {POOLED, *(t for t in groups if t is not None)}
+        state.view = _view(state.prior, state.view, changed)
+        if state.goal_priors is not None:
+            state.goal_priors = add_goals(state.goal_priors.copy(), items)
+            if state.guide_map is not None:
+                state.guide_map = state.guide_map.replace_counts(state.goal_priors)
 
 
 def add_goals(priors: GoalPriors, items: Sequence[Trajectory]) -> GoalPriors:

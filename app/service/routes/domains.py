@@ -68,15 +68,20 @@ async def delete_domain(name: DomainName, state: StateDep) -> None:
     dependencies=[AdminDep],
     status_code=201,
     openapi_extra=body("TrajectoriesCreate"),
-    responses=NOT_FOUND | ADMIN | INVALID | {413: {"model": ErrorPublic}},
+    responses=NOT_FOUND
+    | ADMIN
+    | INVALID
+    | {409: {"model": ErrorPublic}, 413: {"model": ErrorPublic}},
 )
 async def add_trajectories(
     request: Request, domain: DomainDep, state: StateDep
 ) -> TrajectoriesAccepted:
     """Store expert trajectories durably (before answering) and update the prior at once;
-    live sessions of the domain are advised from the new prior from their next event."""
-    accepted = await run_in_threadpool(ops.ingest, state, domain, await request.body())
-    state.registry.retable(domain)
+    live sessions of the domain are advised from the new prior from their next event. If the
+    domain is PUT again with the same map meanwhile, they go to it; if its map is replaced by
+    another, nothing is stored and the answer is 409."""
+    accepted, went = await run_in_threadpool(ops.ingest, state, domain, await request.body())
+    state.registry.retable(went)
     return accepted
 
 

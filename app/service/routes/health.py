@@ -14,7 +14,7 @@ router = APIRouter(tags=["health"])
 
 @router.get("/health", responses={503: {"model": ErrorPublic}})
 async def health(state: StateDep) -> HealthPublic:
-    """Liveness and readiness: the database answers."""
+    """Liveness and readiness: the database answers (``HEAD /health``: the same, no body)."""
     try:
         await run_in_threadpool(state.store.ping)
     except Exception as exc:  # any database failure means "not ready"
@@ -27,3 +27,9 @@ async def health(state: StateDep) -> HealthPublic:
         sessions=len(state.registry),
         uptime_seconds=time.monotonic() - state.started,
     )
+
+
+@router.head("/health", include_in_schema=False)
+async def health_head(state: StateDep) -> HealthPublic:
+    """What load balancers and probes ask: ``GET /health``'s status without its body."""
+    return await health(state)
