@@ -9,6 +9,7 @@ the assigning thread; a wake-up is all they do, and the viewer ignores the pump'
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -87,6 +88,26 @@ class Controls:
     @property
     def picked_session(self) -> str | None:
         return None if self.session.value == NONE else self.session.value
+
+    @property
+    def picked_kappa(self) -> float:
+        """The slider's kappa, within [0, KAPPA_MAX]. Any page can open the viewer's websocket
+        and send a value the slider would never give (NaN, -5, 1e308, text): such a value is
+        put back in range (NaN and non-numbers: the default) and the slider shows it."""
+        value = self.kappa.value
+        try:
+            v = float(value)
+        except (TypeError, ValueError):
+            v = DEFAULT_KAPPA
+        if isinstance(value, bool) or not math.isfinite(v):
+            v = DEFAULT_KAPPA
+        v = min(max(v, 0.0), KAPPA_MAX)
+        if isinstance(value, bool) or not isinstance(value, float):
+            # viser's setter casts to the type of the value it holds: give it a float first
+            self.kappa._impl.value = v
+        if value != v or not isinstance(value, float):
+            self.kappa.value = v  # type: ignore[misc]  # viser types no setter; it has one
+        return v
 
     def layer_visible(self, layer: str) -> bool:
         return bool(self.layers[layer].value)

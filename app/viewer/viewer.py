@@ -161,7 +161,7 @@ class Viewer:
         scene.update_sessions(drawn, picked.session_id if picked else None)
         for layer in LAYERS:
             scene.set_layer(layer, controls.layer_visible(layer))
-        kappa = float(controls.kappa.value)
+        kappa = controls.picked_kappa
         p = picked.p_normal if picked is not None and controls.lost.value == LOST_PICKED else 0.0
         shaded = scene.shade(view.theta, kappa, p)
         controls.show_shading(shaded, view.domain.n_states, kappa, p)

@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 from app.domain.generate import generate_domain
 from app.domain.grid import GridDomain
 from app.viewer import geometry as geo
-from app.viewer.controls import LOST_PICKED, NONE
+from app.viewer.controls import KAPPA_MAX, LOST_PICKED, NONE
 from app.viewer.state import DomainView, Snapshot
 from app.viewer.viewer import Viewer, pump_wait
 from tests.viewer.conftest import FakeFeed, choose, free_port, wait_until, walk
@@ -216,3 +216,28 @@ def test_viewer_shows_a_goal_aware_sessions_goal_posterior(
     choose(viewer.controls.session, "w0")
     viewer.tick()
     assert "Goal posterior" not in viewer.controls.stats.content
+
+
+@pytest.mark.parametrize(
+    ("sent", "kept"),
+    [(float("nan"), 0.5), (-5.0, 0.0), (1e308, KAPPA_MAX), (float("inf"), 0.5), ("x", 0.5),
+     (True, 0.5), (0.3, 0.3)],
+)  # fmt: skip
+def test_a_kappa_no_slider_gives_is_put_back_in_range(
+    viewer: Viewer, feed: FakeFeed, domain: GridDomain, theta: np.ndarray, sent: object,
+    kept: float,
+) -> None:  # fmt: skip
+    """Any page can send the viewer's kappa a value its slider would never give: the pump
+    shades with a kappa in range and puts the slider back."""
+    feed.snapshot = snapshot(domain, theta, 1)
+    viewer.tick()
+    controls, scene = viewer.controls, viewer.scene
+    assert controls is not None and scene is not None
+    if isinstance(sent, float):
+        choose(controls.kappa, sent)
+    else:  # what a raw message can leave there: viser casts only what code assigns
+        controls.kappa._impl.value = sent
+    viewer.tick()
+    assert controls.kappa.value == kept
+    assert scene.shaded.sum() == geo.advised_cells(theta, kept, 0.0).sum()
+    assert f"kappa = {kept:.2f}" in controls.shading_text.content
