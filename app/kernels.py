@@ -525,6 +525,15 @@ def guide_decide(
 
 
 @njit(cache=True)
+def guide_buffers(
+    n_goals: int,
+) -> tuple[FloatArray, FloatArray, FloatArray]:  # pragma: no cover - compiled
+    """What :func:`guide_decide` and :func:`guide_append` need besides the session's state:
+    its scratch (4 + 3 G + 8 G + 4,), ``pi`` (4,) and ``theta`` (4,)."""
+    return np.empty(4 + 11 * n_goals + 4), np.empty(4), np.empty(4)
+
+
+@njit(cache=True)
 def guide_stream(
     gmap: GuideArrays,
     params: GuideParams,
@@ -548,9 +557,7 @@ def guide_stream(
     states, actions, next_states = moves
     kl_out, p_out, advise_out, count_out, benefit_out, advice_out = out
     n_goals = alive.shape[0]
-    scratch = np.empty(4 + 11 * n_goals + 4)
-    pi = np.empty(4)
-    theta = np.empty(4)
+    scratch, pi, theta = guide_buffers(n_goals)
     for i in range(states.shape[0]):
         heading = guide_append(
             gmap, params, goals, ll, alive, states[i], actions[i], last == states[i], advice,
@@ -731,8 +738,7 @@ def episode(
     g_alive = np.ones(n_dest, dtype=np.bool_)
     g_target = -1
     g_heading = -1
-    g_scratch = np.empty(4 + 11 * n_dest + 4)
-    g_pi = np.empty(4)
+    g_scratch, g_pi, _ = guide_buffers(n_dest)
     heading = 0
     if kind == LEFT:
         heading = int(rng.random() * 4)
@@ -854,9 +860,7 @@ def q_learning(
     g_alive = np.ones(n_dest, dtype=np.bool_)
     g_target = -1
     g_heading = -1
-    g_scratch = np.empty(4 + 11 * n_dest + 4)
-    g_pi = np.empty(4)
-    theta_w = np.empty(4)
+    g_scratch, g_pi, theta_w = guide_buffers(n_dest)
     total_steps = 0
     for e in range(episodes):
         if not keep_history:

@@ -17,8 +17,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import socket
 import statistics
 import subprocess
 import sys
@@ -37,20 +35,15 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from app.domain.generate import generate_building_domain
 from app.domain.grid import ACTIONS, GridDomain
 from app.service.config import Settings
-from app.service.state import ServiceState, open_state
+from app.service.state import open_state
 from app.service.viewer_feed import ServiceFeed
 from app.viewer.viewer import Viewer
 from benchmarks._report import command_line, machine, write_section
+from benchmarks.bench_viewer import advance, free_port, serve
 
 ROOT = Path(__file__).resolve().parents[1]
 FRAME = 500
 SIDE = 256
-
-
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return int(sock.getsockname()[1])
 
 
 def walk(grid: GridDomain, rng: np.random.Generator, s: int, n: int) -> tuple[list[Any], int]:
@@ -59,17 +52,6 @@ def walk(grid: GridDomain, rng: np.random.Generator, s: int, n: int) -> tuple[li
         events.append({"state": list(grid.cell(s)), "action": ACTIONS[a]})
         s = int(grid.next_state[s, a])
     return events, s
-
-
-def advance(state: ServiceState, rng: np.random.Generator, steps: int) -> None:
-    for session in state.registry.sessions():
-        grid = session.domain.domain
-        a = rng.integers(0, 4, steps)
-        s = np.empty(steps + 1, dtype=np.int64)
-        s[0] = session.position
-        for i in range(steps):
-            s[i + 1] = grid.next_state[s[i], a[i]]
-        state.registry.observe_batch(session, (s[:-1], a.astype(np.int64), s[1:]))
 
 
 def bench_viewer(grid: GridDomain, n_sessions: int, ticks: int) -> dict[str, float]:
@@ -89,7 +71,7 @@ def bench_viewer(grid: GridDomain, n_sessions: int, ticks: int) -> dict[str, flo
             try:
                 assert viewer.controls is not None
                 viewer.tick()
-                viewer.controls.domain.value = "hall"
+                viewer.controls.domain.value = "hall"  # type: ignore[misc]  # viser types no setter
                 t0 = time.perf_counter()
                 viewer.tick()  # builds the 256 x 256 scene
                 first = (time.perf_counter() - t0) * 1e3
@@ -113,28 +95,10 @@ def bench_viewer(grid: GridDomain, n_sessions: int, ticks: int) -> dict[str, flo
     }  # fmt: skip
 
 
-def serve(port: int, data_dir: Path) -> subprocess.Popen[bytes]:
-    env = os.environ | {"ADVISOR_ADMIN_KEY": "bench"}
-    cmd = [sys.executable, "-m", "app", "serve", "--port", str(port), "--data-dir",
-           str(data_dir), "--log-level", "warning", "--no-viewer"]  # fmt: skip
-    proc = subprocess.Popen(
-        cmd, cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
-    )
-    deadline = time.monotonic() + 90
-    while time.monotonic() < deadline:
-        try:
-            if httpx.get(f"http://127.0.0.1:{port}/health", timeout=1).status_code == 200:
-                return proc
-        except httpx.HTTPError:
-            time.sleep(0.2)
-    proc.kill()
-    raise RuntimeError("the service did not start")
-
-
 def bench_ws(grid: GridDomain, rounds: int) -> dict[str, Any]:
     with tempfile.TemporaryDirectory() as tmp:
         port = free_port()
-        proc = serve(port, Path(tmp))
+        proc = serve(port, free_port(), Path(tmp), viewer=False)
         base = f"http://127.0.0.1:{port}"
         try:
             with httpx.Client(base_url=base, timeout=120) as http:
@@ -149,7 +113,7 @@ def bench_ws(grid: GridDomain, rounds: int) -> dict[str, Any]:
                     urls[strategy] = f"ws://127.0.0.1:{port}/sessions/{c['session_id']}/stream"
                     urls[strategy] += f"?token={c['token']}"
             rng = np.random.default_rng(1)
-            frames = {k: [] for k in urls}
+            frames: dict[str, list[str]] = {k: [] for k in urls}
             for k in urls:
                 s = grid.start
                 for _ in range(rounds + 1):
@@ -194,8 +158,10 @@ def bench_ws(grid: GridDomain, rounds: int) -> dict[str, Any]:
     return {
         "put_with_experts_s": put_s, "paper_per_s": paper, "guide_per_s": guide,
         "ratio_median": statistics.median(ratios), "ratio_min": min(ratios),
-        "health_p50_ms": statistics.median(latency),
-        "health_p99_ms": float(np.percentile(latency, 99)), "health_probes": len(latency),
+        # nan: no probe finished while so few rounds ran (--rounds)
+        "health_p50_ms": statistics.median(latency) if latency else float("nan"),
+        "health_p99_ms": float(np.percentile(latency, 99)) if latency else float("nan"),
+        "health_probes": len(latency),
     }  # fmt: skip
 
 

@@ -214,6 +214,12 @@ class GuideParams:
     spread: float
 
 
+def kernel_params(window: int, p: GuideParams) -> tuple[float, float, float, float, float]:
+    """The parameters as app/kernels.py reads them: (lam, p_lost, slack, spread, bump), with
+    lam = 1 - 1/W the evidence's fading."""
+    return (1.0 - 1.0 / window, float(p.p_lost), float(p.slack), float(p.spread), LOST_BUMP)
+
+
 class GuideAdvisor(Advisor):
     """Leads explorers that look lost to a destination of the map; see the module text."""
 
@@ -241,7 +247,7 @@ class GuideAdvisor(Advisor):
         if not (0.0 < self.p_lost < 1.0 and 0.0 < self.slack <= 1.0 and 0 <= self.spread <= 1):
             raise ValueError("need 0 < p_lost < 1, 0 < slack <= 1 and 0 <= spread <= 1")
         super().__init__(tables, kappa, window)
-        self._lam = 1.0 - 1.0 / self.window
+        self._lam = kernel_params(self.window, p)[0]
 
     @property
     def strategy(self) -> str:

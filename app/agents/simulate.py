@@ -19,10 +19,10 @@ import numpy.typing as npt
 
 from app import kernels
 from app.advice.advisor import DEFAULT_KAPPA, DEFAULT_WINDOW, check_kappa_window, resync_period
-from app.advice.guide import LOST_BUMP, GuideError, GuideMap
+from app.advice.guide import GuideError, GuideMap, kernel_params
 from app.advice.models import AdviceTables
 from app.advice.priors import GoalPriors
-from app.advice.strategies import STRATEGIES, StrategyParams
+from app.advice.strategies import STRATEGIES, StrategyParams, guide_params
 from app.agents.explorers import FIXED_EXPLORERS
 from app.agents.qlearning import TIE_RULES
 from app.domain.grid import GridDomain
@@ -52,10 +52,9 @@ _NO_GUIDE: kernels.GuideArrays = (
 _NO_GOALS = np.zeros(0, dtype=np.int64)
 
 
-def guide_arrays(
-    window: int, params: StrategyParams
-) -> kernels.GuideParams:  # the kernels' (lam, p_lost, slack, spread, bump)
-    return (1.0 - 1.0 / window, params.p_lost, params.slack, params.spread, LOST_BUMP)
+def guide_arrays(window: int, params: StrategyParams) -> kernels.GuideParams:
+    """guide's parameters as the kernels read them."""
+    return kernel_params(window, guide_params(params))
 
 
 @dataclass(frozen=True)

@@ -269,6 +269,11 @@ def run_learning(args: Args, spec: MapSpec) -> dict[str, dict[str, FloatArray]]:
     return out
 
 
+def run_job(args: Args, spec: MapSpec, who: str) -> dict[str, dict[str, FloatArray]]:
+    """One job of the suite: an explorer's tasks on a map, or the map's Q-learning."""
+    return run_learning(args, spec) if who == "q-learning" else run_fixed(args, spec, who)
+
+
 @dataclass
 class Results:
     """``fixed[explorer][config key][measure]`` and ``learning[curve][measure]``: one row per
@@ -301,22 +306,15 @@ def run_all(args: Args) -> Results:
             for name, values in measures.items():
                 into[key][name][spec.index] = values
 
-    def job(spec: MapSpec, who: str) -> dict[str, dict[str, FloatArray]]:
-        return run_learning(args, spec) if who == "q-learning" else run_fixed(args, spec, who)
-
     with tqdm(total=len(jobs), desc="buildings", unit="job", disable=not args.progress) as bar:
         if args.workers == 1:
             for spec, who in jobs:
-                store(spec, who, job(spec, who))
+                store(spec, who, run_job(args, spec, who))
                 bar.update()
         else:
             ctx = multiprocessing.get_context("spawn")  # no fork of a process with threads
             with ProcessPoolExecutor(args.workers, mp_context=ctx) as pool:
-                futures = {
-                    pool.submit(run_learning, args, s) if w == "q-learning"
-                    else pool.submit(run_fixed, args, s, w): (s, w)
-                    for s, w in jobs
-                }  # fmt: skip
+                futures = {pool.submit(run_job, args, s, w): (s, w) for s, w in jobs}
                 for fut in as_completed(futures):
                     store(*futures[fut], fut.result())
                     bar.update()

@@ -18,7 +18,7 @@ import numpy.typing as npt
 
 from app import kernels
 from app.advice.advisor import Advisor, DecisionBatch, resync_period
-from app.advice.guide import LOST_BUMP, GuideAdvisor
+from app.advice.guide import GuideAdvisor, GuideParams, kernel_params
 from app.domain.grid import N_ACTIONS
 
 IntArray = npt.NDArray[np.int64]
@@ -169,7 +169,7 @@ class StreamGuide(GuideAdvisor):
         kl, p_normal, benefit = np.empty(n), np.empty(n), np.empty(n)
         advise, count = np.empty(n, dtype=np.bool_), np.empty(n, dtype=np.int64)
         rows = np.empty((n, N_ACTIONS))
-        params = (self._lam, self.p_lost, self.slack, self.spread, LOST_BUMP)
+        params = kernel_params(self.window, GuideParams(self.p_lost, self.slack, self.spread))
         got = kernels.guide_stream(
             g.arrays, params, g.goal_states, ll, alive, self._target, self._last, self._heading,
             last_advice, self.kappa, count_before, benefit_before,
