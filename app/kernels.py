@@ -41,10 +41,11 @@ FlagArray = npt.NDArray[np.uint8]
 Tables = tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]
 GoalTables = tuple[IntArray, float, FloatArray, FloatArray, FloatArray]
 #: (next_state (S, 4), open moves per state (S,), cells (S, 2), distance to each destination
-#: (G, S), destination of each state (S,), the experts' goal counts (G, S * 4))
-GuideArrays = tuple[IntArray, IntArray, IntArray, IntArray, IntArray, FloatArray]
-#: (lam, p_lost, slack, spread, bump)
-GuideParams = tuple[float, float, float, float, float]
+#: (G, S), destination of each state (S,), the experts' goal counts (G, S * 4), the fewest moves
+#: against the compass on a way to each destination (G, S))
+GuideArrays = tuple[IntArray, IntArray, IntArray, IntArray, IntArray, FloatArray, IntArray]
+#: (lam, p_lost, slack, spread, bump, the most destinations a tour is planned through)
+GuideParams = tuple[float, float, float, float, float, int]
 
 #: explorer kinds, in the order of app.agents.explorers.FIXED_EXPLORERS
 RANDOM, RANDOM_AVOID, LEFT, BUG, OPTIMAL = 0, 1, 2, 3, 4
@@ -337,7 +338,7 @@ def guide_open(gmap: GuideArrays, s: int, out: FloatArray) -> None:  # pragma: n
 @njit(cache=True)
 def guide_policy(gmap: GuideArrays, g: int, s: int, out: FloatArray) -> None:  # pragma: no cover
     """``GuideMap.policy``: pi_g(. | s) into ``out`` (4,)."""
-    next_state, _, _, dist, _, counts = gmap
+    next_state, _, _, dist, _, counts, _ = gmap
     d = dist[g, s]
     if d > 0:
         tot = 0.0
@@ -354,20 +355,72 @@ def guide_policy(gmap: GuideArrays, g: int, s: int, out: FloatArray) -> None:  #
 
 
 @njit(cache=True)
+def guide_own_moves(
+    next_state: IntArray, cells: IntArray, goal: int, s: int
+) -> tuple[int, int]:  # pragma: no cover
+    """``GuideMap.compass_moves``: up to two moves (-1: none) of someone at ``s`` heading for
+    the destination in state ``goal`` as the crow flies."""
+    dr = cells[goal, 0] - cells[s, 0]
+    dc = cells[goal, 1] - cells[s, 1]
+    vert = 0 if dr < 0 else 2
+    horiz = 1 if dc > 0 else 3
+    v_ok = dr != 0 and next_state[s, vert] != s
+    h_ok = dc != 0 and next_state[s, horiz] != s
+    if abs(dr) == abs(dc):
+        if v_ok:
+            return vert, (horiz if h_ok else -1)
+        return (horiz if h_ok else -1), -1
+    if abs(dr) > abs(dc):
+        return (vert if v_ok else (horiz if h_ok else -1)), -1
+    return (horiz if h_ok else (vert if v_ok else -1)), -1
+
+
+@njit(cache=True)
 def guide_compass(
     gmap: GuideArrays, goal: int, s: int, out: FloatArray
 ) -> None:  # pragma: no cover
     """``GuideMap.compass``: c_g(. | s) for the destination in state ``goal``, into ``out``."""
-    next_state, _, cells, _, _, _ = gmap
-    dr = cells[goal, 0] - cells[s, 0]
-    dc = cells[goal, 1] - cells[s, 1]
-    n = 0
+    m0, m1 = guide_own_moves(gmap[0], gmap[2], goal, s)
+    if m0 < 0:
+        guide_open(gmap, s, out)
+        return
+    n = 1 if m1 < 0 else 2
     for a in range(4):
-        ok = (dr < 0) if a == 0 else ((dc > 0) if a == 1 else ((dr > 0) if a == 2 else dc < 0))
-        out[a] = 1.0 if ok and next_state[s, a] != s else 0.0
-        n += int(out[a])
-    for a in range(4):  # no way closer: nothing said (uniform over the four)
-        out[a] = 0.25 if n == 0 else (1.0 / n if out[a] > 0.0 else 0.0)
+        out[a] = 1.0 / n if a in (m0, m1) else 0.0
+
+
+@njit(cache=True)
+def guide_compass_route(
+    gmap: GuideArrays, g: int, goal: int, s: int, out: FloatArray
+) -> None:  # pragma: no cover
+    """``GuideMap.compass_route``: pc_g(. | s) for destination ``g`` (in state ``goal``)."""
+    next_state, _, cells, _, _, _, detour = gmap
+    if s == goal or detour[g, s] < 0:
+        guide_open(gmap, s, out)
+        return
+    m0, m1 = guide_own_moves(next_state, cells, goal, s)
+    best = -1
+    for a in range(4):  # out[a]: moves it would not make, counting this one (-1: shut)
+        out[a] = -1.0
+        t = next_state[s, a]
+        if t != s:
+            own = a in (m0, m1)
+            cost = detour[g, t] + (0 if own else 1)
+            out[a] = cost + (0.0 if own else 0.5)  # .5 marks a move it would not make
+            if best < 0 or cost < best:
+                best = cost
+    n_own = 0
+    n_any = 0
+    for a in range(4):
+        if out[a] >= 0.0 and math.floor(out[a]) == best:
+            n_any += 1
+            if out[a] == best:
+                n_own += 1
+    for a in range(4):
+        if out[a] >= 0.0 and math.floor(out[a]) == best and (n_own == 0 or out[a] == best):
+            out[a] = 1.0 / (n_own if n_own > 0 else n_any)
+        else:
+            out[a] = 0.0
 
 
 @njit(cache=True)
@@ -378,7 +431,7 @@ def guide_append(
     """``GuideAdvisor.append``: fade the evidence, add log P(a | s, k), rule out a destination
     the explorer stood on. ``goals`` holds each destination's state; ``advised``: the last
     decision, for ``s``, gave ``advice`` (4,); ``pi`` is scratch (4,)."""
-    lam, _, slack, _, bump = params
+    lam, _, slack, _, bump, _ = params
     next_state = gmap[0]
     guide_open(gmap, s, pi)
     lo = (1.0 - bump) * pi[a] + bump / 4.0
@@ -395,7 +448,8 @@ def guide_append(
         pa = pi[a]
         guide_compass(gmap, goals[g], s, pi)
         ca = pi[a]
-        if advised:  # C_g follows advice or its compass where advice is given
+        if advised:  # they take the advice or their own way, half each
+            pa = 0.5 * (pa + advice[a])
             ca = 0.5 * (ca + advice[a])
         k = 4 + 3 * g
         ll[k] = lam * ll[k] + math.log((1.0 - slack) * pa + slack / 4.0)
@@ -404,6 +458,12 @@ def guide_append(
     gi = gmap[4][s]
     if gi >= 0:
         alive[gi] = False
+        passed_all = True
+        for g in range(alive.shape[0]):
+            passed_all = passed_all and not alive[g]
+        if passed_all:  # it passed every one: the others count again
+            for g in range(alive.shape[0]):
+                alive[g] = g != gi
     return a if next_state[s, a] != s else heading
 
 
@@ -427,14 +487,82 @@ def guide_wall(next_state: IntArray, s: int, heading: int, w: int) -> int:  # pr
 
 
 @njit(cache=True)
+def guide_drift(gmap: GuideArrays, t: int, s: int) -> float:  # pragma: no cover - compiled
+    """``GuideMap.drift``: the mean change of the BFS distance to destination ``t`` over the
+    open moves of ``s`` (0 at ``t``, where it cannot be reached, or with no open move)."""
+    next_state, dist = gmap[0], gmap[3]
+    here = dist[t, s]
+    if here <= 0:
+        return 0.0
+    n = 0
+    change = 0
+    for a in range(4):
+        u = next_state[s, a]
+        if u != s:
+            n += 1
+            change += dist[t, u] - here
+    return change / n if n > 0 else 0.0
+
+
+@njit(cache=True)
+def guide_first_of_tour(
+    dist: IntArray, goals: IntArray, alive: BoolArray, any_alive: bool, s: int, max_tour: int
+) -> int:  # pragma: no cover - compiled
+    """``GuideMap.first_of_tour``: the first destination of the shortest walk from ``s``
+    through every destination not ruled out (all of them when ``any_alive`` is false) that
+    ``s`` reaches; exact for up to ``max_tour`` of them, the nearest beyond; -1 if none."""
+    todo = np.empty(goals.shape[0], dtype=np.int64)
+    n = 0
+    for g in range(goals.shape[0]):
+        if (alive[g] or not any_alive) and dist[g, s] >= 0:
+            todo[n] = g
+            n += 1
+    if n == 0:
+        return -1
+    if n > max_tour:
+        first = int(todo[0])
+        for j in range(1, n):
+            if dist[todo[j], s] < dist[first, s]:
+                first = int(todo[j])
+        return first
+    full = (1 << n) - 1
+    inf = 1 << 60
+    rest = np.full((full + 1, n), inf, dtype=np.int64)
+    for mask in range(1, full + 1):
+        for j in range(n):
+            if not mask & (1 << j):
+                continue
+            others = mask & ~(1 << j)
+            if others == 0:
+                rest[mask, j] = 0
+                continue
+            here = goals[todo[j]]
+            best = inf
+            for k in range(n):
+                if others & (1 << k):
+                    c = dist[todo[k], here] + rest[others, k]
+                    if c < best:
+                        best = c
+            rest[mask, j] = best
+    first = -1
+    first_cost = inf
+    for j in range(n):
+        c = dist[todo[j], s] + rest[full, j]
+        if c < first_cost:
+            first = int(todo[j])
+            first_cost = c
+    return first
+
+
+@njit(cache=True)
 def guide_decide(
     gmap: GuideArrays, params: GuideParams, goals: IntArray, ll: FloatArray, alive: BoolArray,
     target: int, heading: int, s: int, theta: FloatArray, scratch: FloatArray,
 ) -> tuple[float, float, int]:  # pragma: no cover - compiled  # fmt: skip
-    """``GuideAdvisor.decide``: fills ``theta`` (4,) with the advice; returns (KL, 1 - P(lost |
-    H), the target). ``heading``: the last move that moved (-1: none). ``scratch`` is
-    (4 + 3 G + 8 G + 4,)."""
-    _, p_lost, slack, spread, bump = params
+    """``GuideAdvisor.decide``: fills ``theta`` (4,) with the advice; returns (the value
+    compared with kappa, 1 - P(lost | H), the target). ``heading``: the last move that moved
+    (-1: none). ``scratch`` is (4 + 3 G + 12 G + 4,)."""
+    _, p_lost, slack, spread, bump, max_tour = params
     dist = gmap[3]
     n_goals = alive.shape[0]
     n_models = 4 + 3 * n_goals
@@ -473,30 +601,26 @@ def guide_decide(
     # each destination's policies here, and the target
     pis = scratch[n_models : n_models + 4 * n_goals].reshape((n_goals, 4))
     cs = scratch[n_models + 4 * n_goals : n_models + 8 * n_goals].reshape((n_goals, 4))
-    best = -1
-    best_score = -1.0
-    cur = -1.0
+    pcs = scratch[n_models + 8 * n_goals : n_models + 12 * n_goals].reshape((n_goals, 4))
     for g in range(n_goals):
-        if not (alive[g] or not any_alive):
-            continue
-        guide_policy(gmap, g, s, pis[g])
-        guide_compass(gmap, goals[g], s, cs[g])
-        d = dist[g, s]
-        if d < 0:
-            continue
-        k = 4 + 3 * g
-        score = (post[k] + post[k + 1] + post[k + 2] + lost / n_alive) / (d + 1.0)
-        if score > best_score:
-            best = g
-            best_score = score
-        if g == target:
-            cur = score
-    if target < 0 or cur < 0.0 or best_score > 2.0 * cur:
-        target = best
-    pi_t = scratch[n_models + 8 * n_goals :]
-    if target >= 0:
+        if alive[g] or not any_alive:
+            guide_policy(gmap, g, s, pis[g])
+            guide_compass(gmap, goals[g], s, cs[g])
+            guide_compass_route(gmap, g, goals[g], s, pcs[g])
+    if target < 0 or not (alive[target] or not any_alive):
+        target = guide_first_of_tour(dist, goals, alive, any_alive, s, max_tour)
+    pi_t = scratch[n_models + 12 * n_goals :]
+    if target >= 0:  # r_T: one shortest move (the heaviest; the heading on a tie)
+        pick = -1
         for a in range(4):
-            pi_t[a] = pis[target, a]
+            if (
+                pick < 0
+                or pis[target, a] > pis[target, pick]
+                or (pis[target, a] == pis[target, pick] and a == heading)
+            ):
+                pick = a
+        for a in range(4):
+            pi_t[a] = 1.0 if a == pick else 0.0
     else:
         guide_open(gmap, s, pi_t)
     op = theta  # the open moves' policy, read before theta is written in its place
@@ -513,7 +637,7 @@ def guide_decide(
         for g in range(n_goals):
             if alive[g] or not any_alive:
                 k = 4 + 3 * g
-                v += (post[k] + post[k + 1] + post[k + 2]) * pis[g, a]
+                v += (post[k] + post[k + 1]) * pis[g, a] + post[k + 2] * pcs[g, a]
                 m += post[k] * ((1.0 - slack) * pis[g, a] + slack / 4.0)
                 m += post[k + 1] * ((1.0 - slack) * pis[g, a] + slack * lo)
                 m += post[k + 2] * ((1.0 - slack) * cs[g, a] + slack * lo)
@@ -521,6 +645,14 @@ def guide_decide(
         theta[a] = th
         if th > 0.0:
             kl += th * (math.log(th) - math.log(m))
+    if target >= 0:  # the value: weighted by what a lost explorer's move costs here
+        kl = kl * (1.0 + lost * guide_drift(gmap, target, s))
+    best = 0  # the advice: theta's favourite move
+    for a in range(4):
+        if theta[a] > theta[best]:
+            best = a
+    for a in range(4):
+        theta[a] = (1.0 - spread) * (1.0 if a == best else 0.0) + spread / 4.0
     return (kl if kl > 0.0 else 0.0), 1.0 - lost, target
 
 
@@ -529,8 +661,8 @@ def guide_buffers(
     n_goals: int,
 ) -> tuple[FloatArray, FloatArray, FloatArray]:  # pragma: no cover - compiled
     """What :func:`guide_decide` and :func:`guide_append` need besides the session's state:
-    its scratch (4 + 3 G + 8 G + 4,), ``pi`` (4,) and ``theta`` (4,)."""
-    return np.empty(4 + 11 * n_goals + 4), np.empty(4), np.empty(4)
+    its scratch (4 + 3 G + 12 G + 4,), ``pi`` (4,) and ``theta`` (4,)."""
+    return np.empty(4 + 15 * n_goals + 4), np.empty(4), np.empty(4)
 
 
 @njit(cache=True)

@@ -9,8 +9,8 @@ its next action ``a`` at ``s`` (docs/ARCHITECTURE.md has the equations beside th
     L4      lost, any action:                1/4
     LO      lost, any open move:             lo(a | s) = (1 - b) open(s, a) / n_open(s) + b/4
     WL, WR  lost, a hand on the wall:        (1 - slack) [a = w(s, h)]' + slack lo(a | s)
-    D4_g    on its way to destination g:     (1 - slack) pi_g(a | s) + slack/4
-    DO_g    the same, never into a wall:     (1 - slack) pi_g(a | s) + slack lo(a | s)
+    D4_g    on its way to destination g:     (1 - slack) pi_g(a | s)' + slack/4
+    DO_g    the same, never into a wall:     (1 - slack) pi_g(a | s)' + slack lo(a | s)
     C_g     heading for g as the crow flies: (1 - slack) c_g(a | s)' + slack lo(a | s)
 
 * ``w(s, h)``: the move of someone keeping the left (WL) or right (WR) hand on the wall,
@@ -19,12 +19,13 @@ its next action ``a`` at ``s`` (docs/ARCHITECTURE.md has the equations beside th
   1 + the experts' goal-``g`` count of (s, a), so that among shortest moves the experts'
   routes are preferred; at ``g`` itself, or where ``g`` cannot be reached, uniform over the
   open moves.
-* ``c_g``: uniform over the open moves that shorten the straight (Manhattan) distance to
-  ``g``: someone who heads for where the destination is and meets a wall; where no move does,
-  uniform over the four (it says nothing).
-* ``'``: where the last decision advised theta at ``s``, the rule's indicator or c_g is
-  averaged with theta_s: these explorers take the advice or their own way, and undo the
-  advice afterwards, so a detour must be advised step by step.
+* ``c_g``: the move of someone who heads for where ``g`` is (the paper's "bug"): along the
+  axis of the larger row or column difference if that way is open, else along the other axis
+  if that way is open (both on a tie); where neither is, uniform over the open moves.
+* ``'``: on a move where the last decision advised, each of these explorers takes the
+  advice or its own way, half each (its rule, pi_g or c_g averaged with the advice): they
+  follow advice, and those that have a way of their own go back to it when it stops, so a
+  detour must be advised step by step.
 
 The evidence fades with time constant W, the session's window::
 
@@ -33,21 +34,32 @@ The evidence fades with time constant W, the session's window::
                                                   3 n_alive P(D4_g) = ... = 1 - p_lost
 
 A destination is ruled out once the explorer stood on it and went on (its task would have
-ended there); if every one is, all count again. The advice leads to a *target* T, the
-destination not ruled out with the largest (P(g | H) + P(lost | H) / n_alive) / (d_g(s) + 1),
-where P(g | H) = P(D4_g | H) + P(DO_g | H) + P(C_g | H), kept until it is ruled out or another
-scores more than twice as much (no flapping between two)::
+ended there); when the last one is, the others count again. A lost explorer is led to a
+*target* T: the first destination of the shortest walk from where it is through every
+destination not ruled out (it could be going to any of them), planned again when T is ruled
+out. With P(lost | H) the sum over L4, LO, WL, WR::
 
-    theta_s     = (1 - spread) [P(lost | H) pi_T(s) + sum_g P(g | H) pi_g(s)] + spread/4
+    theta_s     = P(lost | H) r_T(s) + sum_g [P(D4_g | H) + P(DO_g | H)] pi_g(s)
+                                     + sum_g P(C_g | H) pc_g(s)
     P(A | s, H) = sum_k P(k | H) P(A | s, k)
-    advise  iff  KL[theta_s || P(A | s, H)] >= kappa           (the paper's eq. 6 and cost)
+    value       = KL[theta_s || P(A | s, H)] (1 + P(lost | H) delta_T(s))
+    advise  iff  value >= kappa; the advice: (1 - spread) [a = argmax theta_s] + spread/4
 
-A competent explorer is explained by some D_g, so the prediction already is the advice and
-nothing is said; a lost one is explained by a lost model and is led; one that heads for its
-destination into a wall is explained by C_g and is shown the way round. P(M1 | H) is
-reported as 1 - P(lost | H). This is plain Python in a fixed order; app/kernels.py's
-guide_decide, guide_append and guide_stream are the same arithmetic, compiled, and the tests
-compare them bit for bit.
+* ``r_T``: one shortest move towards T (the heaviest of ``pi_T``; the heading on a tie).
+* ``pc_g``: the way to ``g`` for someone who moves as ``c_g``: the moves after which the
+  fewest moves it would not make by itself remain (:func:`~app.domain.grid.compass_detours`),
+  its own moves first.
+* ``delta_T(s)``: how far a random open move from ``s`` takes a lost explorer from T, on
+  average (BFS distance); advice saves 1 + delta_T moves where it saves 1 in the open, so the
+  paper's KL (eq. 3's stand-in for the benefit) is weighted by it.
+
+A competent explorer is explained by some D_g, so the prediction already is what it should do
+and nothing is said; a lost one is explained by a lost model and is led, most insistently
+where a random move costs most; one that heads for its destination by the compass is explained
+by C_g and is shown only the moves it would not make. P(M1 | H) is reported as 1 - P(lost |
+H), and the value compared with kappa as the decision's KL. This is plain Python in a fixed
+order; app/kernels.py's guide_decide, guide_append and guide_stream are the same arithmetic,
+compiled, and the tests compare them bit for bit.
 """
 
 from __future__ import annotations
@@ -61,7 +73,7 @@ import numpy.typing as npt
 from app.advice.advisor import DEFAULT_KAPPA, DEFAULT_WINDOW, Advisor, Decision
 from app.advice.models import AdviceTables
 from app.advice.priors import GoalPriors
-from app.domain.grid import N_ACTIONS, GridDomain
+from app.domain.grid import N_ACTIONS, GridDomain, compass_detours
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -70,9 +82,9 @@ IntArray = npt.NDArray[np.int64]
 LOST_BUMP = 0.02
 #: the lost models: L4, LO, WL, WR
 N_LOST = 4
-#: a new target must score more than this many times the current one
-SWITCH = 2.0
-#: most destinations x states a guide map holds (its distances: 8 bytes each)
+#: most destinations a tour is planned through exactly (2^n n^2 steps; the nearest beyond)
+MAX_TOUR = 10
+#: most destinations x states a guide map holds (its distances and detours: 16 bytes each)
 MAX_GUIDE_CELLS = 16_777_216
 
 
@@ -89,6 +101,7 @@ class GuideMap:
     n_open: IntArray  # (S,) open moves per state
     cells: IntArray  # (S, 2) row, column
     dist: IntArray  # (G, S), -1 where unreachable
+    detour: IntArray  # (G, S) fewest moves against the compass on a way there, -1: none
     goal_of_state: IntArray  # (S,) destination index, -1 elsewhere
     counts: FloatArray  # (G, S * 4) experts' goal counts
     goals: tuple[int, ...]
@@ -112,6 +125,7 @@ class GuideMap:
             np.ascontiguousarray(domain.open_moves.sum(axis=1), dtype=np.int64),
             np.ascontiguousarray(domain.cells, dtype=np.int64),
             np.ascontiguousarray(domain.goal_distances, dtype=np.int64),
+            np.stack([compass_detours(domain.next_state, domain.cells, g) for g in goals]),
             of_state,
             np.zeros((len(goals), s * N_ACTIONS)),
             goals,
@@ -127,10 +141,13 @@ class GuideMap:
         return len(self.goals)
 
     @property
-    def arrays(self) -> tuple[IntArray, IntArray, IntArray, IntArray, IntArray, FloatArray]:
+    def arrays(
+        self,
+    ) -> tuple[IntArray, IntArray, IntArray, IntArray, IntArray, FloatArray, IntArray]:
         """As app/kernels.py reads it."""
         return (
             self.next_state, self.n_open, self.cells, self.dist, self.goal_of_state, self.counts,
+            self.detour,
         )  # fmt: skip
 
     @property
@@ -151,8 +168,8 @@ class GuideMap:
                 if gi is not None:
                     counts[i] = goal_priors.goal_counts[gi].reshape(-1)
         return GuideMap(
-            self.next_state, self.n_open, self.cells, self.dist, self.goal_of_state, counts,
-            self.goals,
+            self.next_state, self.n_open, self.cells, self.dist, self.detour, self.goal_of_state,
+            counts, self.goals,
         )  # fmt: skip
 
     def policy(self, g: int, s: int) -> list[float]:
@@ -168,21 +185,105 @@ class GuideMap:
             return [w[0] / tot, w[1] / tot, w[2] / tot, w[3] / tot]
         return self.open_policy(s)
 
-    def compass(self, g: int, s: int) -> list[float]:
-        """c_g(. | s): the open moves that shorten the straight distance to destination g."""
+    def compass_moves(self, g: int, s: int) -> list[int]:
+        """The moves of someone at ``s`` heading for destination g as the crow flies (the
+        paper's bug): along the axis of the larger row or column difference if that way is
+        open, else along the other axis if that way is open and brings it closer; both when
+        the differences are equal; none at g or where neither way is open."""
         gs = self.goals[g]
         dr = int(self.cells[gs, 0]) - int(self.cells[s, 0])
         dc = int(self.cells[gs, 1]) - int(self.cells[s, 1])
-        ok = [dr < 0, dc > 0, dr > 0, dc < 0]  # N, E, S, W
-        n = 0
+        vert = 0 if dr < 0 else 2
+        horiz = 1 if dc > 0 else 3
+        v_ok = dr != 0 and int(self.next_state[s, vert]) != s
+        h_ok = dc != 0 and int(self.next_state[s, horiz]) != s
+        if abs(dr) == abs(dc):
+            return [a for a, ok in ((vert, v_ok), (horiz, h_ok)) if ok]
+        first, second = ((vert, v_ok), (horiz, h_ok)) if abs(dr) > abs(dc) else (
+            (horiz, h_ok), (vert, v_ok))  # fmt: skip
+        return [first[0]] if first[1] else ([second[0]] if second[1] else [])
+
+    def compass(self, g: int, s: int) -> list[float]:
+        """c_g(. | s): uniform over :meth:`compass_moves`, over the open moves where there is
+        none (someone blocked both ways wanders)."""
+        moves = self.compass_moves(g, s)
+        if not moves:
+            return self.open_policy(s)
+        return [1.0 / len(moves) if a in moves else 0.0 for a in range(N_ACTIONS)]
+
+    def compass_route(self, g: int, s: int) -> list[float]:
+        """pc_g(. | s): the way to destination g for someone who heads there as the crow
+        flies: the open moves after which the fewest moves it would not make by itself remain
+        (``detour``), its own moves first; at g, or where g cannot be reached, uniform over
+        the open moves."""
+        if s == self.goals[g] or int(self.detour[g, s]) < 0:
+            return self.open_policy(s)
+        own = self.compass_moves(g, s)
+        cost = [-1, -1, -1, -1]  # moves it would not make, counting this one
+        best = -1
         for a in range(N_ACTIONS):
-            if ok[a] and int(self.next_state[s, a]) != s:
+            t = int(self.next_state[s, a])
+            if t != s:
+                cost[a] = int(self.detour[g, t]) + (0 if a in own else 1)
+                if best < 0 or cost[a] < best:
+                    best = cost[a]
+        pick = [a for a in range(N_ACTIONS) if cost[a] == best and a in own]
+        if not pick:
+            pick = [a for a in range(N_ACTIONS) if cost[a] == best]
+        return [1.0 / len(pick) if a in pick else 0.0 for a in range(N_ACTIONS)]
+
+    def drift(self, t: int, s: int) -> float:
+        """delta_t(s): the mean change of the BFS distance to destination t over the open
+        moves of s (0 at t, where t cannot be reached, or with no open move)."""
+        here = int(self.dist[t, s])
+        if here <= 0:
+            return 0.0
+        n = 0
+        change = 0
+        for a in range(N_ACTIONS):
+            u = int(self.next_state[s, a])
+            if u != s:
                 n += 1
-        if n == 0:  # no way closer: nothing said
-            return [0.25, 0.25, 0.25, 0.25]
-        return [
-            1.0 / n if ok[a] and int(self.next_state[s, a]) != s else 0.0 for a in range(N_ACTIONS)
-        ]
+                change += int(self.dist[t, u]) - here
+        return change / n if n > 0 else 0.0
+
+    def first_of_tour(self, s: int, alive: list[bool]) -> int:
+        """The destination to lead a lost explorer at ``s`` to first: the first of the
+        shortest walk from ``s`` through every destination of ``alive`` it can reach (exact
+        for up to ``MAX_TOUR`` of them, by dynamic programming over subsets; the nearest one
+        beyond that); -1 if it can reach none. Ties go to the lower index."""
+        todo = [i for i in range(self.n_goals) if alive[i] and int(self.dist[i, s]) >= 0]
+        if not todo:
+            return -1
+        if len(todo) > MAX_TOUR:
+            return min(todo, key=lambda i: (int(self.dist[i, s]), i))
+        n = len(todo)
+        full = (1 << n) - 1
+        inf = 1 << 60
+        # rest[mask][j]: the shortest walk from destination todo[j] through the others of mask
+        rest = [[inf] * n for _ in range(full + 1)]
+        for mask in range(1, full + 1):
+            for j in range(n):
+                if not mask & (1 << j):
+                    continue
+                others = mask & ~(1 << j)
+                if others == 0:
+                    rest[mask][j] = 0
+                    continue
+                here = self.goals[todo[j]]
+                best = inf
+                for k in range(n):
+                    if others & (1 << k):
+                        c = int(self.dist[todo[k], here]) + rest[others][k]
+                        if c < best:
+                            best = c
+                rest[mask][j] = best
+        first, first_cost = -1, inf
+        for j in range(n):
+            c = int(self.dist[todo[j], s]) + rest[full][j]
+            if c < first_cost:
+                first, first_cost = todo[j], c
+        return first
 
     def wall(self, s: int, heading: int, hand: int) -> int:
         """The move of a wall follower at ``s`` heading ``heading`` (-1: none yet, then its
@@ -214,10 +315,13 @@ class GuideParams:
     spread: float
 
 
-def kernel_params(window: int, p: GuideParams) -> tuple[float, float, float, float, float]:
-    """The parameters as app/kernels.py reads them: (lam, p_lost, slack, spread, bump), with
-    lam = 1 - 1/W the evidence's fading."""
-    return (1.0 - 1.0 / window, float(p.p_lost), float(p.slack), float(p.spread), LOST_BUMP)
+def kernel_params(window: int, p: GuideParams) -> tuple[float, float, float, float, float, int]:
+    """The parameters as app/kernels.py reads them: (lam, p_lost, slack, spread, bump,
+    MAX_TOUR), with lam = 1 - 1/W the evidence's fading."""
+    return (
+        1.0 - 1.0 / window, float(p.p_lost), float(p.slack), float(p.spread), LOST_BUMP,
+        MAX_TOUR,
+    )  # fmt: skip
 
 
 class GuideAdvisor(Advisor):
@@ -300,7 +404,8 @@ class GuideAdvisor(Advisor):
         for i in range(g.n_goals):
             pa = g.policy(i, state)[action]
             ca = g.compass(i, state)[action]
-            if advised:
+            if advised:  # they take the advice or their own way, half each
+                pa = 0.5 * (pa + self._last_advice[action])
                 ca = 0.5 * (ca + self._last_advice[action])
             k = N_LOST + 3 * i
             ll[k] = lam * ll[k] + math.log((1.0 - slack) * pa + slack / 4.0)
@@ -309,6 +414,8 @@ class GuideAdvisor(Advisor):
         gi = int(g.goal_of_state[state])
         if gi >= 0:  # it stood on this destination and went on: not its destination
             self.alive[gi] = False
+            if not any(self.alive):  # it passed every one: the others count again
+                self.alive = [i != gi for i in range(g.n_goals)]
         if int(g.next_state[state, action]) != state:
             self._heading = action
         self.steps += 1
@@ -360,29 +467,26 @@ class GuideAdvisor(Advisor):
         g = self.guide
         post = self.model_posterior()
         alive = self._alive()
-        n_alive = 0
-        for on in alive:
-            n_alive += 1 if on else 0
         lost = post[0] + post[1] + post[2] + post[3]
         pis = [g.policy(i, state) if alive[i] else None for i in range(g.n_goals)]
         cs = [g.compass(i, state) if alive[i] else None for i in range(g.n_goals)]
-        # the target: kept unless ruled out or clearly beaten
-        best, best_score = -1, -1.0
-        cur = -1.0
-        for i in range(g.n_goals):
-            d = int(g.dist[i, state])
-            if not alive[i] or d < 0:
-                continue
-            score = (self._p_goal(post, i) + lost / n_alive) / (d + 1.0)
-            if score > best_score:
-                best, best_score = i, score
-            if i == self._target:
-                cur = score
-        if self._target < 0 or cur < 0.0 or best_score > SWITCH * cur:
-            self._target = best
-        pi_t = pis[self._target] if self._target >= 0 else None
-        if pi_t is None:
-            pi_t = g.open_policy(state)
+        pcs = [g.compass_route(i, state) if alive[i] else None for i in range(g.n_goals)]
+        # the target: the first destination of the shortest tour through those not ruled
+        # out, planned again once it is ruled out
+        if self._target < 0 or not alive[self._target]:
+            self._target = g.first_of_tour(state, alive)
+        pi_t = g.open_policy(state)
+        target_pi = pis[self._target] if self._target >= 0 else None
+        if target_pi is not None:  # r_T: one shortest move (the heaviest; the heading on a tie)
+            pick = -1
+            for a in range(N_ACTIONS):
+                if (
+                    pick < 0
+                    or target_pi[a] > target_pi[pick]
+                    or (target_pi[a] == target_pi[pick] and a == self._heading)
+                ):
+                    pick = a
+            pi_t = [1.0 if a == pick else 0.0 for a in range(N_ACTIONS)]
         lo = self._lost_open(state)
         wl, wr = g.wall(state, self._heading, 0), g.wall(state, self._heading, 1)
         slack, spread = self.slack, self.spread
@@ -394,10 +498,10 @@ class GuideAdvisor(Advisor):
             m += post[2] * ((1.0 - slack) * (1.0 if a == wl else 0.0) + slack * lo[a])
             m += post[3] * ((1.0 - slack) * (1.0 if a == wr else 0.0) + slack * lo[a])
             for i in range(g.n_goals):
-                pi, c = pis[i], cs[i]
-                if pi is not None and c is not None:
+                pi, c, pc = pis[i], cs[i], pcs[i]
+                if pi is not None and c is not None and pc is not None:
                     k = N_LOST + 3 * i
-                    v += self._p_goal(post, i) * pi[a]
+                    v += (post[k] + post[k + 1]) * pi[a] + post[k + 2] * pc[a]
                     m += post[k] * ((1.0 - slack) * pi[a] + slack / 4.0)
                     m += post[k + 1] * ((1.0 - slack) * pi[a] + slack * lo[a])
                     m += post[k + 2] * ((1.0 - slack) * c[a] + slack * lo[a])
@@ -405,7 +509,15 @@ class GuideAdvisor(Advisor):
             theta[a] = th
             if th > 0.0:
                 kl += th * (math.log(th) - math.log(m))
+        if self._target >= 0:  # the value: weighted by what a lost explorer's move costs here
+            kl = kl * (1.0 + lost * g.drift(self._target, state))
         kl = kl if kl > 0.0 else 0.0
+        best = 0  # the advice: theta's favourite move
+        for a in range(N_ACTIONS):
+            if theta[a] > theta[best]:
+                best = a
+        for a in range(N_ACTIONS):
+            theta[a] = (1.0 - spread) * (1.0 if a == best else 0.0) + spread / 4.0
         row = (theta[0], theta[1], theta[2], theta[3])
         advise = kl >= self.kappa
         self._last = state if advise else -1

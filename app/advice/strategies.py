@@ -68,7 +68,7 @@ class StrategyParams:
         "drawn uniformly (1: no better than lost).",
     )  # fmt: skip
     spread: float = _param(
-        0.1, 0.0, 1.0, ("guide",),
+        0.05, 0.0, 1.0, ("guide",),
         "guide: share of the advice spread evenly over the four actions (0: only moves towards "
         "the destination).",
     )  # fmt: skip

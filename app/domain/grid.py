@@ -409,3 +409,63 @@ def _check_reachable(rows: list[str], start: tuple[int, int]) -> None:
                     line=i + 1,
                     column=j + 1,
                 )
+
+
+def compass_moves(next_state: IntArray, cells: IntArray, target: int) -> BoolArray:
+    """``out[s, a]``: ``a`` is a move of someone at ``s`` who heads for ``target`` as the crow
+    flies (the paper's "bug"): along the axis of the larger row or column difference if that
+    way is open, else along the other axis if that way is open and brings it closer; both
+    axes when the differences are equal. No move where neither way is open (it then wanders
+    among the open moves) and none at ``target``."""
+    n = next_state.shape[0]
+    dr = cells[target, 0] - cells[:, 0]
+    dc = cells[target, 1] - cells[:, 1]
+    vert = np.where(dr < 0, 0, 2)  # N or S
+    horiz = np.where(dc > 0, 1, 3)  # E or W
+    rows = np.arange(n)
+    v_ok = (dr != 0) & (next_state[rows, vert] != rows)
+    h_ok = (dc != 0) & (next_state[rows, horiz] != rows)
+    tie = np.abs(dr) == np.abs(dc)
+    v_major = np.abs(dr) > np.abs(dc)
+    take_v = np.where(tie, v_ok, np.where(v_major, v_ok, ~h_ok & v_ok))
+    take_h = np.where(tie, h_ok, np.where(v_major, ~v_ok & h_ok, h_ok))
+    out = np.zeros((n, 4), dtype=np.bool_)
+    out[rows, vert] |= take_v
+    out[rows, horiz] |= take_h
+    return out
+
+
+def compass_detours(next_state: IntArray, cells: IntArray, target: int) -> IntArray:
+    """Fewest moves on any way from every state to ``target`` that someone heading there as
+    the crow flies (:func:`compass_moves`) would not make by itself (``-1`` if none): the
+    moves it must be shown.
+
+    A 0-1 breadth-first search outward from ``target``, level by level: each level first
+    takes in every state whose own move leads into the level (cost 0), then the next level
+    starts from every free neighbour of it (cost 1). Moves are reversible on a grid: the
+    state ``u`` that move ``a`` of ``v`` reaches reaches ``v`` by the opposite move.
+    """
+    n = next_state.shape[0]
+    own = compass_moves(next_state, cells, target)
+    out = np.full(n, UNREACHABLE, dtype=np.int64)
+    level = 0
+    seeds = np.array([target], dtype=np.int64)
+    while seeds.size:
+        out[seeds] = level
+        members = [seeds]
+        frontier = seeds
+        while frontier.size:  # states whose own move leads into the level
+            found = []
+            for a in range(4):
+                u = next_state[frontier, a]
+                back = (a + 2) % 4  # u's move into the frontier
+                hit = (u != frontier) & own[u, back] & (out[u] == UNREACHABLE)
+                found.append(u[hit])
+            cand = np.unique(np.concatenate(found))
+            out[cand] = level
+            members.append(cand)
+            frontier = cand
+        level += 1
+        nbrs = np.unique(next_state[np.concatenate(members)].ravel())
+        seeds = nbrs[out[nbrs] == UNREACHABLE]
+    return out

@@ -1,5 +1,6 @@
 from __future__ import annotations
 
+import heapq
 from collections import deque
 
 import numpy as np
@@ -7,13 +8,15 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from app.domain.generate import generate_maze
+from app.domain.generate import generate_building, generate_maze
 from app.domain.grid import (
     ACTIONS,
     MOVES,
     GridDomain,
     MapError,
     action_index,
+    compass_detours,
+    compass_moves,
     validate_map,
 )
 from app.domain.maps import DEFAULT_MAP
@@ -84,6 +87,63 @@ def test_grid_bfs_distances_match_slow_version(rows: list[str]) -> None:
         slow = slow_bfs(rows, d.cell(g))
         fast = d.distances_to(g)
         assert all(fast[s] == slow[d.cell(s)] for s in range(d.n_states))
+
+
+def slow_compass_moves(rows: list[str], r: int, c: int, target: tuple[int, int]) -> set[int]:
+    """Someone heading for ``target`` as the crow flies (the paper's bug, spelled out): the
+    axis of the larger difference first if open, else the other if open; both on a tie."""
+    dr, dc = target[0] - r, target[1] - c
+    vertical = [2 if dr > 0 else 0] if dr != 0 else []
+    horizontal = [1 if dc > 0 else 3] if dc != 0 else []
+    open_ = [a for a in vertical + horizontal if slow_next_state(rows, r, c, a) != (r, c)]
+    if abs(dr) == abs(dc):
+        return set(open_)
+    order = vertical + horizontal if abs(dr) > abs(dc) else horizontal + vertical
+    return {next(a for a in order if a in open_)} if open_ else set()
+
+
+def slow_detours(rows: list[str], target: tuple[int, int]) -> dict[tuple[int, int], int]:
+    """Dijkstra over cells: a move costs 0 if it is one of the mover's own compass moves."""
+    free = [(r, c) for r, row in enumerate(rows) for c, ch in enumerate(row) if ch != "#"]
+    into: dict[tuple[int, int], list[tuple[tuple[int, int], int]]] = {}
+    for cell in free:
+        for a in range(4):
+            nxt = slow_next_state(rows, *cell, a)
+            if nxt != cell:
+                into.setdefault(nxt, []).append((cell, a))
+    best = {target: 0}
+    queue = [(0, target)]
+    while queue:
+        cost, v = heapq.heappop(queue)
+        if cost > best[v]:
+            continue
+        for u, a in into.get(v, []):
+            c = cost + (0 if a in slow_compass_moves(rows, *u, target) else 1)
+            if c < best.get(u, 1 << 30):
+                best[u] = c
+                heapq.heappush(queue, (c, u))
+    return best
+
+
+buildings = st.builds(
+    lambda rows, cols, seed: generate_building(rows, cols, np.random.default_rng(seed), n_goals=3),
+    st.integers(16, 30),
+    st.integers(16, 30),
+    st.integers(0, 10_000),
+)
+
+
+@given(st.one_of(maps, buildings))
+def test_compass_moves_and_detours_match_slow_versions(rows: list[str]) -> None:
+    d = GridDomain.from_strings(rows)
+    for g in d.goals:
+        target = d.cell(g)
+        own = compass_moves(d.next_state, d.cells, g)
+        slow = slow_detours(rows, target)
+        fast = compass_detours(d.next_state, d.cells, g)
+        for s in range(d.n_states):
+            assert set(np.flatnonzero(own[s])) == slow_compass_moves(rows, *d.cell(s), target)
+            assert fast[s] == slow[d.cell(s)]
 
 
 @given(maps)
