@@ -1,7 +1,7 @@
 """``python -m app simulate``: simulated explorers walk a domain through the live service.
 
 Each explorer (:mod:`app.agents.explorers`) gets a random hidden goal per episode, opens a
-session, and reports every move over the session's websocket with :mod:`app.client`. With
+session, and reports every move over the session's websocket with :mod:`advisor_client`. With
 ``--advice on`` an advised explorer samples its next action from the advice (the paper's
 protocol); with ``off`` the service still watches and decides, but the explorer ignores it.
 The map comes from the server (``GET /domains/{name}``); nothing here touches service internals.
@@ -17,11 +17,11 @@ import httpx
 import numpy as np
 import numpy.typing as npt
 import typer
+from advisor_client import AdvisorError, AsyncAdvisorClient
+from advisor_client.types import Decision
 
 from app.advice.strategies import STRATEGIES
 from app.agents.explorers import FIXED_EXPLORERS, make_explorer
-from app.client import AdvisorError, AsyncAdvisorClient
-from app.client.types import Decision
 from app.domain.grid import ACTIONS, GridDomain
 
 

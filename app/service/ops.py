@@ -154,7 +154,7 @@ def apply_positions(state: ServiceState, session: LiveSession, body: PositionsIn
 
 def apply_events_binary(state: ServiceState, session: LiveSession, raw: bytes | str) -> bytes:
     """Events (JSON text: one or a list) -> decisions as one binary frame
-    (:mod:`app.protocol`), the same decisions as :func:`apply_events` gives."""
+    (:mod:`advisor_client.protocol`), the same decisions as :func:`apply_events` gives."""
     grid = session.domain.domain
     moves, _ = read_moves(grid, raw, state.settings.max_batch_events)
     out = state.registry.observe_batch(session, moves)

@@ -6,7 +6,8 @@ import subprocess
 import sys
 from pathlib import Path
 
-from app.client import AdvisorClient
+from advisor_client import AdvisorClient
+
 from tests.client.conftest import REPO, Server, start_server, stop_server
 
 
