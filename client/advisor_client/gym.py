@@ -119,7 +119,7 @@ def cell_of_observation(obs: Any) -> tuple[int, int]:
         ) from None
 
 
-class AdvisedEnv(gym.Wrapper[Any, Any, Any, Any]):
+class AdvisedEnv(gym.Wrapper[Any, Any, Any, Any], gym.utils.RecordConstructorArgs):
     """Reports each step to the advice service; the decision goes in ``info["decision"]``.
 
     ``cell_of`` maps an observation to ``(row, col)`` (default: :func:`cell_of_observation`,
@@ -142,7 +142,12 @@ class AdvisedEnv(gym.Wrapper[Any, Any, Any, Any]):
         cell_of: Callable[[Any], tuple[int, int]] = cell_of_observation,
         action_names: Sequence[str] = ACTIONS,
     ):
-        super().__init__(env)
+        gym.utils.RecordConstructorArgs.__init__(
+            self, _disable_deepcopy=True, client=client, domain=domain, kappa=kappa,
+            window=window, agent_type=agent_type, follow_advice=follow_advice, cell_of=cell_of,
+            action_names=action_names,
+        )  # fmt: skip
+        gym.Wrapper.__init__(self, env)
         self.client = client
         self.domain = domain
         self.options = {"kappa": kappa, "window": window, "agent_type": agent_type}
@@ -160,10 +165,16 @@ class AdvisedEnv(gym.Wrapper[Any, Any, Any, Any]):
         obs, info = self.env.reset(seed=seed, options=options)
         self._end_session()
         self.cell = self.cell_of(obs)
+        self.domain = self.domain_for(obs, info, seed)
         self.session = self.client.create_session(self.domain, start=self.cell, **self.options)  # type: ignore[arg-type]
         self.stream = self.client.stream(self.session)
         self.decision = self.session.decision
         return obs, {**info, "decision": self.decision, "session_id": self.session.session_id}
+
+    def domain_for(self, obs: Any, info: dict[str, Any], seed: int | None) -> str:
+        """The domain of the episode that ``reset`` began (here: always the one given;
+        :class:`~advisor_client.minigrid.AdvisedMiniGrid` makes one per layout)."""
+        return self.domain
 
     def advised_action(self) -> int | None:
         """An action sampled from the current advice, if the last decision advised."""
