@@ -6,6 +6,7 @@ import json
 import logging
 from pathlib import Path
 
+import httpx
 from fastapi.testclient import TestClient
 from prometheus_client import REGISTRY
 from prometheus_client.parser import text_string_to_metric_families
@@ -139,3 +140,28 @@ def test_event_routes_are_left_out_of_the_access_log_others_are_kept() -> None:
     assert not keep.filter(ws)
     other = logging.LogRecord("uvicorn.error", logging.INFO, "", 0, "Started server", None, None)
     assert keep.filter(other)
+
+
+def test_a_live_server_counts_event_routes_instead_of_logging_them(tmp_path: Path) -> None:
+    from websockets.sync.client import connect
+
+    from tests.reliability.conftest import start, stop
+
+    live = start(tmp_path / "data", log_level="info")
+    try:
+        with httpx.Client(base_url=live.url, timeout=10) as http:
+            created = http.post("/domains/default/sessions", json={}).json()
+            sid, token = created["session_id"], created["token"]
+            auth = {"Authorization": f"Bearer {token}"}
+            assert http.post(f"/sessions/{sid}/events", json=E, headers=auth).status_code == 200
+            with connect(live.url.replace("http", "ws") + f"/sessions/{sid}/stream?token={token}"):
+                pass
+            assert http.get(f"/sessions/{sid}", headers=auth).status_code == 200
+            counted = http.get("/metrics").text
+    finally:
+        stop(live)
+    log = live.log.read_text(errors="replace")
+    assert f'"GET /sessions/{sid} HTTP/1.1" 200' in log  # other routes keep their line
+    assert f"/sessions/{sid}/events" not in log and f"/sessions/{sid}/stream" not in log
+    assert 'route="/sessions/{session_id}/events",status="200"} 1.0' in counted
+    assert 'method="WS",route="/sessions/{session_id}/stream",status="101"} 1.0' in counted
