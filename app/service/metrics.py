@@ -12,8 +12,9 @@ log", measures the difference).
 
 Several worker processes: set ``PROMETHEUS_MULTIPROC_DIR`` (an empty directory, before the
 workers start), as prometheus-client's multiprocess mode asks; ``/metrics`` then sums the
-workers' files, and the live-sessions gauge is the sum over live workers (``livesum``), each
-worker refreshing its own value at every scrape it answers and every few seconds.
+workers' files, and the live-sessions gauge is the sum over live workers (``livesum``: a
+worker that exits is reported with ``multiprocess.mark_process_dead(pid)``), each worker
+refreshing its own value at every scrape it answers and every few seconds.
 """
 
 from __future__ import annotations

@@ -165,3 +165,46 @@ def test_a_live_server_counts_event_routes_instead_of_logging_them(tmp_path: Pat
     assert f"/sessions/{sid}/events" not in log and f"/sessions/{sid}/stream" not in log
     assert 'route="/sessions/{session_id}/events",status="200"} 1.0' in counted
     assert 'method="WS",route="/sessions/{session_id}/stream",status="101"} 1.0' in counted
+
+
+def test_metrics_add_up_the_workers_in_prometheus_multiprocess_mode(tmp_path: Path) -> None:
+    """Two worker processes count; a third answers /metrics with their sums."""
+    import os
+    import subprocess
+    import sys
+
+    env = os.environ | {"PROMETHEUS_MULTIPROC_DIR": str(tmp_path)}
+    work = (
+        "from app.service.metrics import METRICS, SESSIONS\n"
+        "METRICS.request('GET', '/health', 200, 0.002)\n"
+        "METRICS.decisions('default', 'paper', 3, 1)\n"
+        "SESSIONS.labels('default').set(2)\n"
+        "import os; print(os.getpid())\n"
+    )
+    pids = [
+        subprocess.run(
+            [sys.executable, "-c", work], env=env, check=True, timeout=120, capture_output=True
+        ).stdout.split()[-1]
+        for _ in range(2)
+    ]
+    # the first worker has exited (as a process manager reports to prometheus-client)
+    show = (
+        "from prometheus_client import multiprocess\n"
+        f"multiprocess.mark_process_dead({int(pids[0])})\n"
+        "from app.service.metrics import exposition; print(exposition().decode())"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", show], env=env, check=True, capture_output=True, text=True
+    ).stdout
+    samples = {
+        (s.name, tuple(sorted(s.labels.items()))): s.value
+        for f in text_string_to_metric_families(out)
+        for s in f.samples
+    }
+    health = (("method", "GET"), ("route", "/health"), ("status", "200"))
+    assert samples[("advisor_http_requests_total", health)] == 2
+    paper = (("domain", "default"), ("strategy", "paper"))
+    assert samples[("advisor_decisions_total", paper)] == 6
+    assert samples[("advisor_advice_total", paper)] == 2
+    # live sessions: the sum over workers not reported dead
+    assert samples[("advisor_live_sessions", (("domain", "default"),))] == 2
