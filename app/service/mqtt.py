@@ -15,16 +15,18 @@ for TLS). With ``P`` the prefix (``ADVISOR_MQTT_PREFIX``, ``advisor``):
   unknown domain, a wall...), as the websocket's error frames; nothing changed.
 
 Explorer ids follow the rule of domain names. QoS 1 both ways: the bridge handles one message
-at a time and takes the next only once the broker has acknowledged every decision of the one
-before; decisions not acknowledged when the connection drops are published again after it
-reconnects (at least once, as QoS 1 is). It reconnects with a backoff of up to 10 s, and keeps
+at a time, acknowledges it, and takes the next only once the broker has acknowledged every
+decision of the one before; decisions not acknowledged when the connection drops are published
+again after it reconnects (at least once, as QoS 1 is). It reconnects with a backoff of up to 10 s, and keeps
 its broker session for a minute (MQTT v5 session expiry) so that what was published meanwhile
 waits for it.
 
 Memory is bounded whatever is published: a message larger than ``ADVISOR_MAX_BODY_BYTES`` is
-refused, at most ``ADVISOR_MQTT_QUEUE`` messages wait to be handled (aiomqtt drops newer ones
-with a warning), and the bridge keeps sessions and configs for ``ADVISOR_MQTT_MAX_EXPLORERS``
-explorers at most (the least recently heard from go first, their sessions ended).
+refused; each message is acknowledged once handled, and the broker sends at most
+``ADVISOR_MQTT_QUEUE`` unacknowledged ones (the connection's Receive Maximum), so a fast
+publisher waits at the broker rather than here, and nothing is dropped; the bridge keeps
+sessions and configs for ``ADVISOR_MQTT_MAX_EXPLORERS`` explorers at most (the least recently
+heard from go first, their sessions ended).
 
 Sessions live in one process's memory, so one bridge serves a data directory: with several
 workers, the first to lock ``<data_dir>/mqtt-bridge.lock`` runs it and the others wait to take
@@ -138,8 +140,12 @@ class Bridge:
             await asyncio.sleep(2.0)
         backoff = 0.5
         while True:
+            connection = self._client()
+            # acknowledged once handled: the broker sends at most ``queue`` unacknowledged
+            # messages (the connection's Receive Maximum), so none waits beyond that here
+            connection._client.manual_ack_set(True)
             try:
-                async with self._client() as client:
+                async with connection as client:
                     backoff = 0.5
                     await self._flush(client)
                     await client.subscribe(self.topic("+", "+", "config"), qos=1)
@@ -147,7 +153,10 @@ class Bridge:
                     self.connected.set()
                     log.info("MQTT bridge connected to %s:%d", self.broker.host, self.broker.port)
                     async for message in client.messages:
-                        await self.handle(client, str(message.topic), _bytes(message.payload))
+                        await self.handle(str(message.topic), _bytes(message.payload))
+                        if message.qos:
+                            client._client.ack(message.mid, message.qos)
+                        await self._flush(client)
             except aiomqtt.MqttError as exc:
                 self.connected.clear()
                 log.warning("MQTT bridge: %s; reconnecting in %.1f s", exc, backoff)
@@ -175,6 +184,7 @@ class Bridge:
     def _client(self) -> aiomqtt.Client:
         props = Properties(PacketTypes.CONNECT)  # type: ignore[no-untyped-call]
         props.SessionExpiryInterval = SESSION_EXPIRY
+        props.ReceiveMaximum = min(self.queue, 65_535)
         b = self.broker
         return aiomqtt.Client(
             b.host, b.port, username=b.username, password=b.password,
@@ -201,7 +211,8 @@ class Bridge:
             raise aiomqtt.MqttError(f"publishing failed: {failed}")
 
     # ---- one message ----------------------------------------------------------------------
-    async def handle(self, client: aiomqtt.Client, topic: str, payload: bytes) -> None:
+    async def handle(self, topic: str, payload: bytes) -> None:
+        """One message: its decisions (or its error) join :attr:`pending`, to be published."""
         parsed = self._parse(topic)
         if parsed is None:
             return
@@ -223,7 +234,6 @@ class Bridge:
             out = self.topic(domain, explorer, "decisions")
             self.pending.extend((out, d) for d in decisions)
             MQTT_MESSAGES.labels("out", "decisions").inc(len(decisions))
-        await self._flush(client)
 
     def configure(self, key: Key, payload: bytes) -> None:
         """A retained config: the options of the explorer's next session (an empty payload
