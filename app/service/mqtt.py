@@ -17,16 +17,17 @@ for TLS). With ``P`` the prefix (``ADVISOR_MQTT_PREFIX``, ``advisor``):
 Explorer ids follow the rule of domain names. QoS 1 both ways: the bridge handles one message
 at a time, acknowledges it, and takes the next only once the broker has acknowledged every
 decision of the one before; decisions not acknowledged when the connection drops are published
-again after it reconnects (at least once, as QoS 1 is). It reconnects with a backoff of up to 10 s, and keeps
-its broker session for a minute (MQTT v5 session expiry) so that what was published meanwhile
-waits for it.
+again after it reconnects (at least once, as QoS 1 is). It reconnects with a backoff of up to
+10 s, and keeps its broker session for a minute (MQTT v5 session expiry) so that what was
+published meanwhile waits for it.
 
 Memory is bounded whatever is published: a message larger than ``ADVISOR_MAX_BODY_BYTES`` is
 refused; each message is acknowledged once handled, and the broker sends at most
-``ADVISOR_MQTT_QUEUE`` unacknowledged ones (the connection's Receive Maximum), so a fast
-publisher waits at the broker rather than here, and nothing is dropped; the bridge keeps
-sessions and configs for ``ADVISOR_MQTT_MAX_EXPLORERS`` explorers at most (the least recently
-heard from go first, their sessions ended).
+``ADVISOR_MQTT_QUEUE`` unacknowledged ones (the connection's Receive Maximum), so what a fast
+publisher sends waits at the broker, not here (Mosquitto keeps up to its
+``max_queued_messages`` per client, 1000 by default, and drops what comes beyond); the bridge
+keeps sessions and configs for ``ADVISOR_MQTT_MAX_EXPLORERS`` explorers at most (the least
+recently heard from go first, their sessions ended).
 
 Sessions live in one process's memory, so one bridge serves a data directory: with several
 workers, the first to lock ``<data_dir>/mqtt-bridge.lock`` runs it and the others wait to take
