@@ -3,7 +3,6 @@ are tried again with a backoff when that is safe (no server needed: httpx's Mock
 
 from __future__ import annotations
 
-import asyncio
 import socket
 
 import httpx
@@ -11,6 +10,8 @@ import pytest
 from advisor_client import AdvisorClient, AdvisorError, AdvisorUnreachable, AsyncAdvisorClient, api
 from advisor_client.api import Session
 from advisor_client.gym import NoCell, cell_of_observation
+
+from tests.client.test_client import run_async
 
 SESSION = Session("ab12", "tok", "default", 0.5, 300, {})  # type: ignore[typeddict-item]
 
@@ -99,7 +100,7 @@ def test_the_async_client_retries_alike() -> None:
         ) as client:
             return (await client.health())["status"]
 
-    assert asyncio.run(scenario()) == "ok" and script.calls == ["GET"] * 3
+    assert run_async(scenario()) == "ok" and script.calls == ["GET"] * 3
 
 
 def test_advised_env_says_what_it_needs_when_the_observation_names_no_cell() -> None:

@@ -3,7 +3,6 @@ restart, one of the test's own on a free port. Each test uses topics of its own.
 
 from __future__ import annotations
 
-import asyncio
 import secrets
 import shutil
 import socket
@@ -26,6 +25,7 @@ from paho.mqtt.enums import CallbackAPIVersion
 from app.domain.grid import ACTIONS, GridDomain
 from app.service.main import create_app
 from app.service.mqtt import Bridge, parse_url
+from tests.client.test_client import run_async
 from tests.service.conftest import make_settings, put_tiny
 
 MOSQUITTO = "/usr/sbin/mosquitto"
@@ -296,10 +296,10 @@ def test_decisions_not_acknowledged_are_published_again() -> None:
     bridge.pending = [("a", b"1"), ("b", b"2"), ("c", b"3")]
     first = Flaky({"b", "c"})
     with pytest.raises(aiomqtt.MqttError):
-        asyncio.run(bridge._flush(first))  # type: ignore[arg-type]
+        run_async(bridge._flush(first))  # type: ignore[arg-type]
     assert first.sent == ["a"] and [t for t, _ in bridge.pending] == ["b", "c"]
     second = Flaky(set())
-    asyncio.run(bridge._flush(second))  # type: ignore[arg-type]
+    run_async(bridge._flush(second))  # type: ignore[arg-type]
     assert second.sent == ["b", "c"] and bridge.pending == []
 
 
