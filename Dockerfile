@@ -14,11 +14,14 @@ ENV PYTHONDONTWRITEBYTECODE=1 \
 
 WORKDIR /app
 
-# dependencies first (a layer that survives code changes), then the package itself
+# dependencies first (a layer that survives code changes), then the client (client/, its own
+# distribution, which the service's requires) and the package itself
 COPY pyproject.toml README.md ./
-RUN python -c "import tomllib; print('\n'.join(tomllib.load(open('pyproject.toml', 'rb'))['project']['dependencies']))" > /tmp/requirements.txt \
+RUN python -c "import tomllib; print('\n'.join(d for d in tomllib.load(open('pyproject.toml', 'rb'))['project']['dependencies'] if not d.startswith('hidden-goal-advisor-client')))" > /tmp/requirements.txt \
     && pip install -r /tmp/requirements.txt \
     && rm /tmp/requirements.txt
+COPY client ./client
+RUN pip install --no-deps ./client
 COPY app ./app
 COPY static ./static
 RUN pip install --no-deps . \

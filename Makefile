@@ -3,18 +3,29 @@ PYTHON ?= $(shell command -v python3.11 2>/dev/null || command -v python3)
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
+RUN_STAMP := $(VENV)/.run-stamp
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
-SRC := app tests benchmarks
+SRC := app tests benchmarks client
 
-.PHONY: run test venv chromium wrk lint format bench clean
+.PHONY: run test venv run-venv chromium wrk lint format bench clean
 
-$(STAMP): pyproject.toml
+## What running needs: the client (client/, its own distribution) and the service.
+$(RUN_STAMP): pyproject.toml client/pyproject.toml
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
-	$(BIN)/python -m pip install -q -e '.[dev]'
-	@touch $(STAMP)
+	$(BIN)/python -m pip install -q -e ./client -e .
+	@touch $(RUN_STAMP)
+
+## The same with the dev tools (tests, linters, the browser driver, MiniGrid).
+$(STAMP): pyproject.toml client/pyproject.toml
+	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install -q --upgrade pip
+	$(BIN)/python -m pip install -q -e './client[gym,minigrid]' -e '.[dev]'
+	@touch $(STAMP) $(RUN_STAMP)
 
 venv: $(STAMP)
+
+run-venv: $(RUN_STAMP)
 
 ## Debian's chromium for the browser tests (Playwright cannot download browsers here).
 chromium:
@@ -31,7 +42,7 @@ wrk:
 lint: venv
 	$(BIN)/ruff check $(SRC)
 	$(BIN)/ruff format --check $(SRC)
-	$(BIN)/mypy app tests
+	$(BIN)/mypy app tests client/advisor_client
 
 format: venv
 	$(BIN)/ruff format $(SRC)
@@ -42,18 +53,22 @@ test: venv chromium lint
 	$(BIN)/python -m pytest
 
 ## The service on 127.0.0.1:8000 with the viewer on :8080; SQLite and the admin key under ./data.
-run: venv
+run: run-venv
 	$(BIN)/python -m app serve
 
-## Every benchmark under benchmarks/ (never part of `make test`): 8 minutes on 2 quiet cores,
-## about 16 on busy ones; each rewrites its own section of docs/PERFORMANCE.md (and
-## bench_scaling/bench_service the curves in docs/figures/).
+## Every benchmark under benchmarks/ (never part of `make test`): about 14 minutes on 2 quiet
+## cores, twice that on busy ones; each rewrites its own section of docs/PERFORMANCE.md (and
+## bench_scaling/bench_service the curves in docs/figures/; bench_minigrid docs/RESULTS.md).
+## bench_mqtt runs Debian's mosquitto (/usr/sbin/mosquitto).
 bench: venv wrk
 	$(BIN)/python benchmarks/bench_core.py --write docs/PERFORMANCE.md
 	$(BIN)/python benchmarks/bench_scaling.py --write docs/PERFORMANCE.md
 	$(BIN)/python benchmarks/bench_experiments.py --write docs/PERFORMANCE.md
 	$(BIN)/python benchmarks/bench_viewer.py --write docs/PERFORMANCE.md
 	$(BIN)/python benchmarks/bench_service.py --write docs/PERFORMANCE.md
+	$(BIN)/python benchmarks/bench_ops.py --write docs/PERFORMANCE.md
+	$(BIN)/python benchmarks/bench_mqtt.py --write docs/PERFORMANCE.md
+	$(BIN)/python benchmarks/bench_minigrid.py --write docs/RESULTS.md
 	$(BIN)/python benchmarks/bench_buildings.py --write docs/PERFORMANCE.md
 	$(BIN)/python benchmarks/rest_inprocess.py
 	$(BIN)/python benchmarks/sessions_inprocess.py

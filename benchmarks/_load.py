@@ -233,14 +233,16 @@ def _start(cmd: list[str], cwd: Path, env: dict[str, str], log: Path, health: st
 
 
 def start_advisor(
-    workdir: Path, root: Path = ROOT, max_sessions: int = 20_000, **env: str
-) -> Server:
-    """``python -m app serve --no-viewer`` from source tree ``root``, on a fresh data dir."""
+    workdir: Path, root: Path = ROOT, max_sessions: int = 20_000, log_level: str = "warning",
+    **env: str,
+) -> Server:  # fmt: skip
+    """``python -m app serve --no-viewer`` from source tree ``root``, on a fresh data dir
+    (``log_level`` info: uvicorn's access log on, written to the server's log file)."""
     port = free_port()
     data = workdir / f"data-{port}"
     settings = {"ADVISOR_ADMIN_KEY": "bench", "ADVISOR_MAX_SESSIONS": str(max_sessions)}
     cmd = [sys.executable, "-m", "app", "serve", "--no-viewer", "--port", str(port),
-           "--data-dir", str(data), "--log-level", "warning"]  # fmt: skip
+           "--data-dir", str(data), "--log-level", log_level]  # fmt: skip
     log = workdir / f"advisor-{port}.log"
     return _start(cmd, root, os.environ | settings | env, log, "/health")
 

@@ -1,6 +1,7 @@
 from __future__ import annotations
 
 import json
+import socket
 from pathlib import Path
 
 from typer.testing import CliRunner
@@ -75,9 +76,9 @@ def test_cli_train_policy_source_counts_every_state() -> None:
 
 
 def test_cli_train_rejects_unknown_expert_source(tmp_path: Path) -> None:
-    result = runner.invoke(cli, ["train", "--experts", "nobody"])
+    result = runner.invoke(cli, ["train", "--experts", "nobody"], env={"COLUMNS": "200"})
     assert result.exit_code == 2
-    assert "--experts must be one of start, anywhere, policy" in result.output
+    assert "'nobody' is not one of 'start', 'anywhere', 'policy'" in result.output
 
 
 def test_cli_train_reports_bad_map_with_location(tmp_path: Path) -> None:
@@ -86,3 +87,44 @@ def test_cli_train_reports_bad_map_with_location(tmp_path: Path) -> None:
     result = runner.invoke(cli, ["train", "--maze", str(bad)])
     assert result.exit_code == 2
     assert "line 2, column 2: unknown character 'x'" in result.output
+
+
+def test_cli_version() -> None:
+    result = runner.invoke(cli, ["--version"])
+    assert result.exit_code == 0 and result.output.startswith("advisor ")
+
+
+def test_cli_help_shows_flags_as_flags_and_lists_choices() -> None:
+    result = runner.invoke(cli, ["simulate", "--help"], env={"COLUMNS": "200"})
+    assert result.exit_code == 0
+    assert "<bool>" not in result.output
+    assert "<random|random-avoid|left|bug|optimal>" in result.output
+    assert "--advice" in result.output and "--no-advice" in result.output
+    train = runner.invoke(cli, ["train", "--help"], env={"COLUMNS": "200"})
+    assert "<start|anywhere|policy>" in train.output
+    assert "app/domain/maps/default.txt" in train.output and "..." not in train.output
+
+
+def test_cli_refusals_say_what_is_allowed_without_pydantics_prefix() -> None:
+    wide = {"COLUMNS": "200"}
+    zero = runner.invoke(cli, ["train", "--alpha0", "0"], env=wide)
+    assert zero.exit_code == 2 and "0.0 is not > 0" in zero.output
+    source = runner.invoke(cli, ["experiment", "table1", "--experts", "x"], env=wide)
+    assert source.exit_code == 2 and "'x' is not one of 'start', 'anywhere', 'policy'" in (
+        source.output
+    )
+    port = runner.invoke(cli, ["serve", "--port", "99999"], env=wide)
+    assert port.exit_code == 2 and "port (ADVISOR_PORT): Input should be" in port.output
+    for result in (zero, source, port):
+        assert "Value error" not in result.output
+
+
+def test_cli_serve_finds_a_busy_port_before_creating_anything(tmp_path: Path) -> None:
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        data = tmp_path / "data"
+        result = runner.invoke(cli, ["serve", "--port", str(port), "--data-dir", str(data)])
+    assert result.exit_code == 2 and f"port {port} on 127.0.0.1 is in use" in result.output
+    assert not data.exists()  # no data directory, no admin key

@@ -16,21 +16,22 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 APP = ROOT / "app"
+#: the client, a distribution of its own (client/pyproject.toml): it imports nothing of app/
+CLIENT = ROOT / "client" / "advisor_client"
 
-#: what each part of app/ may import from app/ (itself always); app.cli is the composition
-#: root and may import anything
+#: what each part of app/ (and the client) may import of either (itself always); app.cli is
+#: the composition root and may import anything
 MAY_IMPORT: dict[str, set[str]] = {
-    "app.protocol": set(),
+    "advisor_client": set(),
     "app.kernels": set(),
     "app.domain": set(),
     "app.advice": {"app.domain"},
     "app.mapio": {"app.domain"},  # file formats (Pillow, PyYAML) read into the core's grids
     "app.agents": {"app.domain", "app.advice", "app.kernels"},
     "app.experiments": {"app.domain", "app.advice", "app.kernels", "app.agents"},
-    "app.service": {"app.domain", "app.advice", "app.kernels", "app.protocol"},
+    "app.service": {"app.domain", "app.advice", "app.kernels", "advisor_client.protocol"},
     "app.service.viewer_feed": {"app.viewer"},  # the one adapter between the two
     "app.viewer": {"app.domain", "app.advice"},
-    "app.client": {"app.protocol"},
 }
 #: the core is numpy only; compiled code lives in two modules
 NUMPY_ONLY = ("app.domain", "app.advice")
@@ -38,7 +39,8 @@ COMPILED = {"app.kernels", "app.service.wire.compiled"}
 
 
 def module_name(path: Path) -> str:
-    parts = path.relative_to(ROOT).with_suffix("").parts
+    base = CLIENT.parent if path.is_relative_to(CLIENT) else ROOT
+    parts = path.relative_to(base).with_suffix("").parts
     return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
 
 
@@ -64,12 +66,13 @@ def imports(path: Path) -> set[str]:
     return out
 
 
-MODULES = {module_name(p): p for p in sorted(APP.rglob("*.py"))}
+MODULES = {module_name(p): p for p in sorted([*APP.rglob("*.py"), *CLIENT.rglob("*.py")])}
 
 
 def app_imports(name: str) -> set[str]:
     """The modules of app/ that ``name`` imports."""
-    return {m for m in imports(MODULES[name]) if m in MODULES and m != "app"}
+    tops = ("app", "advisor_client")
+    return {m for m in imports(MODULES[name]) if m in MODULES and m not in tops}
 
 
 def parts_of(name: str) -> list[str]:
@@ -85,6 +88,7 @@ def within(name: str, parts: set[str]) -> bool:
 def test_module_imports_only_the_layers_below_it(name: str) -> None:
     parts = parts_of(name)
     if not parts:  # app.cli, app.__main__: the composition root
+        assert name == "app" or name.startswith(("app.cli", "app.__main__")), f"{name}: no layer"
         return
     allowed = {q for p in parts for q in (p, *MAY_IMPORT[p])}
     wrong = sorted(m for m in app_imports(name) if not within(m, allowed))
@@ -132,10 +136,12 @@ def test_no_module_imports_itself_through_others() -> None:
 
 
 # ---- what the text names ------------------------------------------------------------------------
-PATH = re.compile(r"(?<![\w./-])((?:app|tests|docs|benchmarks|static)/[\w./-]*\w)")
-DOTTED = re.compile(r":(?:mod|func|class|meth|data|attr):`~?(app(?:\.\w+)+)`")
+PATH = re.compile(r"(?<![\w./-])((?:app|tests|docs|benchmarks|static|client)/[\w./-]*\w)")
+DOTTED = re.compile(r":(?:mod|func|class|meth|data|attr):`~?((?:app|advisor_client)(?:\.\w+)+)`")
 TEXTS = [
     *sorted(APP.rglob("*.py")),
+    *sorted(CLIENT.rglob("*.py")),
+    ROOT / "client" / "README.md",
     *sorted((ROOT / "tests").rglob("*.py")),
     *sorted((ROOT / "benchmarks").glob("*.py")),
     *sorted((ROOT / "docs").glob("*.md")),

@@ -9,8 +9,12 @@ service, numba kernels, matplotlib) wait until a command runs.
 
 from __future__ import annotations
 
+from importlib.metadata import PackageNotFoundError, version
+from typing import Annotated
+
 import typer
 
+from app.cli import options  # noqa: F401  (how every command shows its options)
 from app.cli.experiment import experiment_cli
 from app.cli.maze import maze_cli
 from app.cli.serve import serve
@@ -23,6 +27,33 @@ cli = typer.Typer(
     add_completion=False,
     pretty_exceptions_enable=False,
 )
+
+
+def package_version() -> str:
+    try:
+        return version("hidden-goal-advisor")
+    except PackageNotFoundError:
+        return "0+unknown (not installed)"
+
+
+def _show_version(value: bool) -> None:
+    if value:
+        typer.echo(f"advisor {package_version()}")
+        raise typer.Exit()
+
+
+@cli.callback()
+def main_options(
+    show_version: Annotated[
+        bool,
+        typer.Option(
+            "--version", callback=_show_version, is_eager=True, help="Print the version and exit."
+        ),
+    ] = False,
+) -> None:
+    """An advisor for agents with hidden goals (Rosman & Ramamoorthy, ICRA 2014)."""
+
+
 cli.add_typer(maze_cli, name="maze")
 cli.command()(train)
 cli.add_typer(experiment_cli, name="experiment")

@@ -25,6 +25,8 @@ from typing import Annotated, Any
 import typer
 from typer.core import TyperCommand, TyperGroup
 
+from app.cli.maze import shown
+from app.cli.options import choice
 from app.domain.grid import MapError
 
 #: name -> (module, one line of help); ``all`` runs ALL_PARTS in order
@@ -77,9 +79,9 @@ PANELS = {"CommonArgs": "Every experiment", "LearningArgs": "The Q-learner"}
 
 
 def _shown(default: Any) -> str | bool:
-    """How a default is shown in the help: an absolute path by its last parts."""
-    if isinstance(default, Path) and default.is_absolute():
-        return f".../{default.parent.name}/{default.name}"
+    """How a default is shown in the help: a path relative to the repository or to here."""
+    if isinstance(default, Path):
+        return shown(default)
     return default is not None
 
 
@@ -112,7 +114,15 @@ def options_of(classes: list[type]) -> list[inspect.Parameter]:
         else:
             doc += " (default: " + "; ".join(f"{owner} {v}" for owner, v in defaults) + ")"
             default, kind = None, _option_type(hint) | None
-        option = typer.Option(help=doc, show_default=_shown(default), rich_help_panel=panel)
+        literal = typing.get_args(hint) if typing.get_origin(hint) is typing.Literal else None
+        if literal:  # the values listed, another refused by name (choice)
+            kind = str if len(values) == 1 else str | None
+            option = choice(
+                [str(v) for v in literal], doc, show_default=_shown(default),
+                rich_help_panel=panel,
+            )  # fmt: skip
+        else:
+            option = typer.Option(help=doc, show_default=_shown(default), rich_help_panel=panel)
         out.append(inspect.Parameter(name, inspect.Parameter.KEYWORD_ONLY, default=default,
                                      annotation=Annotated[kind, option]))  # fmt: skip
     return out

@@ -27,8 +27,26 @@ class ImportFormat(StrEnum):
 
 maze_cli = typer.Typer(help="Show, check, generate and import ASCII maps.", no_args_is_help=True)
 
+
+def shown(path: Path) -> str:
+    """How --help shows a default path: relative to the repository for the files shipped with
+    the package (``app/domain/maps/default.txt``), else relative to here if it is below, else
+    whole."""
+    root = Path(__file__).resolve().parents[2]
+    for base in (root, Path.cwd()):
+        if path.is_absolute() and path.is_relative_to(base):
+            return str(path.relative_to(base))
+    return str(path)
+
+
 MazeOption = Annotated[
-    Path, typer.Option("--maze", "-m", help="ASCII map file ('#' wall, '.' free, 'S', 'G').")
+    Path,
+    typer.Option(
+        "--maze",
+        "-m",
+        help="ASCII map file ('#' wall, '.' free, 'S', 'G').",
+        show_default=shown(DEFAULT_MAP),
+    ),
 ]
 
 
@@ -64,7 +82,7 @@ def describe(domain: GridDomain) -> str:
 @maze_cli.command("show")
 def maze_show(
     maze: Annotated[
-        Path, typer.Argument(help="Map file (default: the shipped maze).")
+        Path, typer.Argument(help="Map file.", show_default=shown(DEFAULT_MAP))
     ] = DEFAULT_MAP,
 ) -> None:
     """Print a map and what it contains."""

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import errno
+import socket
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -37,17 +39,54 @@ def serve(
     try:
         settings = Settings(**overrides)
     except ValidationError as exc:
-        typer.echo(f"error: bad setting: {exc}", err=True)
+        typer.echo(f"error: bad setting: {setting_errors(exc)}", err=True)
         raise typer.Exit(code=2) from None
+    busy = port_taken(settings.host, settings.port)
+    if busy:  # before anything is created (the data directory, a new admin key)
+        typer.echo(f"error: {busy}", err=True)
+        raise typer.Exit(code=2)
     uvicorn.run(create_app(settings), **uvicorn_options(settings, log_level))
+
+
+def setting_errors(exc: ValidationError) -> str:
+    """Pydantic's errors as ``name (ADVISOR_NAME): what``, one line each, without the
+    "Value error," that pydantic puts before a validator's own message."""
+    lines = []
+    for e in exc.errors():
+        name = ".".join(str(part) for part in e["loc"])
+        lines.append(f"{name} (ADVISOR_{name.upper()}): {e['msg'].removeprefix('Value error, ')}")
+    return "; ".join(lines)
+
+
+def port_taken(host: str, port: int) -> str | None:
+    """Why ``host:port`` cannot be listened on (in use, or not an address here), or None."""
+    if port == 0:
+        return None
+    with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET) as sock:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as uvicorn binds
+        try:
+            sock.bind((host, port))
+        except OSError as exc:
+            if exc.errno == errno.EADDRINUSE:
+                return (
+                    f"port {port} on {host} is in use (another advisor?): stop it, or pick "
+                    "another port with --port or ADVISOR_PORT"
+                )
+            return f"cannot listen on {host}:{port}: {exc.strerror or exc}"
+    return None
 
 
 def uvicorn_options(settings: Settings, log_level: str = "info") -> dict[str, Any]:
     """How ``serve`` runs uvicorn (one worker); the benchmarks' baseline apps run the same."""
-    return {
+    options: dict[str, Any] = {
         "host": settings.host,
         "port": settings.port,
         "log_level": log_level,
         "ws_max_size": settings.max_body_bytes + 1024,
         "ws_per_message_deflate": False,  # compressing 100 kB frames costs more than it saves
     }
+    if settings.log_format == "json":
+        from app.service.logs import json_log_config
+
+        options["log_config"] = json_log_config(log_level)
+    return options

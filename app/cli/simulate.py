@@ -1,9 +1,10 @@
 """``python -m app simulate``: simulated explorers walk a domain through the live service.
 
 Each explorer (:mod:`app.agents.explorers`) gets a random hidden goal per episode, opens a
-session, and reports every move over the session's websocket with :mod:`app.client`. With
-``--advice on`` an advised explorer samples its next action from the advice (the paper's
-protocol); with ``off`` the service still watches and decides, but the explorer ignores it.
+session, and reports every move over the session's websocket with :mod:`advisor_client`. With
+``--advice`` (the default) an advised explorer samples its next action from the advice
+(the paper's protocol); with ``--no-advice`` the service still watches and decides, but the
+explorer ignores it.
 The map comes from the server (``GET /domains/{name}``); nothing here touches service internals.
 """
 
@@ -17,11 +18,13 @@ import httpx
 import numpy as np
 import numpy.typing as npt
 import typer
+from advisor_client import AdvisorError, AsyncAdvisorClient
+from advisor_client.types import Decision
+from tqdm import tqdm
 
 from app.advice.strategies import STRATEGIES
 from app.agents.explorers import FIXED_EXPLORERS, make_explorer
-from app.client import AdvisorError, AsyncAdvisorClient
-from app.client.types import Decision
+from app.cli.options import choice
 from app.domain.grid import ACTIONS, GridDomain
 
 
@@ -99,27 +102,39 @@ async def episode(
     )
 
 
-async def run(server: str, plan: Plan, seed: int) -> list[Outcome]:
-    """All episodes, ``plan.explorers`` at a time (explorer k runs episodes k, k+K, ...)."""
+def line(o: Outcome) -> str:
+    return (
+        f"episode {o.episode} (explorer {o.explorer}): goal {list(o.goal)} "
+        f"{'reached' if o.success else 'not reached'} in {o.steps} steps, "
+        f"{o.advice_count} advice, p_normal {o.p_normal:.3f}"
+    )
+
+
+async def run(server: str, plan: Plan, seed: int, progress: bool = True) -> list[Outcome]:
+    """All episodes, ``plan.explorers`` at a time (explorer k runs episodes k, k+K, ...);
+    each episode's line is printed in episode order, as soon as those before it are done."""
     async with AsyncAdvisorClient(server) as client:
         info = await client.domain(plan.domain)
         grid = GridDomain.from_strings(info["map"], name=plan.domain)
         rngs = np.random.default_rng(seed).spawn(plan.explorers)
+        done: dict[int, Outcome] = {}
+        printed = 0
+        bar = tqdm(total=plan.episodes, unit="episode", disable=not progress, leave=False)
 
-        async def worker(k: int) -> list[Outcome]:
-            out = []
+        async def worker(k: int) -> None:
+            nonlocal printed
             for e in range(k, plan.episodes, plan.explorers):
-                result = await episode(client, grid, plan, k, e, rngs[k])
-                typer.echo(
-                    f"explorer {k} episode {e}: goal {list(result.goal)} "
-                    f"{'reached' if result.success else 'not reached'} in {result.steps} steps, "
-                    f"{result.advice_count} advice, p_normal {result.p_normal:.3f}"
-                )
-                out.append(result)
-            return out
+                done[e] = await episode(client, grid, plan, k, e, rngs[k])
+                bar.update(1)
+                while printed in done:
+                    bar.write(line(done[printed]))
+                    printed += 1
 
-        done = await asyncio.gather(*(worker(k) for k in range(plan.explorers)))
-    return sorted((o for batch in done for o in batch), key=lambda o: o.episode)
+        try:
+            await asyncio.gather(*(worker(k) for k in range(plan.explorers)))
+        finally:
+            bar.close()
+    return [done[e] for e in sorted(done)]
 
 
 def summary(outcomes: list[Outcome], plan: Plan) -> str:
@@ -138,10 +153,13 @@ def summary(outcomes: list[Outcome], plan: Plan) -> str:
 
 def simulate(
     server: Annotated[str, typer.Option(help="Service URL.")] = "http://127.0.0.1:8000",
-    explorer: Annotated[str, typer.Option(help=" | ".join(FIXED_EXPLORERS))] = "random",
+    explorer: Annotated[str, choice(FIXED_EXPLORERS, "The simulated explorer.")] = "random",
     advice: Annotated[
-        str, typer.Option(help="on: advised explorers follow it; off: ignore.")
-    ] = "on",
+        bool,
+        typer.Option(
+            "--advice/--no-advice", help="Advised explorers follow the advice (or ignore it)."
+        ),
+    ] = True,
     episodes: Annotated[int, typer.Option(min=1, help="Episodes (tasks) in all.")] = 10,
     explorers: Annotated[int, typer.Option(min=1, help="Explorers walking at once.")] = 1,
     steps: Annotated[int, typer.Option(min=1, help="Moves per episode at most.")] = 5000,
@@ -152,27 +170,19 @@ def simulate(
     delay: Annotated[float, typer.Option(min=0.0, help="Seconds between moves (to watch).")] = 0.0,
     keep: Annotated[bool, typer.Option(help="Leave sessions open after each episode.")] = False,
     strategy: Annotated[
-        str, typer.Option(help="When to advise: " + " | ".join(STRATEGIES) + " (defaults).")
+        str, choice(STRATEGIES, "When to advise (the strategy's default parameters).")
     ] = "paper",
+    progress: Annotated[bool, typer.Option(help="A progress bar (on stderr).")] = True,
 ) -> None:
     """Drive simulated explorers through the live service and print their outcomes."""
-    if explorer not in FIXED_EXPLORERS:
-        typer.echo(f"error: --explorer must be one of {', '.join(FIXED_EXPLORERS)}", err=True)
-        raise typer.Exit(code=2)
-    if advice not in ("on", "off"):
-        typer.echo("error: --advice must be 'on' or 'off'", err=True)
-        raise typer.Exit(code=2)
-    if strategy not in STRATEGIES:
-        typer.echo(f"error: --strategy must be one of {', '.join(STRATEGIES)}", err=True)
-        raise typer.Exit(code=2)
     plan = Plan(
-        domain, explorer, advice == "on", episodes, explorers, steps, kappa, window, delay, keep,
-        strategy,
+        domain, explorer, advice, episodes, explorers, steps, kappa, window, delay, keep, strategy,
     )  # fmt: skip
     try:
-        outcomes = asyncio.run(run(server, plan, seed))
+        outcomes = asyncio.run(run(server, plan, seed, progress))
     except AdvisorError as exc:
-        typer.echo(f"error: the service refused: {exc}", err=True)
+        reason = exc.detail if exc.status == 0 else f"the service refused: {exc}"
+        typer.echo(f"error: {reason}", err=True)
         raise typer.Exit(code=2) from None
     except (httpx.HTTPError, OSError) as exc:
         typer.echo(f"error: cannot reach {server}: {exc}", err=True)

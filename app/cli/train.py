@@ -13,18 +13,28 @@ import numpy as np
 import typer
 
 from app.cli.maze import MazeOption, describe, load_domain
+from app.cli.options import choice
 from app.domain.grid import ACTIONS
 from app.domain.maps import DEFAULT_MAP
+
+SOURCES = ("start", "anywhere", "policy")  # app.agents.experts.EXPERT_SOURCES (checked below)
+
+
+def _positive(value: float) -> float:
+    if not value > 0:
+        raise typer.BadParameter(f"{value} is not > 0 (alpha0 keeps every probability positive)")
+    return value
 
 
 def train(
     maze: MazeOption = DEFAULT_MAP,
     experts: Annotated[
-        str, typer.Option(help="Where experts start: start | anywhere | policy (full policies).")
+        str, choice(SOURCES, "Where experts start (policy: full optimal policies).")
     ] = "start",
     per_goal: Annotated[int, typer.Option(min=1, help="Expert trajectories per goal.")] = 10,
     alpha0: Annotated[
-        float, typer.Option(min=0.0, help="Dirichlet hyperprior alpha0 (> 0).")
+        float,
+        typer.Option(callback=_positive, help="Dirichlet hyperprior alpha0, > 0 (every count)."),
     ] = 1.0,
     delta: Annotated[float, typer.Option(min=0.0, max=1.0, help="Policy threshold (eq. 1).")] = 0.0,
     epsilon: Annotated[

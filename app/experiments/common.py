@@ -11,7 +11,7 @@ import math
 import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import cast
+from typing import Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -43,7 +43,7 @@ class CommonArgs:
     """Dirichlet hyperprior: pseudo-count added to every action of every state."""
     window: int = 300
     """Length W of the history H the posterior P(M|H) is computed over."""
-    experts: str = "start"
+    experts: ExpertSource = "start"
     """Expert data: 'start' (trajectories from the start cell, as every agent in the paper
     starts there), 'anywhere' (from random cells) or 'policy' (full optimal policies)."""
     per_goal: int = 10
@@ -105,7 +105,7 @@ def prepare(args: CommonArgs, n_tasks: int | None = None) -> Setup:
     prior = train_prior(
         domain,
         rng_for(args.seed, "experts"),
-        cast(ExpertSource, args.experts),
+        args.experts,
         args.per_goal,
         args.alpha0,
     )
@@ -156,7 +156,7 @@ class LearningArgs:
     """Discount factor."""
     q_epsilon: float = 0.1
     """Exploration probability; exploring samples the advice when advice is given."""
-    q_ties: str = "advice"
+    q_ties: Literal["advice", "uniform"] = "advice"
     """How equal Q-values are broken: 'advice' (sample the advice among them when advised)
     or 'uniform'. Until a reward reaches a state all four tie, so this matters."""
     q_keep_history: bool = True

@@ -59,6 +59,26 @@ class Settings(BaseSettings):
     bootstrap_per_goal: int = Field(10, ge=1, description="Expert trajectories per goal.")
     bootstrap_seed: int = Field(0, description="Seed of the default domain's experts.")
     bootstrap_alpha0: float = Field(1.0, gt=0, description="alpha0 of the default domain.")
+    # ---- operations: metrics, logs, the MQTT bridge ----
+    metrics_enabled: bool = Field(True, description="Count requests; serve GET /metrics.")
+    log_format: Literal["text", "json"] = Field(
+        "text", description="Log lines as text, or as JSON objects with a request id."
+    )
+    access_log_events: bool = Field(
+        False, description="Also write an access-log line per event request and websocket."
+    )
+    mqtt_url: str | None = Field(
+        None, description="MQTT broker, e.g. mqtt://127.0.0.1:1883: starts the bridge."
+    )
+    mqtt_prefix: str = Field(
+        "advisor", pattern=r"^[A-Za-z0-9_.-]{1,64}$", description="First level of its topics."
+    )
+    mqtt_max_explorers: int = Field(
+        10_000, ge=1, description="Explorers the bridge keeps a session for (then the oldest go)."
+    )
+    mqtt_queue: int = Field(
+        1000, ge=1, description="MQTT messages waiting to be handled or published, at most."
+    )
 
     @property
     def db_url(self) -> str:

@@ -10,11 +10,13 @@ from contextlib import asynccontextmanager
 
 from fastapi import FastAPI
 from fastapi.staticfiles import StaticFiles
+from fastapi_offline import FastAPIOffline
 from starlette.concurrency import run_in_threadpool
 
-from app.service import viewer_feed
+from app.service import apidocs, metrics, viewer_feed
 from app.service.config import VERSION, Settings
 from app.service.errors import BodyLimit, install_error_handlers
+from app.service.logs import quiet_event_routes
 from app.service.openapi import install_openapi
 from app.service.ops import warm_up
 from app.service.routes import ROUTERS
@@ -28,9 +30,14 @@ Stop = Callable[[], Awaitable[None]]
 async def start_background(app: FastAPI, settings: Settings) -> list[Stop]:
     """The one hook for services that run beside the API (the viser viewer when
     ``settings.viewer_enabled``); returns their stop functions, called at shutdown."""
-    if not settings.viewer_enabled:
-        return []
-    return [await viewer_feed.start_viewer(app, settings)]
+    stops = []
+    if settings.viewer_enabled:
+        stops.append(await viewer_feed.start_viewer(app, settings))
+    if settings.mqtt_url:
+        from app.service.mqtt import start_bridge
+
+        stops.append(await start_bridge(app))
+    return stops
 
 
 async def _expire_idle(state: ServiceState) -> None:
@@ -43,6 +50,8 @@ async def _expire_idle(state: ServiceState) -> None:
 async def lifespan(app: FastAPI) -> AsyncIterator[None]:
     settings: Settings = app.state.settings
     redact_access_log()  # uvicorn has configured its loggers by now
+    if not settings.access_log_events:
+        quiet_event_routes()
     state, messages = await run_in_threadpool(open_state, settings)
     for message in messages:
         print(message, file=sys.stderr, flush=True)
@@ -53,6 +62,7 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
     gc.collect()
     gc.freeze()
     sweeper = asyncio.create_task(_expire_idle(state))
+    gauges = asyncio.create_task(metrics.keep_gauges(state)) if settings.metrics_enabled else None
     stops = await start_background(app, settings)
     try:
         yield
@@ -60,12 +70,17 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         for stop in reversed(stops):
             await stop()
         sweeper.cancel()
+        if gauges is not None:
+            gauges.cancel()
         await run_in_threadpool(state.close)
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:
     settings = settings or Settings()
-    app = FastAPI(
+    # /docs and /redoc: Swagger UI and ReDoc from the fastapi-offline package, no CDN
+    app = FastAPIOffline(
+        redoc_url=None,  # apidocs serves it (its bundle patched to load nothing from outside)
+        static_url=apidocs.STATIC_URL,
         title="Hidden-goal advisor",
         version=VERSION,
         description="Advice for explorers with hidden goals (Rosman & Ramamoorthy, ICRA 2014).",
@@ -74,10 +89,16 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.settings = settings
     install_error_handlers(app)
     app.add_middleware(BodyLimit, max_bytes=settings.max_body_bytes)
+    if settings.metrics_enabled:
+        request_ids = settings.log_format == "json"
+        app.add_middleware(metrics.MetricsMiddleware, request_ids=request_ids)
     add_event_route(app)  # the busiest route first, on the app's own router
     for router in ROUTERS:
         app.include_router(router)
     app.include_router(viewer_feed.router)
+    app.include_router(apidocs.router)
+    if settings.metrics_enabled:
+        app.include_router(metrics.router)
     if settings.static_dir.is_dir():
         app.mount("/static", StaticFiles(directory=settings.static_dir), "static")
     install_openapi(app)

@@ -10,7 +10,7 @@ import json
 
 import numpy as np
 
-from app.advice.advisor import Decision
+from app.advice.advisor import Decision, DecisionBatch
 from app.advice.guide import GuideError
 from app.advice.models import AdviceTables
 from app.advice.strategies import strategy_params
@@ -21,6 +21,7 @@ from app.service.data.ingest import parse_trajectories, to_trajectories
 from app.service.data.store import POOLED, Trajectory
 from app.service.live.registry import LiveSession, TooManySessions
 from app.service.live.stream import StreamAdvisor
+from app.service.metrics import METRICS, ingested
 from app.service.problems import BadInput
 from app.service.schemas import (
     Cell,
@@ -66,7 +67,7 @@ def create_session(
         except GuideError as exc:
             raise BadInput(f"strategy guide: {exc}") from None
     try:
-        return state.registry.create(
+        session, decision = state.registry.create(
             domain, body.kappa, body.window, body.agent_type, start, body.strategy, params
         )
     except TooManySessions:
@@ -75,6 +76,18 @@ def create_session(
             "end one (DELETE /sessions/{id}) or retry after idle sessions expire",
             503,
         ) from None
+    _count(state, session, 1, int(decision.advise))
+    return session, decision
+
+
+def _count(state: ServiceState, session: LiveSession, made: int, advised: int) -> None:
+    if state.settings.metrics_enabled:
+        METRICS.decisions(session.domain.name, session.advisor.strategy, made, advised)
+
+
+def _count_batch(state: ServiceState, session: LiveSession, out: DecisionBatch) -> None:
+    if state.settings.metrics_enabled and len(out):
+        _count(state, session, len(out), int(np.count_nonzero(out.advise)))
 
 
 def apply_events(state: ServiceState, session: LiveSession, raw: bytes | str) -> bytes:
@@ -82,9 +95,13 @@ def apply_events(state: ServiceState, session: LiveSession, raw: bytes | str) ->
     grid = session.domain.domain
     move = read_move(grid, raw)
     if move is not None:  # one event object: plain ints and one decision
-        return decision_json(state.registry.observe_one(session, *move), grid)
+        d = state.registry.observe_one(session, *move)
+        _count(state, session, 1, int(d.advise))
+        return decision_json(d, grid)
     moves, _ = read_moves(grid, raw, state.settings.max_batch_events)  # a list (or not JSON)
-    return batch_json(state.registry.observe_batch(session, moves), grid)
+    out = state.registry.observe_batch(session, moves)
+    _count_batch(state, session, out)
+    return batch_json(out, grid)
 
 
 def apply_positions(state: ServiceState, session: LiveSession, body: PositionsIn) -> bytes:
@@ -130,15 +147,19 @@ def apply_positions(state: ServiceState, session: LiveSession, body: PositionsIn
     s = np.array(visited[:-1], dtype=np.int64)
     s2 = np.array(visited[1:], dtype=np.int64)
     a = np.argmax(grid.next_state[s] == s2[:, None], axis=1).astype(np.int64)
-    return batch_json(state.registry.observe_batch(session, (s, a, s2)), grid)
+    out = state.registry.observe_batch(session, (s, a, s2))
+    _count_batch(state, session, out)
+    return batch_json(out, grid)
 
 
 def apply_events_binary(state: ServiceState, session: LiveSession, raw: bytes | str) -> bytes:
     """Events (JSON text: one or a list) -> decisions as one binary frame
-    (:mod:`app.protocol`), the same decisions as :func:`apply_events` gives."""
+    (:mod:`advisor_client.protocol`), the same decisions as :func:`apply_events` gives."""
     grid = session.domain.domain
     moves, _ = read_moves(grid, raw, state.settings.max_batch_events)
-    return batch_binary(state.registry.observe_batch(session, moves), grid)
+    out = state.registry.observe_batch(session, moves)
+    _count_batch(state, session, out)
+    return batch_binary(out, grid)
 
 
 def put_domain(state: ServiceState, name: str, body: DomainPut) -> tuple[DomainState, bool, bool]:
@@ -161,6 +182,7 @@ def put_domain(state: ServiceState, name: str, body: DomainPut) -> tuple[DomainS
         if experts is None:  # the data it would have kept went meanwhile
             experts = simulated_experts(grid, body.experts, state.settings.max_expert_pairs)
         state.catalog.add_trajectories(domain, experts)
+        ingested(name, len(experts), sum(len(t.pairs) for t in experts))
     prepare_answers(domain)
     return domain, created, kept
 
@@ -203,6 +225,12 @@ def after_put(state: ServiceState, domain: DomainState, kept: bool) -> None:
         state.registry.end_domain(domain.name)
 
 
+def after_delete(state: ServiceState, name: str) -> None:
+    """On the loop: a deleted domain's sessions end and its metric series go."""
+    state.registry.end_domain(name)
+    METRICS.forget_domain(name)
+
+
 def ingest(
     state: ServiceState, domain: DomainState, raw: bytes
 ) -> tuple[TrajectoriesAccepted, DomainState]:
@@ -214,6 +242,7 @@ def ingest(
     domain = state.catalog.add_trajectories(domain, items)  # the same map put again: its state
     prepare_answers(domain)
     accepted = TrajectoriesAccepted(accepted=len(items), pairs=sum(len(t.pairs) for t in items))
+    ingested(domain.name, accepted.accepted, accepted.pairs)
     return accepted, domain
 
 

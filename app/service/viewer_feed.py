@@ -21,6 +21,7 @@ from app.service.config import Settings
 from app.service.data.domains import DomainState
 from app.service.data.store import POOLED
 from app.service.live.registry import SessionSnapshot
+from app.service.metrics import viewer_tick
 from app.service.state import ServiceState
 from app.viewer.state import DomainView, Feed, SessionView, Snapshot
 
@@ -94,7 +95,8 @@ async def start_viewer(app: FastAPI, settings: Settings) -> Stop:
     from app.viewer.viewer import Viewer
 
     feed: Feed = ServiceFeed(app.state.service)
-    viewer = Viewer(feed, host=settings.host, port=settings.viewer_port)
+    on_tick = viewer_tick if settings.metrics_enabled else None
+    viewer = Viewer(feed, host=settings.host, port=settings.viewer_port, on_tick=on_tick)
     await asyncio.to_thread(viewer.start)
     app.state.viewer = viewer
     if viewer.port != settings.viewer_port:

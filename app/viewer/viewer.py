@@ -17,6 +17,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections.abc import Callable
 
 import viser
 
@@ -45,6 +46,7 @@ class Viewer:
         rate_hz: float = DEFAULT_RATE_HZ,
         idle_rate_hz: float = IDLE_RATE_HZ,
         max_share: float = MAX_SHARE,
+        on_tick: Callable[[float], None] | None = None,
     ):
         for name, value in (("rate_hz", rate_hz), ("idle_rate_hz", idle_rate_hz)):
             if not value > 0:
@@ -57,6 +59,8 @@ class Viewer:
         self.period = 1.0 / rate_hz
         self.idle_period = 1.0 / idle_rate_hz
         self.max_share = max_share
+        #: called with each pump tick's duration in seconds (the service's metrics hook)
+        self.on_tick = on_tick
         self.server: viser.ViserServer | None = None
         self.controls: Controls | None = None
         self.scene: MazeScene | None = None
@@ -129,8 +133,11 @@ class Viewer:
                 self.tick()
             except Exception:  # keep pumping: the next snapshot may be fine
                 log.exception("viewer pump tick failed")
+            took = time.perf_counter() - started
+            if self.on_tick is not None:
+                self.on_tick(took)
             period = self.period if watched else self.idle_period
-            wait = pump_wait(time.perf_counter() - started, period, self.max_share)
+            wait = pump_wait(took, period, self.max_share)
 
     # ---- one tick ------------------------------------------------------------------------
     def tick(self) -> None:

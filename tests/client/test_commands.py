@@ -6,7 +6,8 @@ import subprocess
 import sys
 from pathlib import Path
 
-from app.client import AdvisorClient
+from advisor_client import AdvisorClient
+
 from tests.client.conftest import REPO, Server, start_server, stop_server
 
 
@@ -18,11 +19,12 @@ def simulate(*args: str) -> subprocess.CompletedProcess[str]:
 def test_simulate_drives_explorers_and_prints_outcomes(server: Server) -> None:
     with AdvisorClient(server.url) as client:
         before = client.overview()["total_sessions"]
-    options = ["--explorer", "random-avoid", "--advice", "on", "--episodes", "3"]
+    options = ["--explorer", "random-avoid", "--advice", "--episodes", "3"]
     run = simulate("--server", server.url, *options, "--explorers", "2", "--steps", "60")
     assert run.returncode == 0, run.stderr
     lines = run.stdout.strip().splitlines()
-    assert sum("episode" in line for line in lines) == 3
+    episodes = [line for line in lines if line.startswith("episode ")]
+    assert [line.split()[1] for line in episodes] == ["0", "1", "2"]  # in order
     assert lines[-1].startswith("random-avoid, advice on (paper), kappa 0.5: ")
     assert "reached their goal" in lines[-1] and "advice per 100 decisions" in lines[-1]
     with AdvisorClient(server.url) as client:  # each episode's session was ended
@@ -30,7 +32,7 @@ def test_simulate_drives_explorers_and_prints_outcomes(server: Server) -> None:
 
 
 def test_simulate_optimal_explorers_reach_their_goals(server: Server) -> None:
-    run = simulate("--server", server.url, "--explorer", "optimal", "--advice", "off",
+    run = simulate("--server", server.url, "--explorer", "optimal", "--no-advice",
                    "--episodes", "2", "--steps", "500")  # fmt: skip
     assert run.returncode == 0, run.stderr
     assert "2/2 reached their goal (mean reward 1000)" in run.stdout
@@ -45,11 +47,11 @@ def test_simulate_takes_an_advising_strategy(server: Server) -> None:
 
 def test_simulate_explains_bad_options_and_unreachable_servers() -> None:
     run = simulate("--explorer", "teleporter")
-    assert run.returncode == 2 and "--explorer must be one of" in run.stderr
+    assert run.returncode == 2 and "'teleporter' is not one of 'random'" in run.stderr
     run = simulate("--strategy", "oracle")
-    assert run.returncode == 2 and "--strategy must be one of" in run.stderr
+    assert run.returncode == 2 and "'oracle' is not one of 'paper'" in run.stderr
     run = simulate("--server", "http://127.0.0.1:9", "--episodes", "1")
-    assert run.returncode == 2 and "cannot reach" in run.stderr
+    assert run.returncode == 2 and "cannot reach the advisor at http://127.0.0.1:9" in run.stderr
 
 
 def test_serve_prints_the_generated_admin_key_once(tmp_path: Path) -> None:

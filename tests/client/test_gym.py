@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import gymnasium as gym
 import numpy as np
+from advisor_client import AdvisorClient
+from advisor_client.gym import AdvisedEnv, MazeEnv
 
-from app.client import AdvisorClient
-from app.client.gym import AdvisedEnv, MazeEnv
 from tests.client.conftest import Server
 
 

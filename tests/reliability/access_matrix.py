@@ -62,6 +62,7 @@ ROUTES = [
     Route("WS", "/sessions/{session_id}/stream", "token"),
     Route("GET", "/overview", "anyone"),
     Route("GET", "/viewer", "anyone"),
+    Route("GET", "/metrics", "anyone"),
     Route("GET", "/", "anyone"),
     Route("GET", "/walk", "anyone"),
 ]

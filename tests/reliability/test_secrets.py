@@ -35,7 +35,10 @@ def test_the_filter_rewrites_uvicorn_s_access_record() -> None:
 def test_a_live_server_logs_no_session_token_nor_admin_key(tmp_path: Path) -> None:
     # a configured admin key (a generated one is shown once, at first start, by design)
     key = "configured-admin-key-for-this-test"
-    live = start(tmp_path / "data", log_level="info", ADVISOR_ADMIN_KEY=key)
+    # event routes logged too (by default they are counted, not logged)
+    live = start(
+        tmp_path / "data", log_level="info", ADVISOR_ADMIN_KEY=key, ADVISOR_ACCESS_LOG_EVENTS="true"
+    )
     try:
         with httpx.Client(base_url=live.url, timeout=10) as http:
             created = http.post("/domains/default/sessions", json={}).json()

@@ -1,5 +1,6 @@
-"""Binary answers on the websocket (``?format=binary``, layout in app/protocol.py): the same
-decisions as the JSON answers, the same session afterwards, errors as JSON text frames."""
+"""Binary answers on the websocket (``?format=binary``, layout in
+client/advisor_client/protocol.py): the same decisions as the JSON answers, the same session
+afterwards, errors as JSON text frames."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from advisor_client.protocol import HEADER, MAGIC, FrameError, pack, unpack
 from fastapi.testclient import TestClient
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -18,7 +20,6 @@ from starlette.websockets import WebSocketDisconnect
 
 from app.domain.grid import ACTIONS
 from app.domain.paths import expert_trajectory
-from app.protocol import HEADER, MAGIC, FrameError, pack, unpack
 from app.service.main import create_app
 from app.service.state import ServiceState
 from tests.service.conftest import make_settings, open_session

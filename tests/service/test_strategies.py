@@ -17,6 +17,7 @@ from typing import Any, get_args
 
 import numpy as np
 import pytest
+from advisor_client.protocol import unpack
 from fastapi.testclient import TestClient
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -27,7 +28,6 @@ from app.advice.priors import GoalPriors
 from app.advice.strategies import READS, STRATEGIES, StrategyParams, make_advisor
 from app.domain.grid import ACTIONS, GridDomain
 from app.domain.paths import expert_trajectory
-from app.protocol import unpack
 from app.service.main import create_app
 from app.service.schemas import StrategyName
 from app.service.state import ServiceState

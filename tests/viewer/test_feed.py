@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import threading
 from collections.abc import Iterator
 from pathlib import Path
@@ -120,6 +121,10 @@ def test_service_starts_and_stops_the_viewer_when_enabled(tmp_path: Path) -> Non
         viewer.feed = watched  # type: ignore[assignment]
         assert ticked.wait(timeout=10.0)  # the pump reads the service by itself
         wait_until(lambda: c.get("/viewer").json()["ticks"] > status["ticks"])
+        # each tick's duration reaches the metrics through the viewer's hook
+        tick_count = re.compile(r"^advisor_viewer_tick_seconds_count (\S+)$", re.M)
+        timed = float(tick_count.search(c.get("/metrics").text).group(1))  # type: ignore[union-attr]
+        assert timed >= 1
     assert app.state.viewer is None
     assert viewer._thread is not None and not viewer._thread.is_alive()
 

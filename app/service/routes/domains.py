@@ -60,7 +60,7 @@ async def put_domain(
 async def delete_domain(name: DomainName, state: StateDep) -> None:
     """Delete a domain with its trajectories and counts; its live sessions end."""
     await run_in_threadpool(state.catalog.delete, name)
-    state.registry.end_domain(name)
+    ops.after_delete(state, name)
 
 
 @router.post(

@@ -12,7 +12,7 @@ the session ends or expires while connected, the next frame closes the connectio
 
 With ``?format=binary`` the decisions come as one binary frame per text frame instead (the
 same decisions in about a tenth of the bytes, with no per-decision formatting: the layout is
-in :mod:`app.protocol`); errors are still JSON text frames. Another ``format`` closes the
+in :mod:`advisor_client.protocol`); errors are still JSON text frames. Another ``format`` closes the
 connection with 4422.
 """
 

@@ -1,4 +1,4 @@
-"""Decisions out: JSON (orjson) and the websocket's binary frames (:mod:`app.protocol`).
+"""Decisions out: JSON (orjson) and the websocket's binary frames (:mod:`advisor_client.protocol`).
 
 * one decision: :func:`decision_json`, a dict written by orjson;
 * a batch: :func:`batch_json`, orjson's texts of the numbers (written from the numpy columns,
@@ -20,8 +20,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 import orjson
+from advisor_client import protocol
 
-from app import protocol
 from app.advice.advisor import Decision, DecisionBatch
 from app.advice.models import AdviceTables
 from app.domain.grid import GridDomain

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+from advisor_client.protocol import unpack
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -13,7 +14,6 @@ from app.advice.advisor import Advisor, DecisionBatch
 from app.advice.goals import GoalAwareAdvisor
 from app.advice.priors import GoalPriors
 from app.domain.generate import generate_domain
-from app.protocol import unpack
 from app.service.live.stream import StreamAdvisor
 from app.service.schemas import DecisionPublic
 from app.service.wire.encode import batch_binary, batch_json, decision_dict, decision_json

@@ -8,18 +8,32 @@ from dataclasses import dataclass, field
 from typing import Any
 from urllib.parse import quote, urlencode, urlsplit, urlunsplit
 
-from app.client.types import Cell, Decision, EventLike
-from app.protocol import unpack
+from advisor_client.protocol import unpack
+from advisor_client.types import Cell, Decision, EventLike
 
 
 class AdvisorError(Exception):
     """The service refused a request: ``status`` (HTTP, or 4xxx websocket close code mapped to
-    4xx) and its ``detail``."""
+    4xx) and its ``detail``; or it could not be reached (:class:`AdvisorUnreachable`)."""
 
     def __init__(self, status: int, detail: str):
         super().__init__(f"{status}: {detail}")
         self.status = status
         self.detail = detail
+
+
+class AdvisorUnreachable(AdvisorError):
+    """No answer from the service (connection refused, a timeout, the connection dropped):
+    ``status`` 0, ``url`` what was called, ``detail`` what went wrong and a hint."""
+
+    def __init__(self, url: str, problem: str, attempts: int = 1):
+        tried = f" ({attempts} attempts)" if attempts > 1 else ""
+        detail = (
+            f"cannot reach the advisor at {url}{tried}: {problem}. Is the service running "
+            "there (`advisor serve`, or `python -m app serve`) and is the URL right?"
+        )
+        super().__init__(0, detail)
+        self.url = url
 
 
 @dataclass(frozen=True)
@@ -48,12 +62,22 @@ class Session:
 
 @dataclass(frozen=True)
 class Call:
+    """One API call. ``idempotent``: sending it twice does what sending it once does (GET,
+    PUT, DELETE), so it is retried after any failure to get an answer; other calls are retried
+    only when the connection could not be made (nothing was sent). Events will be idempotent
+    once they carry their ``step`` (the service then ignores a step it has seen)."""
+
     method: str
     path: str
     json: Any = None
     params: dict[str, Any] = field(default_factory=dict)
     headers: dict[str, str] = field(default_factory=dict)
     admin: bool = False
+    idempotent: bool = False
+
+    def __post_init__(self) -> None:
+        if self.method in ("GET", "HEAD", "PUT", "DELETE"):
+            object.__setattr__(self, "idempotent", True)
 
 
 def _name(name: str) -> str:
@@ -150,8 +174,8 @@ def overview(limit: int = 100) -> Call:
 
 def stream_url(base_url: str, session: Session, binary: bool = False) -> str:
     """``ws(s)://.../sessions/{id}/stream`` for an ``http(s)://`` base URL (with
-    ``?format=binary`` for binary answers, :mod:`app.protocol`). The token goes in a header
-    (:func:`stream_headers`), not in the URL, which proxies and servers log."""
+    ``?format=binary`` for binary answers, :mod:`advisor_client.protocol`). The token goes in a
+    header (:func:`stream_headers`), not in the URL, which proxies and servers log."""
     parts = urlsplit(base_url)
     scheme = "wss" if parts.scheme == "https" else "ws"
     path = parts.path.rstrip("/") + f"/sessions/{session.session_id}/stream"

@@ -9,7 +9,9 @@ websocket stream over ``websockets``. Talks HTTP only; imports nothing of the se
 
 from __future__ import annotations
 
+import asyncio
 import json
+import time
 from collections.abc import Mapping, Sequence
 from types import TracebackType
 from typing import Any, Self, cast
@@ -17,14 +19,30 @@ from typing import Any, Self, cast
 import httpx
 from websockets.asyncio.client import ClientConnection as AsyncConnection
 from websockets.asyncio.client import connect as async_connect
-from websockets.exceptions import ConnectionClosed
+from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidStatus
 from websockets.sync.client import ClientConnection, connect
 
-from app.client import api
-from app.client.api import AdvisorError, Call, Session
-from app.client.types import Cell, Decision, EventLike
+from advisor_client import api
+from advisor_client.api import AdvisorError, AdvisorUnreachable, Call, Session
+from advisor_client.types import (
+    Accepted,
+    Cell,
+    Decision,
+    DomainInfo,
+    EventLike,
+    Health,
+    Overview,
+    Prior,
+    SessionInfo,
+    SessionList,
+)
 
 DEFAULT_URL = "http://127.0.0.1:8000"
+#: answers worth another try of an idempotent call (a proxy or the service restarting)
+RETRY_STATUSES = frozenset({502, 503, 504})
+#: failures in which nothing reached the service: any call may be sent again
+NOT_SENT = (httpx.ConnectError, httpx.ConnectTimeout, httpx.PoolTimeout)
+MAX_DELAY = 4.0
 
 
 def _closed(exc: ConnectionClosed) -> AdvisorError:
@@ -44,10 +62,50 @@ def _parse(response: httpx.Response) -> Any:
     return api.result(response.status_code, body, response.text)
 
 
+def _problem(exc: BaseException) -> str:
+    text = str(exc) or type(exc).__name__
+    return f"{type(exc).__name__}: {text}" if type(exc).__name__ not in text else text
+
+
+def _ws_failure(url: str, exc: Exception) -> AdvisorError:
+    """A websocket that could not be opened, as an AdvisorError."""
+    if isinstance(exc, ConnectionClosed):
+        return _closed(exc)
+    if isinstance(exc, InvalidStatus):
+        status = exc.response.status_code
+        return AdvisorError(status, f"the service refused the websocket: HTTP {status}")
+    return AdvisorUnreachable(url, _problem(exc))
+
+
 class _Base:
-    def __init__(self, base_url: str, admin_key: str | None):
+    """What both clients share: credentials, and when to try a call again.
+
+    ``retries``: how many more times a call is tried after a failure worth retrying, waiting
+    ``backoff`` seconds, then twice that, and so on (at most 4 s): a call that could not
+    connect (nothing was sent); an idempotent call (GET, PUT, DELETE) that got no answer or a
+    502, 503 or 504. After the last, :class:`AdvisorUnreachable` (an :class:`AdvisorError`
+    with ``status`` 0, the URL and a hint) or the service's own answer."""
+
+    def __init__(
+        self, base_url: str, admin_key: str | None, retries: int = 3, backoff: float = 0.25
+    ):
+        if retries < 0 or backoff < 0:
+            raise ValueError("retries and backoff must be >= 0")
         self.base_url = base_url.rstrip("/")
         self.admin_key = admin_key
+        self.retries = retries
+        self.backoff = backoff
+
+    def _delay(self, attempt: int) -> float:
+        return float(min(self.backoff * 2**attempt, MAX_DELAY))
+
+    def _again(self, call: Call, attempt: int, failure: Exception | int) -> bool:
+        """Whether ``call`` is tried again after ``failure`` (an error or a status)."""
+        if attempt >= self.retries:
+            return False
+        if isinstance(failure, int):
+            return call.idempotent and failure in RETRY_STATUSES
+        return isinstance(failure, NOT_SENT) or call.idempotent
 
     def _request(self, call: Call) -> dict[str, Any]:
         headers = dict(call.headers)
@@ -69,8 +127,8 @@ class Stream:
 
     def send(self, events: EventLike | Sequence[EventLike]) -> Any:
         """One event -> one decision; a list -> a list (a binary stream: a
-        :class:`~app.protocol.DecisionFrame` either way). AdvisorError for a refused batch
-        (the stream stays usable) or a closed stream."""
+        :class:`~advisor_client.protocol.DecisionFrame` either way). AdvisorError for a refused
+        batch (the stream stays usable) or a closed stream."""
         body = dict(events) if isinstance(events, Mapping) else [dict(e) for e in events]
         try:
             self.connection.send(json.dumps(body))
@@ -98,13 +156,29 @@ class AdvisorClient(_Base):
         admin_key: str | None = None,
         timeout: float = 30.0,
         transport: httpx.BaseTransport | None = None,
+        retries: int = 3,
+        backoff: float = 0.25,
     ):
-        super().__init__(base_url, admin_key)
+        super().__init__(base_url, admin_key, retries, backoff)
         self.http = httpx.Client(base_url=self.base_url, timeout=timeout, transport=transport)
 
     def call(self, call: Call) -> Any:
-        response = self.http.request(call.method, call.path, **self._request(call))
-        return _parse(response)
+        """Send ``call`` (tried again as :class:`_Base` says); its answer's body."""
+        kwargs = self._request(call)
+        attempt = 0
+        while True:
+            try:
+                response = self.http.request(call.method, call.path, **kwargs)
+            except httpx.TransportError as exc:
+                if not self._again(call, attempt, exc):
+                    raise AdvisorUnreachable(
+                        self.base_url + call.path, _problem(exc), attempt + 1
+                    ) from exc
+            else:
+                if not self._again(call, attempt, response.status_code):
+                    return _parse(response)
+            time.sleep(self._delay(attempt))
+            attempt += 1
 
     def close(self) -> None:
         self.http.close()
@@ -117,31 +191,31 @@ class AdvisorClient(_Base):
     ) -> None:
         self.close()
 
-    def health(self) -> dict[str, Any]:
-        return cast(dict[str, Any], self.call(api.health()))
+    def health(self) -> Health:
+        return cast(Health, self.call(api.health()))
 
-    def domains(self) -> list[dict[str, Any]]:
-        return cast(list[dict[str, Any]], self.call(api.domains()))
+    def domains(self) -> list[DomainInfo]:
+        return cast(list[DomainInfo], self.call(api.domains()))
 
-    def domain(self, name: str) -> dict[str, Any]:
-        return cast(dict[str, Any], self.call(api.domain(name)))
+    def domain(self, name: str) -> DomainInfo:
+        return cast(DomainInfo, self.call(api.domain(name)))
 
     def put_domain(
         self, name: str, rows: Sequence[str], alpha0: float = 1.0, **frame_and_experts: Any
-    ) -> dict[str, Any]:
+    ) -> DomainInfo:
         """Create or replace a domain; keywords ``resolution``, ``origin`` (metres) and
         ``experts`` (``{"source", "per_goal", "seed"}``) as the PUT body has them."""
         call = api.put_domain(name, rows, alpha0, **frame_and_experts)
-        return cast(dict[str, Any], self.call(call))
+        return cast(DomainInfo, self.call(call))
 
     def delete_domain(self, name: str) -> None:
         self.call(api.delete_domain(name))
 
-    def add_trajectories(self, name: str, trajectories: Sequence[EventLike]) -> dict[str, int]:
-        return cast(dict[str, int], self.call(api.add_trajectories(name, trajectories)))
+    def add_trajectories(self, name: str, trajectories: Sequence[EventLike]) -> Accepted:
+        return cast(Accepted, self.call(api.add_trajectories(name, trajectories)))
 
-    def prior(self, name: str, agent_type: str | None = None) -> dict[str, Any]:
-        return cast(dict[str, Any], self.call(api.prior(name, agent_type)))
+    def prior(self, name: str, agent_type: str | None = None) -> Prior:
+        return cast(Prior, self.call(api.prior(name, agent_type)))
 
     def create_session(
         self,
@@ -169,27 +243,36 @@ class AdvisorClient(_Base):
     def step(self, session: Session, event: EventLike) -> Decision:
         return cast(Decision, self.events(session, event))
 
-    def session(self, session: Session) -> dict[str, Any]:
-        return cast(dict[str, Any], self.call(api.read_session(session)))
+    def session(self, session: Session) -> SessionInfo:
+        return cast(SessionInfo, self.call(api.read_session(session)))
 
-    def end_session(self, session: Session) -> dict[str, Any]:
-        return cast(dict[str, Any], self.call(api.end_session(session)))
+    def end_session(self, session: Session) -> SessionInfo:
+        return cast(SessionInfo, self.call(api.end_session(session)))
 
-    def sessions(self, limit: int = 100) -> dict[str, Any]:
-        return cast(dict[str, Any], self.call(api.sessions(limit)))
+    def sessions(self, limit: int = 100) -> SessionList:
+        return cast(SessionList, self.call(api.sessions(limit)))
 
-    def overview(self, limit: int = 100) -> dict[str, Any]:
-        return cast(dict[str, Any], self.call(api.overview(limit)))
+    def overview(self, limit: int = 100) -> Overview:
+        return cast(Overview, self.call(api.overview(limit)))
 
     def stream(self, session: Session, binary: bool = False) -> Stream:
         """The session's websocket (use as a context manager); ``binary``: decisions come as
-        :class:`~app.protocol.DecisionFrame` arrays, about a tenth of the bytes of JSON."""
+        :class:`~advisor_client.protocol.DecisionFrame` arrays, about a tenth of the bytes of
+        JSON."""
         url = api.stream_url(self.base_url, session, binary)
         headers = api.stream_headers(session)
-        try:
-            return Stream(connect(url, compression=None, max_size=None, additional_headers=headers))
-        except ConnectionClosed as exc:
-            raise _closed(exc) from None
+        for attempt in range(self.retries + 1):
+            try:
+                return Stream(
+                    connect(url, compression=None, max_size=None, additional_headers=headers)
+                )
+            except (OSError, TimeoutError) as exc:  # refused: nothing was sent, try again
+                if attempt == self.retries:
+                    raise _ws_failure(url, exc) from None
+            except (ConnectionClosed, InvalidHandshake) as exc:
+                raise _ws_failure(url, exc) from None
+            time.sleep(self._delay(attempt))
+        raise AssertionError("unreachable")
 
 
 class AsyncStream:
@@ -225,13 +308,29 @@ class AsyncAdvisorClient(_Base):
         admin_key: str | None = None,
         timeout: float = 30.0,
         transport: httpx.AsyncBaseTransport | None = None,
+        retries: int = 3,
+        backoff: float = 0.25,
     ):
-        super().__init__(base_url, admin_key)
+        super().__init__(base_url, admin_key, retries, backoff)
         self.http = httpx.AsyncClient(base_url=self.base_url, timeout=timeout, transport=transport)
 
     async def call(self, call: Call) -> Any:
-        response = await self.http.request(call.method, call.path, **self._request(call))
-        return _parse(response)
+        """Send ``call`` (tried again as :class:`_Base` says); its answer's body."""
+        kwargs = self._request(call)
+        attempt = 0
+        while True:
+            try:
+                response = await self.http.request(call.method, call.path, **kwargs)
+            except httpx.TransportError as exc:
+                if not self._again(call, attempt, exc):
+                    raise AdvisorUnreachable(
+                        self.base_url + call.path, _problem(exc), attempt + 1
+                    ) from exc
+            else:
+                if not self._again(call, attempt, response.status_code):
+                    return _parse(response)
+            await asyncio.sleep(self._delay(attempt))
+            attempt += 1
 
     async def aclose(self) -> None:
         await self.http.aclose()
@@ -242,31 +341,29 @@ class AsyncAdvisorClient(_Base):
     async def __aexit__(self, *exc: object) -> None:
         await self.aclose()
 
-    async def health(self) -> dict[str, Any]:
-        return cast(dict[str, Any], await self.call(api.health()))
+    async def health(self) -> Health:
+        return cast(Health, await self.call(api.health()))
 
-    async def domains(self) -> list[dict[str, Any]]:
-        return cast(list[dict[str, Any]], await self.call(api.domains()))
+    async def domains(self) -> list[DomainInfo]:
+        return cast(list[DomainInfo], await self.call(api.domains()))
 
-    async def domain(self, name: str) -> dict[str, Any]:
-        return cast(dict[str, Any], await self.call(api.domain(name)))
+    async def domain(self, name: str) -> DomainInfo:
+        return cast(DomainInfo, await self.call(api.domain(name)))
 
     async def put_domain(
         self, name: str, rows: Sequence[str], alpha0: float = 1.0, **frame_and_experts: Any
-    ) -> dict[str, Any]:
+    ) -> DomainInfo:
         call = api.put_domain(name, rows, alpha0, **frame_and_experts)
-        return cast(dict[str, Any], await self.call(call))
+        return cast(DomainInfo, await self.call(call))
 
     async def delete_domain(self, name: str) -> None:
         await self.call(api.delete_domain(name))
 
-    async def add_trajectories(
-        self, name: str, trajectories: Sequence[EventLike]
-    ) -> dict[str, int]:
-        return cast(dict[str, int], await self.call(api.add_trajectories(name, trajectories)))
+    async def add_trajectories(self, name: str, trajectories: Sequence[EventLike]) -> Accepted:
+        return cast(Accepted, await self.call(api.add_trajectories(name, trajectories)))
 
-    async def prior(self, name: str, agent_type: str | None = None) -> dict[str, Any]:
-        return cast(dict[str, Any], await self.call(api.prior(name, agent_type)))
+    async def prior(self, name: str, agent_type: str | None = None) -> Prior:
+        return cast(Prior, await self.call(api.prior(name, agent_type)))
 
     async def create_session(
         self,
@@ -289,28 +386,34 @@ class AsyncAdvisorClient(_Base):
     ) -> list[Decision]:
         return cast(list[Decision], await self.call(api.positions(session, points)))
 
-    async def session(self, session: Session) -> dict[str, Any]:
-        return cast(dict[str, Any], await self.call(api.read_session(session)))
+    async def session(self, session: Session) -> SessionInfo:
+        return cast(SessionInfo, await self.call(api.read_session(session)))
 
-    async def end_session(self, session: Session) -> dict[str, Any]:
-        return cast(dict[str, Any], await self.call(api.end_session(session)))
+    async def end_session(self, session: Session) -> SessionInfo:
+        return cast(SessionInfo, await self.call(api.end_session(session)))
 
-    async def sessions(self, limit: int = 100) -> dict[str, Any]:
-        return cast(dict[str, Any], await self.call(api.sessions(limit)))
+    async def sessions(self, limit: int = 100) -> SessionList:
+        return cast(SessionList, await self.call(api.sessions(limit)))
 
-    async def overview(self, limit: int = 100) -> dict[str, Any]:
-        return cast(dict[str, Any], await self.call(api.overview(limit)))
+    async def overview(self, limit: int = 100) -> Overview:
+        return cast(Overview, await self.call(api.overview(limit)))
 
     async def stream(self, session: Session, binary: bool = False) -> AsyncStream:
         """The session's websocket (``async with await client.stream(s) as stream``);
         ``binary`` as in :meth:`AdvisorClient.stream`."""
         url = api.stream_url(self.base_url, session, binary)
         headers = api.stream_headers(session)
-        try:
-            return AsyncStream(
-                await async_connect(
-                    url, compression=None, max_size=None, additional_headers=headers
+        for attempt in range(self.retries + 1):
+            try:
+                return AsyncStream(
+                    await async_connect(
+                        url, compression=None, max_size=None, additional_headers=headers
+                    )
                 )
-            )
-        except ConnectionClosed as exc:
-            raise _closed(exc) from None
+            except (OSError, TimeoutError) as exc:  # refused: nothing was sent, try again
+                if attempt == self.retries:
+                    raise _ws_failure(url, exc) from None
+            except (ConnectionClosed, InvalidHandshake) as exc:
+                raise _ws_failure(url, exc) from None
+            await asyncio.sleep(self._delay(attempt))
+        raise AssertionError("unreachable")

@@ -16,7 +16,7 @@ advice (as the paper's advised explorers do), drawn from the environment's ``np_
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any, SupportsFloat
 
 import gymnasium as gym
@@ -24,9 +24,9 @@ import numpy as np
 import numpy.typing as npt
 from gymnasium import spaces
 
-from app.client.api import AdvisorError, Session
-from app.client.client import AdvisorClient, Stream
-from app.client.types import Decision
+from advisor_client.api import AdvisorError, Session
+from advisor_client.client import AdvisorClient, Stream
+from advisor_client.types import Decision
 
 ACTIONS = ("N", "E", "S", "W")
 MOVES = ((-1, 0), (0, 1), (1, 0), (0, -1))
@@ -89,14 +89,41 @@ class MazeEnv(gym.Env[Obs, int]):
         return "\n".join("".join(r) for r in grid)
 
 
-def _row_col(obs: Any) -> tuple[int, int]:
-    return int(obs[0]), int(obs[1])
+class NoCell(TypeError):
+    """An observation from which :class:`AdvisedEnv` cannot read the explorer's cell."""
 
 
-class AdvisedEnv(gym.Wrapper[Any, Any, Any, Any]):
+def _describe(obs: Any) -> str:
+    if isinstance(obs, Mapping):
+        return f"a dict with keys {sorted(map(str, obs))}"
+    shape = getattr(obs, "shape", None)
+    if shape is not None:
+        return f"an array of shape {tuple(shape)}"
+    text = repr(obs)
+    return f"{type(obs).__name__} {text[:60]}{'...' if len(text) > 60 else ''}"
+
+
+def cell_of_observation(obs: Any) -> tuple[int, int]:
+    """The default ``cell_of``: an observation's ``"cell"`` entry if it is a dict that has
+    one, else its first two entries, as ``(row, col)``."""
+    value = obs["cell"] if isinstance(obs, Mapping) and "cell" in obs else obs
+    try:
+        return int(value[0]), int(value[1])
+    except (KeyError, IndexError, TypeError, ValueError):
+        raise NoCell(
+            f"AdvisedEnv needs the explorer's cell (row, col) from each observation, and this "
+            f"observation ({_describe(obs)}) names none: pass cell_of=<a function from an "
+            "observation to (row, col)>, e.g. cell_of=lambda s: divmod(int(s), 4) for a 4x4 "
+            "FrozenLake; for MiniGrid, wrap the environment in "
+            "advisor_client.minigrid.CompassActions, whose observations carry a 'cell'"
+        ) from None
+
+
+class AdvisedEnv(gym.Wrapper[Any, Any, Any, Any], gym.utils.RecordConstructorArgs):
     """Reports each step to the advice service; the decision goes in ``info["decision"]``.
 
-    ``cell_of`` maps an observation to ``(row, col)`` (default: the first two entries);
+    ``cell_of`` maps an observation to ``(row, col)`` (default: :func:`cell_of_observation`,
+    a dict's ``"cell"`` or the first two entries; :class:`NoCell` says what to pass otherwise);
     ``action_names`` names the wrapped environment's actions as compass moves (e.g.
     FrozenLake's ``("W", "S", "E", "N")``). ``info["followed_advice"]`` says whether the step
     took an action sampled from the advice instead of the agent's.
@@ -112,10 +139,15 @@ class AdvisedEnv(gym.Wrapper[Any, Any, Any, Any]):
         window: int | None = None,
         agent_type: str | None = None,
         follow_advice: bool = False,
-        cell_of: Callable[[Any], tuple[int, int]] = _row_col,
+        cell_of: Callable[[Any], tuple[int, int]] = cell_of_observation,
         action_names: Sequence[str] = ACTIONS,
     ):
-        super().__init__(env)
+        gym.utils.RecordConstructorArgs.__init__(
+            self, _disable_deepcopy=True, client=client, domain=domain, kappa=kappa,
+            window=window, agent_type=agent_type, follow_advice=follow_advice, cell_of=cell_of,
+            action_names=action_names,
+        )  # fmt: skip
+        gym.Wrapper.__init__(self, env)
         self.client = client
         self.domain = domain
         self.options = {"kappa": kappa, "window": window, "agent_type": agent_type}
@@ -133,10 +165,16 @@ class AdvisedEnv(gym.Wrapper[Any, Any, Any, Any]):
         obs, info = self.env.reset(seed=seed, options=options)
         self._end_session()
         self.cell = self.cell_of(obs)
+        self.domain = self.domain_for(obs, info, seed)
         self.session = self.client.create_session(self.domain, start=self.cell, **self.options)  # type: ignore[arg-type]
         self.stream = self.client.stream(self.session)
         self.decision = self.session.decision
         return obs, {**info, "decision": self.decision, "session_id": self.session.session_id}
+
+    def domain_for(self, obs: Any, info: dict[str, Any], seed: int | None) -> str:
+        """The domain of the episode that ``reset`` began (here: always the one given;
+        :class:`~advisor_client.minigrid.AdvisedMiniGrid` makes one per layout)."""
+        return self.domain
 
     def advised_action(self) -> int | None:
         """An action sampled from the current advice, if the last decision advised."""

@@ -1,0 +1,43 @@
+"""How the command line shows and checks its options (shared by every command).
+
+* On/off flags show no value type (typer would show ``<bool>`` beside ``--keep/--no-keep``).
+* Options with a fixed set of values list them (``<random|left|...>``) and refuse another
+  value saying which are allowed; :func:`choice` makes such an option. (Typer checks a
+  ``Literal`` or an ``Enum`` itself, but words the refusal "Value error, ...".)
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import typer
+import typer.core
+
+_type_column = typer.core.TyperOption.display_type_rich
+
+
+def _flag_type(self: typer.core.TyperOption, ctx: Any) -> str | None:
+    return "" if self.is_flag else _type_column(self, ctx)
+
+
+typer.core.TyperOption.display_type_rich = _flag_type  # type: ignore[method-assign]
+
+
+def check_choice(choices: Sequence[str]) -> Callable[[Any], Any]:
+    """A callback refusing a value (or any value of a list) that is not one of ``choices``."""
+
+    def check(value: Any) -> Any:
+        for v in value if isinstance(value, list | tuple) else [value]:
+            if v is not None and v not in choices:
+                allowed = ", ".join(repr(c) for c in choices)
+                raise typer.BadParameter(f"{v!r} is not one of {allowed}")
+        return value
+
+    return check
+
+
+def choice(choices: Sequence[str], help: str, **options: Any) -> Any:
+    """A ``typer.Option`` of type ``str`` taking one of ``choices`` (listed in --help)."""
+    metavar = "<" + "|".join(choices) + ">"
+    return typer.Option(help=help, metavar=metavar, callback=check_choice(choices), **options)

@@ -1,0 +1,98 @@
+"""Logs: optional JSON lines with a request id, and the event routes kept out of the access log.
+
+``ADVISOR_LOG_FORMAT=json`` writes every log line (uvicorn's, the access log's, the service's)
+as one JSON object: ``time``, ``level``, ``logger``, ``message``, the ``request_id`` of the
+request being answered (given by the client as ``X-Request-ID`` or made here, and echoed in the
+answer's header), and for access lines ``method``, ``path``, ``status``, ``client``.
+
+A line per request costs a small endpoint about a third of its throughput (docs/PERFORMANCE.md,
+"Metrics and access log"), so by default the event routes (``POST /sessions/{id}/events`` and
+the websocket) are counted by the metrics and not logged line by line;
+``ADVISOR_ACCESS_LOG_EVENTS=true`` logs them too. Every other route keeps its access line.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import re
+import secrets
+import time
+from contextvars import ContextVar
+from typing import Any
+
+REQUEST_ID: ContextVar[str | None] = ContextVar("advisor_request_id", default=None)
+#: the paths of the event routes, as uvicorn's log lines carry them
+EVENT_PATH = re.compile(r"^/sessions/[^/?]+/(?:events|stream)(?:\?|$)")
+ACCESS_FIELDS = ("client", "method", "path", "http_version", "status")
+
+
+def new_request_id() -> str:
+    return secrets.token_hex(8)
+
+
+class JsonFormatter(logging.Formatter):
+    """One JSON object per line."""
+
+    def format(self, record: logging.LogRecord) -> str:
+        line: dict[str, Any] = {
+            "time": time.strftime("%Y-%m-%dT%H:%M:%S", time.gmtime(record.created))
+            + f".{int(record.msecs):03d}Z",
+            "level": record.levelname,
+            "logger": record.name,
+            "message": record.getMessage(),
+        }
+        rid = REQUEST_ID.get()
+        if rid is not None:
+            line["request_id"] = rid
+        args = record.args
+        if record.name == "uvicorn.access" and isinstance(args, tuple) and len(args) == 5:
+            line |= dict(zip(ACCESS_FIELDS, args, strict=True))
+        if record.exc_info:
+            line["exception"] = self.formatException(record.exc_info)
+        return json.dumps(line, default=str)
+
+
+class SkipEventRoutes(logging.Filter):
+    """Drops uvicorn's line for each event request and websocket connection (they are counted
+    by the metrics instead)."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        args = record.args
+        if record.name == "uvicorn.access":
+            path = args[2] if isinstance(args, tuple) and len(args) > 2 else None
+        elif isinstance(record.msg, str) and record.msg.startswith('%s - "WebSocket'):
+            path = args[1] if isinstance(args, tuple) and len(args) > 1 else None
+        else:  # websockets' own "connection open/closed": the only websocket is the stream
+            return record.msg not in ("connection open", "connection closed")
+        return not (isinstance(path, str) and EVENT_PATH.match(path))
+
+
+def quiet_event_routes() -> None:
+    """Install :class:`SkipEventRoutes` on uvicorn's access and error loggers (once)."""
+    for name in ("uvicorn.access", "uvicorn.error"):
+        logger = logging.getLogger(name)
+        if not any(isinstance(f, SkipEventRoutes) for f in logger.filters):
+            logger.addFilter(SkipEventRoutes())
+
+
+def json_log_config(level: str = "info") -> dict[str, Any]:
+    """uvicorn's ``log_config`` for JSON lines: its loggers and the root (the service's own
+    loggers) to stderr, the access log to stdout, as uvicorn's default has them."""
+    formatter = {"()": f"{__name__}.JsonFormatter"}
+    handler = {"class": "logging.StreamHandler", "formatter": "json"}
+    return {
+        "version": 1,
+        "disable_existing_loggers": False,
+        "formatters": {"json": formatter},
+        "handlers": {
+            "default": handler | {"stream": "ext://sys.stderr"},
+            "access": handler | {"stream": "ext://sys.stdout"},
+        },
+        "loggers": {
+            "uvicorn": {"handlers": ["default"], "level": level.upper(), "propagate": False},
+            "uvicorn.error": {"level": level.upper()},
+            "uvicorn.access": {"handlers": ["access"], "level": "INFO", "propagate": False},
+        },
+        "root": {"handlers": ["default"], "level": "INFO"},
+    }

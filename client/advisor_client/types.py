@@ -1,0 +1,135 @@
+"""The shapes the service answers with, as TypedDicts (the client needs no server code)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any, Literal, NotRequired, TypedDict
+
+Cell = tuple[int, int] | list[int]
+ActionName = Literal["N", "E", "S", "W"]
+
+
+class Advice(TypedDict):
+    N: float
+    E: float
+    S: float
+    W: float
+
+
+class Cost(TypedDict):
+    advice_count: int
+    total: float
+    benefit: float
+
+
+class Decision(TypedDict):
+    step: int
+    state: list[int]
+    advise: bool
+    advice: Advice | None
+    kl: float
+    p_normal: float
+    cost: Cost
+
+
+#: An event or a trajectory step as the client accepts it: any mapping with the fields of
+#: :class:`Event` / :class:`Step` (plain dict literals are fine).
+EventLike = Mapping[str, Any]
+
+
+class Event(TypedDict):
+    state: Cell
+    action: NotRequired[ActionName | int | None]
+    next_state: NotRequired[Cell | None]
+
+
+class Step(TypedDict):
+    state: Cell
+    action: ActionName | int
+
+
+class TrajectoryIn(TypedDict):
+    steps: list[Step]
+    agent_type: NotRequired[str | None]
+    goal: NotRequired[Cell | None]
+
+
+# ---- answers (the service's response models, as the client sees them) ------------------------
+class Health(TypedDict):
+    status: Literal["ok"]
+    version: str
+    database: str
+    domains: int
+    sessions: int
+    uptime_seconds: float
+
+
+class DomainInfo(TypedDict):
+    name: str
+    rows: int
+    cols: int
+    map: list[str]
+    resolution: float | None
+    origin: list[float] | None
+    start: list[int]
+    goals: list[list[int]]
+    actions: list[ActionName]
+    alpha0: float
+    n_states: int
+    trajectories: int
+    agent_types: list[str]
+    created_at: str
+    updated_at: str
+
+
+class Accepted(TypedDict):
+    accepted: int
+    pairs: int
+
+
+class Prior(TypedDict):
+    domain: str
+    agent_type: str | None
+    table: str
+    actions: list[ActionName]
+    alpha0: float
+    trajectories: int
+    theta: list[list[list[float] | None]]
+
+
+class GoalBelief(TypedDict):
+    goal: list[int]
+    p: float
+    ruled_out: bool
+
+
+class SessionInfo(TypedDict):
+    session_id: str
+    domain: str
+    agent_type: str | None
+    prior_table: str
+    kappa: float
+    window: int
+    strategy: str
+    params: dict[str, int | float]
+    goals: list[GoalBelief] | None
+    steps: int
+    position: list[int]
+    p_normal: float
+    advice_count: int
+    total_cost: float
+    benefit: float
+    advice_per_100: float
+    idle_seconds: float
+    created_at: str
+
+
+class SessionList(TypedDict):
+    total: int
+    sessions: list[SessionInfo]
+
+
+class Overview(TypedDict):
+    domains: list[dict[str, Any]]
+    total_sessions: int
+    sessions: list[dict[str, Any]]

@@ -1,0 +1,210 @@
+"""GET /metrics (Prometheus text), the request ids of JSON logs, and the quiet event routes."""
+
+from __future__ import annotations
+
+import json
+import logging
+from pathlib import Path
+
+import httpx
+from fastapi.testclient import TestClient
+from prometheus_client import REGISTRY
+from prometheus_client.parser import text_string_to_metric_families
+
+from app.service.logs import JsonFormatter, SkipEventRoutes
+from app.service.main import create_app
+from tests.service.conftest import make_settings, open_session, put_tiny
+
+EVENTS = "/sessions/{session_id}/events"
+
+
+def sample(name: str, **labels: str) -> float:
+    return REGISTRY.get_sample_value(name, labels) or 0.0
+
+
+def test_metrics_are_prometheus_text_named_advisor(client: TestClient) -> None:
+    r = client.get("/metrics")
+    assert r.status_code == 200
+    assert r.headers["content-type"].startswith("text/plain")
+    names = {f.name for f in text_string_to_metric_families(r.text)}
+    ours = {n for n in names if n.startswith("advisor_")}
+    assert {
+        "advisor_http_requests",
+        "advisor_http_request_duration_seconds",
+        "advisor_live_sessions",
+        "advisor_decisions",
+        "advisor_advice",
+        "advisor_trajectories_ingested",
+        "advisor_viewer_tick_seconds",
+    } <= ours
+
+
+def test_metrics_count_requests_by_route_template_not_path(client: TestClient) -> None:
+    before = sample("advisor_http_requests_total", method="POST", route=EVENTS, status="200")
+    hist = sample("advisor_http_request_duration_seconds_count", method="POST", route=EVENTS)
+    for _ in range(2):  # two sessions: two paths, one series
+        sid, auth, _ = open_session(client)
+        assert client.post(f"/sessions/{sid}/events", json=E, headers=auth).status_code == 200
+    after = sample("advisor_http_requests_total", method="POST", route=EVENTS, status="200")
+    assert after - before == 2
+    assert sample("advisor_http_request_duration_seconds_count", method="POST", route=EVENTS) == (
+        hist + 2
+    )
+    text = client.get("/metrics").text
+    assert sid not in text  # no raw path becomes a label
+    unmatched = sample(
+        "advisor_http_requests_total", method="GET", route="<unmatched>", status="404"
+    )
+    assert client.get(f"/no/such/{sid}").status_code == 404
+    assert (
+        sample("advisor_http_requests_total", method="GET", route="<unmatched>", status="404")
+        == unmatched + 1
+    )
+
+
+E = {"state": [28, 0], "action": "E"}
+
+
+def test_metrics_count_decisions_and_advice_per_domain_and_strategy(
+    client: TestClient, admin: dict[str, str]
+) -> None:
+    put_tiny(client, admin, "metrics-tiny")
+    labels = {"domain": "metrics-tiny", "strategy": "always"}
+    sid, auth, _ = open_session(client, "metrics-tiny", strategy="always")
+    moves = [{"state": [5, 1], "action": "E"}, {"state": [5, 2], "action": "W"}]
+    assert client.post(f"/sessions/{sid}/events", json=moves, headers=auth).status_code == 200
+    assert client.post(f"/sessions/{sid}/events", json=moves[0], headers=auth).status_code == 200
+    # the start decision, a batch of two, one event: four decisions, each advised ("always")
+    assert sample("advisor_decisions_total", **labels) == 4
+    assert sample("advisor_advice_total", **labels) == 4
+    client.get("/metrics")
+    assert sample("advisor_live_sessions", domain="metrics-tiny") == 1
+    steps = [{"state": [5, 1], "action": "E"}, {"state": [5, 2], "action": "E"}]
+    r = client.post(
+        "/domains/metrics-tiny/trajectories",
+        json={"trajectories": [{"steps": steps}]},
+        headers=admin,
+    )
+    assert r.status_code == 201
+    assert sample("advisor_trajectories_ingested_total", domain="metrics-tiny") == 1
+    assert sample("advisor_trajectory_pairs_ingested_total", domain="metrics-tiny") == 2
+    # a deleted domain's series go with it
+    assert client.delete("/domains/metrics-tiny", headers=admin).status_code == 204
+    text = client.get("/metrics").text
+    assert "metrics-tiny" not in text
+
+
+def test_metrics_can_be_turned_off(tmp_path: Path) -> None:
+    with TestClient(create_app(make_settings(tmp_path, metrics_enabled=False))) as c:
+        assert c.get("/metrics").status_code == 404
+
+
+def test_json_logs_carry_the_request_id_which_the_answer_echoes(tmp_path: Path) -> None:
+    settings = make_settings(tmp_path, log_format="json")
+    with TestClient(create_app(settings)) as c:
+        given = c.get("/health", headers={"X-Request-ID": "abc-123"})
+        assert given.headers["x-request-id"] == "abc-123"
+        made = c.get("/health").headers["x-request-id"]
+        assert len(made) == 16 and made != "abc-123"
+    record = logging.LogRecord(
+        "uvicorn.access", logging.INFO, "", 0, '%s - "%s %s HTTP/%s" %d',
+        ("127.0.0.1:5", "GET", "/health", "1.1", 200), None,
+    )  # fmt: skip
+    from app.service.logs import REQUEST_ID
+
+    token = REQUEST_ID.set("r1")
+    try:
+        line = json.loads(JsonFormatter().format(record))
+    finally:
+        REQUEST_ID.reset(token)
+    assert line["request_id"] == "r1" and line["status"] == 200 and line["path"] == "/health"
+    assert line["level"] == "INFO" and line["logger"] == "uvicorn.access"
+
+
+def test_event_routes_are_left_out_of_the_access_log_others_are_kept() -> None:
+    keep = SkipEventRoutes()
+
+    def access(path: str) -> logging.LogRecord:
+        args = ("127.0.0.1:5", "POST", path, "1.1", 200)
+        return logging.LogRecord(
+            "uvicorn.access", logging.INFO, "", 0, "%s %s %s %s %d", args, None
+        )
+
+    assert not keep.filter(access("/sessions/ab12/events"))
+    assert keep.filter(access("/sessions/ab12"))
+    assert keep.filter(access("/domains/default/sessions"))
+    ws = logging.LogRecord(
+        "uvicorn.error", logging.INFO, "", 0, '%s - "WebSocket %s" [accepted]',
+        ("127.0.0.1:5", "/sessions/ab12/stream?token=***"), None,
+    )  # fmt: skip
+    assert not keep.filter(ws)
+    other = logging.LogRecord("uvicorn.error", logging.INFO, "", 0, "Started server", None, None)
+    assert keep.filter(other)
+
+
+def test_a_live_server_counts_event_routes_instead_of_logging_them(tmp_path: Path) -> None:
+    from websockets.sync.client import connect
+
+    from tests.reliability.conftest import start, stop
+
+    live = start(tmp_path / "data", log_level="info")
+    try:
+        with httpx.Client(base_url=live.url, timeout=10) as http:
+            created = http.post("/domains/default/sessions", json={}).json()
+            sid, token = created["session_id"], created["token"]
+            auth = {"Authorization": f"Bearer {token}"}
+            assert http.post(f"/sessions/{sid}/events", json=E, headers=auth).status_code == 200
+            with connect(live.url.replace("http", "ws") + f"/sessions/{sid}/stream?token={token}"):
+                pass
+            assert http.get(f"/sessions/{sid}", headers=auth).status_code == 200
+            counted = http.get("/metrics").text
+    finally:
+        stop(live)
+    log = live.log.read_text(errors="replace")
+    assert f'"GET /sessions/{sid} HTTP/1.1" 200' in log  # other routes keep their line
+    assert f"/sessions/{sid}/events" not in log and f"/sessions/{sid}/stream" not in log
+    assert 'route="/sessions/{session_id}/events",status="200"} 1.0' in counted
+    assert 'method="WS",route="/sessions/{session_id}/stream",status="101"} 1.0' in counted
+
+
+def test_metrics_add_up_the_workers_in_prometheus_multiprocess_mode(tmp_path: Path) -> None:
+    """Two worker processes count; a third answers /metrics with their sums."""
+    import os
+    import subprocess
+    import sys
+
+    env = os.environ | {"PROMETHEUS_MULTIPROC_DIR": str(tmp_path)}
+    work = (
+        "from app.service.metrics import METRICS, SESSIONS\n"
+        "METRICS.request('GET', '/health', 200, 0.002)\n"
+        "METRICS.decisions('default', 'paper', 3, 1)\n"
+        "SESSIONS.labels('default').set(2)\n"
+        "import os; print(os.getpid())\n"
+    )
+    pids = [
+        subprocess.run(
+            [sys.executable, "-c", work], env=env, check=True, timeout=120, capture_output=True
+        ).stdout.split()[-1]
+        for _ in range(2)
+    ]
+    # the first worker has exited (as a process manager reports to prometheus-client)
+    show = (
+        "from prometheus_client import multiprocess\n"
+        f"multiprocess.mark_process_dead({int(pids[0])})\n"
+        "from app.service.metrics import exposition; print(exposition().decode())"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", show], env=env, check=True, capture_output=True, text=True
+    ).stdout
+    samples = {
+        (s.name, tuple(sorted(s.labels.items()))): s.value
+        for f in text_string_to_metric_families(out)
+        for s in f.samples
+    }
+    health = (("method", "GET"), ("route", "/health"), ("status", "200"))
+    assert samples[("advisor_http_requests_total", health)] == 2
+    paper = (("domain", "default"), ("strategy", "paper"))
+    assert samples[("advisor_decisions_total", paper)] == 6
+    assert samples[("advisor_advice_total", paper)] == 2
+    # live sessions: the sum over workers not reported dead
+    assert samples[("advisor_live_sessions", (("domain", "default"),))] == 2

@@ -1,0 +1,35 @@
+"""The README says what the code does: every setting listed, the library example runs (from
+outside the repository) and shows advice being given."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+from app.service.config import Settings
+
+README = (Path(__file__).resolve().parents[1] / "README.md").read_text(encoding="utf-8")
+
+
+def test_readme_lists_every_setting() -> None:
+    listed = set(re.findall(r"`ADVISOR_([A-Z0-9_]+)`", README))
+    missing = sorted(n.upper() for n in Settings.model_fields if n.upper() not in listed)
+    assert not missing, f"README.md does not list ADVISOR_{missing}"
+
+
+def test_readme_library_example_runs_outside_the_repository_and_advises(tmp_path: Path) -> None:
+    section = README.split("## The library", 1)[1]
+    code = section.split("```python", 1)[1].split("```", 1)[0]
+    run = subprocess.run(
+        [sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=300
+    )
+    assert run.returncode == 0, run.stderr
+    first, second = run.stdout.splitlines()
+    assert first == "False"
+    advise, kl, p_normal, advice = second.split(" ", 3)
+    assert advise == "True" and float(kl) >= 0.5 and float(p_normal) < 0.5
+    shown = re.search(r"# True ([\d.]+) ([\d.]+)", code)
+    assert shown is not None and (shown.group(1), shown.group(2)) == (kl, p_normal)
+    assert advice.startswith("(0.0119")
