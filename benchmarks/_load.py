@@ -238,7 +238,11 @@ def start_advisor(
     """``python -m app serve --no-viewer`` from source tree ``root``, on a fresh data dir."""
     port = free_port()
     data = workdir / f"data-{port}"
-    settings = {"ADVISOR_ADMIN_KEY": "bench", "ADVISOR_MAX_SESSIONS": str(max_sessions)}
+    settings = {  # one client measuring capacity: the per-client quotas as the service's own
+        "ADVISOR_ADMIN_KEY": "bench", "ADVISOR_MAX_SESSIONS": str(max_sessions),
+        "ADVISOR_CLIENT_MAX_SESSIONS": str(max_sessions),
+        "ADVISOR_CLIENT_MAX_SESSION_MEMORY": str(1024 * 1024 * 1024),
+    }  # fmt: skip
     cmd = [sys.executable, "-m", "app", "serve", "--no-viewer", "--port", str(port),
            "--data-dir", str(data), "--log-level", "warning"]  # fmt: skip
     log = workdir / f"advisor-{port}.log"

@@ -6,8 +6,10 @@ from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Literal
 
-from pydantic import Field, SecretStr
+from pydantic import Field, SecretStr, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
+
+from app.service.clients import networks
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 try:
@@ -59,6 +61,41 @@ class Settings(BaseSettings):
     bootstrap_per_goal: int = Field(10, ge=1, description="Expert trajectories per goal.")
     bootstrap_seed: int = Field(0, description="Seed of the default domain's experts.")
     bootstrap_alpha0: float = Field(1.0, gt=0, description="alpha0 of the default domain.")
+
+    # ---- what one client, or all of them, may take (docs/RELIABILITY.md) -----------------
+    max_session_memory: int = Field(
+        1024 * MiB, ge=MiB,
+        description="Bytes the live sessions may reserve in all: each reserves the most its "
+        "state can take (its window, its goals); beyond it new sessions get 503.",
+    )  # fmt: skip
+    client_max_sessions: int = Field(
+        1000, ge=1, description="Live sessions one client (key or address) may hold (then 429)."
+    )
+    client_max_session_memory: int = Field(
+        256 * MiB, ge=MiB, description="Session memory one client may reserve (then 429)."
+    )
+    trusted_proxies: list[str] = Field(
+        default_factory=list,
+        description="Addresses or networks (CIDR) of proxies in front of the service: for a "
+        "request from one of them, the client is the last address of X-Forwarded-For that is "
+        "not a trusted proxy. Empty: the peer's address is the client.",
+    )
+    max_goal_cells: int = Field(
+        2_097_152, ge=1,
+        description="goal_aware and guide keep per-goal tables of goals x cells: maps of more "
+        "are refused (PUT: 422).",
+    )  # fmt: skip
+    max_goal_window: int = Field(
+        1_048_576, ge=1,
+        description="A goal_aware session with beta > 0 keeps a per-goal window of goals x "
+        "window values: more is refused (422).",
+    )  # fmt: skip
+
+    @field_validator("trusted_proxies")
+    @classmethod
+    def _networks(cls, entries: list[str]) -> list[str]:
+        networks(entries)  # ValueError names an entry that is no address or network
+        return entries
 
     @property
     def db_url(self) -> str:

@@ -11,10 +11,11 @@ from fastapi import Depends, Path
 from fastapi.security import APIKeyHeader, HTTPAuthorizationCredentials, HTTPBearer
 from starlette.requests import HTTPConnection
 
+from app.service.clients import client_address
 from app.service.data.domains import DomainState
 from app.service.live.registry import LiveSession
 from app.service.schemas import NAME_PATTERN
-from app.service.security import AuthError, check_admin, check_session_token
+from app.service.security import AuthError, check_admin, check_session_token, same_secret
 from app.service.state import ServiceState
 
 SESSION_ID_PATTERN = r"^[A-Za-z0-9_-]{1,64}$"
@@ -97,6 +98,15 @@ async def get_session_or_admin(
         check_admin(key, state.admin_key)
         return state.registry.get(session_id)
     return await get_session(conn, session_id)
+
+
+def client_of(conn: HTTPConnection, state: ServiceState) -> str | None:
+    """Whom a new session's quota counts against: None for the admin key (no per-client
+    quota), else the client's address (:func:`app.service.clients.client_address`)."""
+    key = conn.headers.get("x-api-key")
+    if key and same_secret(key, state.admin_key):
+        return None
+    return "address " + client_address(conn, state.trusted)
 
 
 AdminDep = Depends(require_admin)

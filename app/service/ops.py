@@ -11,15 +11,19 @@ import json
 import numpy as np
 
 from app.advice.advisor import Decision
-from app.advice.guide import GuideError
 from app.advice.models import AdviceTables
-from app.advice.strategies import strategy_params
+from app.advice.strategies import StrategyParams, strategy_params
 from app.domain.grid import ACTIONS, Frame, GridDomain, MapError
 from app.domain.paths import expert_trajectories, path_within
 from app.service.data.domains import DomainNotFound, DomainState
 from app.service.data.ingest import parse_trajectories, to_trajectories
 from app.service.data.store import POOLED, Trajectory
-from app.service.live.registry import LiveSession, TooManySessions
+from app.service.live.registry import (
+    ClientQuotaReached,
+    LiveSession,
+    SessionMemoryFull,
+    TooManySessions,
+)
 from app.service.live.stream import StreamAdvisor
 from app.service.problems import BadInput
 from app.service.schemas import (
@@ -45,35 +49,77 @@ def cell_state(domain: GridDomain, cell: Cell, what: str) -> int:
         raise BadInput(f"{what}: {exc}") from None
 
 
-def create_session(
-    state: ServiceState, domain: DomainState, body: SessionCreate
-) -> tuple[LiveSession, Decision]:
-    limit = state.settings.max_window
+def session_params(state: ServiceState, domain: DomainState, body: SessionCreate) -> StrategyParams:
+    """The strategy's parameters of a session request, checked against this service's limits
+    before anything is built for it: the window, the parameters, and for goal_aware and guide
+    the per-goal tables (goals x cells) and goal_aware's per-goal window (goals x window)."""
+    settings = state.settings
+    limit = settings.max_window
     if body.window > limit:
         raise BadInput(f"window: {body.window} is larger than this service allows ({limit})")
-    grid = domain.domain
-    start = grid.start if body.start is None else cell_state(grid, body.start, "start")
     given = body.params.model_dump(exclude_unset=True) if body.params else {}
     try:
         params = strategy_params(body.strategy, given)
     except ValueError as exc:
         raise BadInput(f"params: {exc}") from None
-    if body.strategy == "goal_aware" and domain.goal_priors is None:
-        state.catalog.goal_priors(domain)  # reads the store once; routes call it off the loop
-    if body.strategy == "guide" and domain.guide_map is None:
-        try:
-            state.catalog.guide_map(domain)  # BFS from each destination, once per map
-        except GuideError as exc:
-            raise BadInput(f"strategy guide: {exc}") from None
+    if body.strategy in ("goal_aware", "guide"):
+        goals, cells = len(domain.domain.goals), domain.domain.n_states
+        if goals * cells > settings.max_goal_cells:
+            raise BadInput(
+                f"strategy {body.strategy}: domain {domain.name!r} has {goals} goals x {cells} "
+                f"free cells = {goals * cells} per-goal entries, more than this service keeps "
+                f"({settings.max_goal_cells}, ADVISOR_MAX_GOAL_CELLS)"
+            )
+    if body.strategy == "goal_aware" and params.beta > 0.0:
+        goals, most = len(domain.domain.goals), settings.max_goal_window
+        if goals * body.window > most:
+            raise BadInput(
+                f"window: goal_aware with beta > 0 keeps a value per goal and pair: {goals} "
+                f"goals x window {body.window} = {goals * body.window} is more than this service "
+                f"allows ({most}, ADVISOR_MAX_GOAL_WINDOW): a smaller window, or beta 0"
+            )
+    return params
+
+
+def create_session(
+    state: ServiceState, domain: DomainState, body: SessionCreate,
+    params: StrategyParams | None = None, client: str | None = None,
+) -> tuple[LiveSession, Decision]:  # fmt: skip
+    """A session for a request checked by :func:`session_params` (``params``: its answer; the
+    domain's goal tables built, for goal_aware and guide, off the event loop:
+    :meth:`DomainCatalog.goal_priors`, :meth:`DomainCatalog.guide_map`); ``client``: whom its
+    quota counts against (None: no per-client quota)."""
+    if params is None:
+        params = session_params(state, domain, body)
+    grid = domain.domain
+    start = grid.start if body.start is None else cell_state(grid, body.start, "start")
+    registry = state.registry
     try:
-        return state.registry.create(
-            domain, body.kappa, body.window, body.agent_type, start, body.strategy, params
-        )
+        return registry.create(
+            domain, body.kappa, body.window, body.agent_type, start, body.strategy, params,
+            client,
+        )  # fmt: skip
     except TooManySessions:
         raise BadInput(
-            f"the service has its maximum of {state.registry.max_sessions} live sessions: "
+            f"the service has its maximum of {registry.max_sessions} live sessions: "
             "end one (DELETE /sessions/{id}) or retry after idle sessions expire",
             503,
+        ) from None
+    except SessionMemoryFull as exc:
+        raise BadInput(
+            f"the live sessions hold the {exc.args[0]} bytes this service keeps for sessions "
+            "(ADVISOR_MAX_SESSION_MEMORY): end one, ask for a smaller window, or retry after "
+            "idle sessions expire",
+            503,
+        ) from None
+    except ClientQuotaReached as exc:
+        who, what, limit = exc.args
+        held = f"{limit} live sessions" if what == "sessions" else f"{limit} bytes of sessions"
+        raise BadInput(
+            f"this client ({who}) holds {held}, the most one client may "
+            f"(ADVISOR_CLIENT_MAX_{'SESSIONS' if what == 'sessions' else 'SESSION_MEMORY'}): "
+            "end some (DELETE /sessions/{id}) or retry after idle ones expire",
+            429,
         ) from None
 
 
@@ -153,6 +199,13 @@ def put_domain(state: ServiceState, name: str, body: DomainPut) -> tuple[DomainS
         grid = state.catalog.parse_map(body.map, name, frame)
     except MapError as exc:
         raise BadInput(f"map: {exc}") from None
+    goals, most = len(grid.goals), state.settings.max_goal_cells
+    if goals * grid.n_states > most:
+        raise BadInput(
+            f"map: {goals} goals x {grid.n_states} free cells = {goals * grid.n_states}; this "
+            f"service keeps per-goal tables (goal_aware, guide) for at most {most} "
+            "(ADVISOR_MAX_GOAL_CELLS): fewer goals or a smaller map"
+        )
     experts = None
     if body.experts is not None and not _keeps_data(state, name, grid):
         experts = simulated_experts(grid, body.experts, state.settings.max_expert_pairs)

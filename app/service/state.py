@@ -6,11 +6,12 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 
+from app.service.clients import Network, networks
 from app.service.config import Settings
 from app.service.data.bootstrap import bootstrap
 from app.service.data.domains import DomainCatalog
 from app.service.data.store import Store
-from app.service.live.registry import SessionRegistry
+from app.service.live.registry import Limits, SessionRegistry
 from app.service.security import load_admin_key
 
 
@@ -22,6 +23,7 @@ class ServiceState:
     registry: SessionRegistry
     admin_key: str
     started: float = field(default_factory=time.monotonic)
+    trusted: tuple[Network, ...] = ()  # proxies whose X-Forwarded-For is believed
 
     def close(self) -> None:
         self.store.close()
@@ -36,8 +38,14 @@ def open_state(settings: Settings) -> tuple[ServiceState, list[str]]:
     store.create_schema()
     catalog = DomainCatalog(store, settings.max_map_cells)
     catalog.load()
-    registry = SessionRegistry(
+    limits = Limits(
         settings.max_sessions,
+        settings.max_session_memory,
+        settings.client_max_sessions,
+        settings.client_max_session_memory,
+    )
+    registry = SessionRegistry(
+        limits,
         settings.session_idle_seconds,
         settings.recent_path,
         settings.recent_p_normal,
@@ -46,4 +54,5 @@ def open_state(settings: Settings) -> tuple[ServiceState, list[str]]:
     made = bootstrap(catalog, settings)
     if made:
         messages.append(made)
-    return ServiceState(settings, store, catalog, registry, admin_key), messages
+    trusted = networks(settings.trusted_proxies)
+    return ServiceState(settings, store, catalog, registry, admin_key, trusted=trusted), messages

@@ -141,7 +141,7 @@ class DomainCatalog:
         guide = None
         if goals is not None:
             goals = goals.copy(alpha0=rec.alpha0)
-            goals.rows()  # built here, in the worker thread, not at a session's first event
+            goals.arrays()  # built here, in the worker thread, not at a session's first event
             if keep is not None and keep.guide_map is not None:  # the same map: same distances
                 guide = keep.guide_map.replace_counts(goals)
         return DomainState(
@@ -218,8 +218,8 @@ class DomainCatalog:
 
 def add_goals(priors: GoalPriors, items: Sequence[Trajectory]) -> GoalPriors:
     """``priors`` with ``items`` added under the goals they ended at (if one of the map's),
-    and the flat lists sessions read built (this runs in a worker thread, not on the loop)."""
+    and the tables sessions share built (this runs in a worker thread, not on the loop)."""
     goal_index = [priors.goal_index.get(t.goal) if t.goal is not None else None for t in items]
     priors.add([t.pairs for t in items], goal_index)
-    priors.rows()
+    priors.arrays()
     return priors

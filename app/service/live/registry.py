@@ -18,7 +18,7 @@ import secrets
 import threading
 import time
 from collections import Counter
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import UTC, datetime
 
 import numpy as np
@@ -28,10 +28,10 @@ from app.advice.advisor import Advisor, Decision, DecisionBatch
 from app.advice.guide import GuideMap
 from app.advice.models import AdviceTables
 from app.advice.priors import GoalPriors
-from app.advice.strategies import StrategyParams, guide_params, make_advisor
+from app.advice.strategies import StrategyParams, guide_params
 from app.service.data.domains import DomainState
 from app.service.live.history import Advice, AdviceLog, Recent
-from app.service.live.stream import StreamAdvisor, StreamGuide
+from app.service.live.stream import StreamAdvisor, StreamGoalAware, StreamGuide, StreamRule
 
 IntArray = npt.NDArray[np.int64]
 RECENT_ADVICE = 50
@@ -45,20 +45,55 @@ class TooManySessions(RuntimeError):
     """The registry holds ``max_sessions`` live sessions already."""
 
 
+class SessionMemoryFull(RuntimeError):
+    """The live sessions have reserved the registry's memory budget (``args[0]`` bytes)."""
+
+
+class ClientQuotaReached(RuntimeError):
+    """One client holds as many sessions (``args[1] == "sessions"``) or as much session
+    memory (``"memory"``) as one client may; ``args[0]`` is the client, ``args[2]`` the limit."""
+
+
+#: What a session costs beside its advisor's arrays (:meth:`footprint`) and its history rings:
+#: the session and advisor objects, their numbers and lists, the advice log (measured under
+#: 10 kB for every strategy: tests/service/live/test_registry.py).
+SESSION_OVERHEAD = 16 * 1024
+
+
+@dataclass(frozen=True)
+class Limits:
+    """What the registry admits: live sessions in all, the bytes their state may reserve in
+    all, and per client (None: no per-client limit)."""
+
+    max_sessions: int
+    max_memory: int | None = None
+    client_sessions: int | None = None
+    client_memory: int | None = None
+
+
+ServiceAdvisor = StreamAdvisor | StreamRule | StreamGoalAware | StreamGuide
+
+
 def new_advisor(
     strategy: str, tables: AdviceTables, kappa: float, window: int,
     params: StrategyParams | None, goal_priors: GoalPriors | None,
     guide_map: GuideMap | None = None,
-) -> Advisor:  # fmt: skip
-    """The advisor of a session: the paper's rule and guide with compiled batches, or the
-    core's advisor of the strategy (one call per event)."""
+) -> ServiceAdvisor:  # fmt: skip
+    """The advisor of a session (:mod:`app.service.live.stream`): the paper's rule, goal_aware
+    and guide with compiled batches, the other rules one call per event; every window as pair
+    keys."""
     if strategy == "paper":
         return StreamAdvisor(tables, kappa, window)
     if strategy == "guide":
         if guide_map is None:
             raise ValueError("guide advice needs the map's destinations (a guide map)")
         return StreamGuide(tables, guide_map, kappa, window, params=guide_params(params))
-    return make_advisor(strategy, tables, kappa, window, params, goal_priors)
+    if strategy == "goal_aware":
+        if goal_priors is None:
+            raise ValueError("goal_aware advice needs the experts' goals (goal priors)")
+        beta = (params or StrategyParams()).beta
+        return StreamGoalAware(tables, goal_priors, kappa, window, beta)
+    return StreamRule(tables, strategy, kappa, window, params)
 
 
 @dataclass(eq=False, slots=True)
@@ -84,6 +119,8 @@ class LiveSession:
     # created at the first advice
     advice_log: AdviceLog | None = None
     closed: bool = False
+    client: str | None = None  # who its quota counts against (None: no quota)
+    reserved: int = 0  # bytes it reserved of the registry's budget
 
     def _rings(self) -> tuple[Recent, Recent]:
         """The recent path and P(M1 | H) rings, made at the first event (until then the
@@ -159,13 +196,35 @@ class SessionRegistry:
     """Every live session by id, bounded in number and idle time."""
 
     def __init__(
-        self, max_sessions: int, idle_seconds: float, recent_path: int = 100, recent_p: int = 200
-    ):
-        self.max_sessions = max_sessions
+        self, limits: Limits | int, idle_seconds: float, recent_path: int = 100,
+        recent_p: int = 200,
+    ):  # fmt: skip
+        self.limits = limits if isinstance(limits, Limits) else Limits(limits)
         self.idle_seconds = idle_seconds
         self.history_sizes = (recent_path, recent_p)
         self.lock = threading.Lock()
         self._sessions: dict[str, LiveSession] = {}
+        self.reserved = 0  # bytes reserved by the live sessions
+        self._clients: dict[str, list[int]] = {}  # client -> [sessions, bytes]
+
+    @property
+    def max_sessions(self) -> int:
+        return self.limits.max_sessions
+
+    @max_sessions.setter
+    def max_sessions(self, value: int) -> None:
+        self.limits = replace(self.limits, max_sessions=value)
+
+    def reservation(self, advisor: ServiceAdvisor) -> int:
+        """Bytes a session with ``advisor`` reserves: the most its advisor's arrays can take,
+        its history rings (int32 cells, float32 P(M1 | H)) and :data:`SESSION_OVERHEAD`."""
+        return advisor.footprint() + 4 * sum(self.history_sizes) + SESSION_OVERHEAD
+
+    def client_usage(self, client: str) -> tuple[int, int]:
+        """(live sessions, bytes reserved) of ``client``."""
+        with self.lock:
+            n, used = self._clients.get(client, (0, 0))
+        return n, used
 
     def __len__(self) -> int:
         return len(self._sessions)
@@ -179,33 +238,74 @@ class SessionRegistry:
         start: int,
         strategy: str = "paper",
         params: StrategyParams | None = None,
+        client: str | None = None,
     ) -> tuple[LiveSession, Decision]:
         """A new session and the decision for its start state (empty history). A goal_aware
         session needs ``domain.goal_priors`` built (:meth:`DomainCatalog.goal_priors`), a guide
-        session ``domain.guide_map`` too (:meth:`DomainCatalog.guide_map`)."""
+        session ``domain.guide_map`` too (:meth:`DomainCatalog.guide_map`).
+
+        Admitted within the :class:`Limits` (idle sessions are expired first when one is
+        reached): :class:`TooManySessions`, :class:`SessionMemoryFull` or, for ``client``,
+        :class:`ClientQuotaReached` otherwise."""
         view = domain.view
         key = view.resolve(agent_type)
         tables = view.tables[key]
         advisor = new_advisor(
             strategy, tables, kappa, window, params, domain.goal_priors, domain.guide_map
         )
+        need = self.reservation(advisor)
         decision = advisor.start(start)
         now = time.monotonic()
         with self.lock:
-            if len(self._sessions) >= self.max_sessions:
+            if self._refusal(need, client) is not None:
                 self._expire(now)
-            if len(self._sessions) >= self.max_sessions:
-                raise TooManySessions(self.max_sessions)
+            refused = self._refusal(need, client)
+            if refused is not None:
+                raise refused
             sid = secrets.token_hex(8)
             session = LiveSession(
                 sid, secrets.token_urlsafe(24), domain, agent_type, key, advisor, start,
                 decision.p_normal, datetime.now(UTC), now, self.history_sizes,
+                client=client, reserved=need,
             )  # fmt: skip
             if decision.advise:
                 own = decision.advice if advisor.own_advice else None
                 session._log().add(0, start, tables, own)
             self._sessions[sid] = session
+            self.reserved += need
+            if client is not None:
+                used = self._clients.setdefault(client, [0, 0])
+                used[0] += 1
+                used[1] += need
         return session, decision
+
+    def _refusal(self, need: int, client: str | None) -> RuntimeError | None:
+        """Why a session reserving ``need`` bytes for ``client`` cannot be admitted now."""
+        lim = self.limits
+        if len(self._sessions) >= lim.max_sessions:
+            return TooManySessions(lim.max_sessions)
+        if lim.max_memory is not None and self.reserved + need > lim.max_memory:
+            return SessionMemoryFull(lim.max_memory)
+        if client is None:
+            return None
+        n, used = self._clients.get(client, (0, 0))
+        if lim.client_sessions is not None and n >= lim.client_sessions:
+            return ClientQuotaReached(client, "sessions", lim.client_sessions)
+        if lim.client_memory is not None and used + need > lim.client_memory:
+            return ClientQuotaReached(client, "memory", lim.client_memory)
+        return None
+
+    def _drop(self, session: LiveSession) -> None:
+        """Under the lock: ``session`` leaves (ended, expired or its domain gone)."""
+        session.closed = True
+        del self._sessions[session.id]
+        self.reserved -= session.reserved
+        if session.client is not None:
+            used = self._clients[session.client]
+            used[0] -= 1
+            used[1] -= session.reserved
+            if used[0] == 0:
+                del self._clients[session.client]
 
     def get(self, session_id: str) -> LiveSession:
         session = self._sessions.get(session_id)
@@ -246,10 +346,10 @@ class SessionRegistry:
 
     def end(self, session_id: str) -> LiveSession:
         with self.lock:
-            session = self._sessions.pop(session_id, None)
+            session = self._sessions.get(session_id)
             if session is None or session.closed:
                 raise SessionNotFound(session_id)
-            session.closed = True
+            self._drop(session)
         return session
 
     def end_domain(self, name: str) -> int:
@@ -257,8 +357,7 @@ class SessionRegistry:
         with self.lock:
             gone = [s for s in self._sessions.values() if s.domain.name == name]
             for s in gone:
-                s.closed = True
-                del self._sessions[s.id]
+                self._drop(s)
         return len(gone)
 
     def retable(self, domain: DomainState) -> None:
@@ -279,8 +378,7 @@ class SessionRegistry:
     def _expire(self, now: float) -> int:
         idle = [s for s in self._sessions.values() if now - s.last_seen > self.idle_seconds]
         for s in idle:
-            s.closed = True
-            del self._sessions[s.id]
+            self._drop(s)
         return len(idle)
 
     def sessions(self) -> list[LiveSession]:

@@ -15,6 +15,7 @@ from app.service.deps import (
     SessionId,
     SessionOrAdminDep,
     StateDep,
+    client_of,
     service_of,
     session_for,
 )
@@ -40,9 +41,10 @@ ERRORS: dict[int | str, dict[str, Any]] = {
 @router.post(
     "/domains/{name}/sessions",
     status_code=201,
-    responses={code: {"model": ErrorPublic} for code in (400, 404, 413, 422, 503)},
+    responses={code: {"model": ErrorPublic} for code in (400, 404, 413, 422, 429, 503)},
 )
 async def create_session(
+    request: Request,
     domain: DomainDep,
     state: StateDep,
     body: Annotated[SessionCreate | None, Body()] = None,
@@ -50,6 +52,7 @@ async def create_session(
     """Start watching an explorer: returns its id, its token (keep it: every session route
     needs it) and the decision for its start cell."""
     body = body or SessionCreate()
+    params = ops.session_params(state, domain, body)
     if body.strategy == "goal_aware" and domain.goal_priors is None:
         await run_in_threadpool(state.catalog.goal_priors, domain)  # first one: reads the store
     if body.strategy == "guide" and domain.guide_map is None:
@@ -57,7 +60,8 @@ async def create_session(
             await run_in_threadpool(state.catalog.guide_map, domain)
         except GuideError as exc:
             raise BadInput(f"strategy guide: {exc}") from None
-    session, decision = ops.create_session(state, domain, body)
+    client = client_of(request, state)
+    session, decision = ops.create_session(state, domain, body, params, client)
     return session_created(session, decision)
 
 
