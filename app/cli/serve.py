@@ -43,11 +43,34 @@ def serve(
 
 
 def uvicorn_options(settings: Settings, log_level: str = "info") -> dict[str, Any]:
-    """How ``serve`` runs uvicorn (one worker); the benchmarks' baseline apps run the same."""
+    """How ``serve`` runs uvicorn (one worker); the benchmarks' baseline apps run the same.
+    HTTP goes through :mod:`app.service.guard` (bounded headers, read deadlines, a cap on
+    connections); uvicorn's reading of X-Forwarded-For is off (it would trust any from
+    127.0.0.1): :mod:`app.service.clients` reads it from the proxies the settings trust."""
+    from app.service.guard import guarded_http
+
+    http = guarded_http(
+        settings.max_header_bytes, settings.header_timeout, settings.body_timeout,
+        connection_cap(settings.max_connections),
+    )  # fmt: skip
     return {
         "host": settings.host,
         "port": settings.port,
         "log_level": log_level,
         "ws_max_size": settings.max_body_bytes + 1024,
         "ws_per_message_deflate": False,  # compressing 100 kB frames costs more than it saves
+        "proxy_headers": False,
+        "http": http,
     }
+
+
+def connection_cap(wanted: int) -> int:
+    """``wanted``, or fewer if the process may not open that many files (each connection is
+    one; 64 are kept for the database, logs and the rest)."""
+    import resource
+
+    soft, _ = resource.getrlimit(resource.RLIMIT_NOFILE)
+    if soft != resource.RLIM_INFINITY and soft - 64 < wanted:
+        typer.echo(f"max_connections {wanted} lowered to {soft - 64} (open files limit {soft})")
+        return max(soft - 64, 1)
+    return wanted

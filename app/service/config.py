@@ -91,6 +91,21 @@ class Settings(BaseSettings):
         "window values: more is refused (422).",
     )  # fmt: skip
 
+    max_header_bytes: int = Field(
+        16 * 1024, ge=1024, description="Request headers at most this many bytes (then 431)."
+    )
+    header_timeout: float = Field(
+        10.0, gt=0, description="Seconds a request's headers may take to arrive (then 408)."
+    )
+    body_timeout: float = Field(
+        30.0, gt=0, description="Seconds a request's body may take after its headers (408)."
+    )
+    max_connections: int = Field(
+        1000, ge=1,
+        description="Open connections at most, websockets included (then 503 and closed); "
+        "lowered to the process's file descriptor limit less 64 if that is lower.",
+    )  # fmt: skip
+
     @field_validator("trusted_proxies")
     @classmethod
     def _networks(cls, entries: list[str]) -> list[str]:

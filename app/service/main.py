@@ -68,8 +68,14 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app = FastAPI(
         title="Hidden-goal advisor",
         version=VERSION,
-        description="Advice for explorers with hidden goals (Rosman & Ramamoorthy, ICRA 2014).",
+        description="Advice for explorers with hidden goals (Rosman & Ramamoorthy, ICRA 2014). "
+        f"Request bodies are JSON of at most {settings.max_body_bytes} bytes (413 beyond, 415 "
+        "for another Content-Type); request headers at most 16 KiB in all (431).",
         lifespan=lifespan,
+        # a body without a Content-Type is read as JSON on every route, as the events and
+        # trajectories routes (which read their bytes themselves) always did; a Content-Type
+        # that is not JSON is refused (415) by BodyLimit on every route
+        strict_content_type=False,
     )
     app.state.settings = settings
     install_error_handlers(app)

@@ -22,8 +22,8 @@ router = APIRouter(tags=["domains"])
 NOT_FOUND: dict[int | str, dict[str, Any]] = {404: {"model": ErrorPublic}}
 ADMIN: dict[int | str, dict[str, Any]] = {401: {"model": ErrorPublic}, 403: {"model": ErrorPublic}}
 INVALID: dict[int | str, dict[str, Any]] = {422: {"model": ErrorPublic}}
-BODY: dict[int | str, dict[str, Any]] = {  # unreadable or oversize bodies
-    400: {"model": ErrorPublic}, 413: {"model": ErrorPublic},
+BODY: dict[int | str, dict[str, Any]] = {  # unreadable, oversize or not JSON bodies
+    400: {"model": ErrorPublic}, 413: {"model": ErrorPublic}, 415: {"model": ErrorPublic},
 }  # fmt: skip
 
 
@@ -68,10 +68,7 @@ async def delete_domain(name: DomainName, state: StateDep) -> None:
     dependencies=[AdminDep],
     status_code=201,
     openapi_extra=body("TrajectoriesCreate"),
-    responses=NOT_FOUND
-    | ADMIN
-    | INVALID
-    | {409: {"model": ErrorPublic}, 413: {"model": ErrorPublic}},
+    responses=NOT_FOUND | ADMIN | INVALID | BODY | {409: {"model": ErrorPublic}},
 )
 async def add_trajectories(
     request: Request, domain: DomainDep, state: StateDep

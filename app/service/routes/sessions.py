@@ -41,7 +41,7 @@ ERRORS: dict[int | str, dict[str, Any]] = {
 @router.post(
     "/domains/{name}/sessions",
     status_code=201,
-    responses={code: {"model": ErrorPublic} for code in (400, 404, 413, 422, 429, 503)},
+    responses={code: {"model": ErrorPublic} for code in (400, 404, 413, 415, 422, 429, 503)},
 )
 async def create_session(
     request: Request,
@@ -85,7 +85,7 @@ def add_event_route(app: FastAPI) -> None:
         tags=["sessions"],
         response_model=DecisionPublic | list[DecisionPublic],
         openapi_extra=body("Events") | BEARER,
-        responses=ERRORS | {413: {"model": ErrorPublic}},
+        responses=ERRORS | {413: {"model": ErrorPublic}, 415: {"model": ErrorPublic}},
     )
 
 
@@ -93,7 +93,7 @@ def add_event_route(app: FastAPI) -> None:
     "/sessions/{session_id}/positions",
     response_model=list[DecisionPublic],
     openapi_extra=BEARER,
-    responses=ERRORS | {413: {"model": ErrorPublic}},
+    responses=ERRORS | {413: {"model": ErrorPublic}, 415: {"model": ErrorPublic}},
 )
 async def post_positions(session: SessionDep, body: PositionsIn, state: StateDep) -> Response:
     """Positions in metres (domains with a resolution): each reading is snapped to its cell; a

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import json
 
-from fastapi import APIRouter, WebSocket
+from fastapi import APIRouter, WebSocket, WebSocketDisconnect
 from starlette.websockets import WebSocketState
 
 from app.service import ops
@@ -58,6 +58,13 @@ def _error(status: int, detail: str) -> str:
 
 @router.websocket("/sessions/{session_id}/stream")
 async def stream(websocket: WebSocket, session_id: str) -> None:
+    try:
+        await _serve(websocket, session_id)
+    except WebSocketDisconnect:  # the client went away before its answer: nothing to say
+        return
+
+
+async def _serve(websocket: WebSocket, session_id: str) -> None:
     state = service_of(websocket)
     await websocket.accept()
     try:
