@@ -33,6 +33,11 @@ class Settings(BaseSettings):
     admin_key: SecretStr | None = Field(
         None, description="X-API-Key for admin routes; generated and stored if not given."
     )
+    operator_key: SecretStr | None = Field(
+        None,
+        description="Read-only X-API-Key for live positions and paths (/overview's sessions, "
+        "GET /sessions, the viewer); generated and stored if not given.",
+    )
     session_idle_seconds: float = Field(1800.0, gt=0, description="Idle sessions expire.")
     sweep_seconds: float = Field(15.0, gt=0, description="How often expired sessions go.")
     max_sessions: int = Field(20_000, ge=1, description="Live sessions at most (then 503).")
@@ -91,6 +96,14 @@ class Settings(BaseSettings):
         "window values: more is refused (422).",
     )  # fmt: skip
 
+    overview_seconds: float = Field(
+        1.0, ge=0, description="GET /overview is made at most once per this many seconds."
+    )
+    path_retention_seconds: float = Field(
+        600.0, gt=0,
+        description="Seconds the cells an explorer was at (its recent path, where it was "
+        "advised) are kept; its current cell stays while its session lives.",
+    )  # fmt: skip
     max_header_bytes: int = Field(
         16 * 1024, ge=1024, description="Request headers at most this many bytes (then 431)."
     )

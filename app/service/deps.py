@@ -15,7 +15,13 @@ from app.service.clients import client_address
 from app.service.data.domains import DomainState
 from app.service.live.registry import LiveSession
 from app.service.schemas import NAME_PATTERN
-from app.service.security import AuthError, check_admin, check_session_token, same_secret
+from app.service.security import (
+    AuthError,
+    check_admin,
+    check_session_token,
+    is_operator,
+    same_secret,
+)
 from app.service.state import ServiceState
 
 SESSION_ID_PATTERN = r"^[A-Za-z0-9_-]{1,64}$"
@@ -44,6 +50,22 @@ async def require_admin(
     state: StateDep, key: Annotated[str | None, Depends(api_key_header)] = None
 ) -> None:
     check_admin(key, state.admin_key)
+
+
+async def operator_view(
+    state: StateDep, key: Annotated[str | None, Depends(api_key_header)] = None
+) -> bool:
+    """Whether the caller may see live positions and paths: the admin key or the read-only
+    operator key (403 for a key that is neither; False without one)."""
+    return is_operator(key, state.admin_key, state.operator_key)
+
+
+async def require_operator(
+    state: StateDep, key: Annotated[str | None, Depends(api_key_header)] = None
+) -> None:
+    if not key:
+        raise AuthError(401, "send the admin key or the read-only operator key as X-API-Key")
+    is_operator(key, state.admin_key, state.operator_key)
 
 
 async def get_domain(name: DomainName, state: StateDep) -> DomainState:
@@ -100,6 +122,20 @@ async def get_session_or_admin(
     return await get_session(conn, session_id)
 
 
+async def get_session_or_operator(
+    conn: HTTPConnection,
+    session_id: SessionId,
+    state: StateDep,
+    credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(bearer)] = None,
+    key: Annotated[str | None, Depends(api_key_header)] = None,
+) -> LiveSession:
+    """As :func:`get_session`, or any session for the admin or operator key (to read it)."""
+    if key and not credentials:
+        is_operator(key, state.admin_key, state.operator_key)
+        return state.registry.get(session_id)
+    return await get_session(conn, session_id)
+
+
 def client_of(conn: HTTPConnection, state: ServiceState) -> str | None:
     """Whom a new session's quota counts against: None for the admin key (no per-client
     quota), else the client's address (:func:`app.service.clients.client_address`)."""
@@ -110,8 +146,14 @@ def client_of(conn: HTTPConnection, state: ServiceState) -> str | None:
 
 
 AdminDep = Depends(require_admin)
+OperatorDep = Depends(require_operator)
+OperatorView = Annotated[bool, Depends(operator_view)]
 DomainDep = Annotated[DomainState, Depends(get_domain)]
 SessionDep = Annotated[LiveSession, Depends(get_session)]
 SessionOrAdminDep = Annotated[LiveSession, Depends(get_session_or_admin)]
+SessionOrOperatorDep = Annotated[LiveSession, Depends(get_session_or_operator)]
 
-__all__ = ["AdminDep", "AuthError", "DomainDep", "SessionDep", "SessionOrAdminDep", "StateDep"]
+__all__ = [
+    "AdminDep", "AuthError", "DomainDep", "OperatorDep", "OperatorView", "SessionDep",
+    "SessionOrAdminDep", "SessionOrOperatorDep", "StateDep",
+]  # fmt: skip

@@ -37,6 +37,7 @@ async def _expire_idle(state: ServiceState) -> None:
     while True:
         await asyncio.sleep(state.settings.sweep_seconds)
         state.registry.expire()
+        state.registry.forget_old()  # the retention of where explorers were
 
 
 @asynccontextmanager

@@ -9,6 +9,8 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import numpy.typing as npt
+import orjson
 
 from app.advice.advisor import Decision
 from app.advice.models import AdviceTables
@@ -26,6 +28,7 @@ from app.service.live.registry import (
 )
 from app.service.live.stream import StreamAdvisor
 from app.service.problems import BadInput
+from app.service.public import overview_domain, overview_session
 from app.service.schemas import (
     Cell,
     DomainPut,
@@ -38,6 +41,7 @@ from app.service.state import ServiceState
 from app.service.wire.encode import batch_binary, batch_json, decision_json, theta_text
 from app.service.wire.events import read_move, read_moves
 
+IntArray = npt.NDArray[np.int64]
 #: an expert walk's longest (``expert_trajectory``'s default ``max_steps``)
 EXPERT_MAX_STEPS = 10_000
 
@@ -124,7 +128,8 @@ def create_session(
 
 
 def apply_events(state: ServiceState, session: LiveSession, raw: bytes | str) -> bytes:
-    """Events (JSON text: one or a list) -> decisions (JSON: one or a list, in order)."""
+    """Events (JSON text: one or a list) -> decisions (JSON: one or a list, in order), in one
+    go (the routes run :func:`answer_events`, the same work with long batches in slices)."""
     grid = session.domain.domain
     move = read_move(grid, raw)
     if move is not None:  # one event object: plain ints and one decision
@@ -133,11 +138,39 @@ def apply_events(state: ServiceState, session: LiveSession, raw: bytes | str) ->
     return batch_json(state.registry.observe_batch(session, moves), grid)
 
 
-def apply_positions(state: ServiceState, session: LiveSession, body: PositionsIn) -> bytes:
+async def answer_events(
+    state: ServiceState, session: LiveSession, raw: bytes | str, binary: bool = False
+) -> bytes:
+    """:func:`apply_events` (or, ``binary``, :func:`apply_events_binary`) as the routes run it:
+    a long batch in slices, the event loop free for others between them
+    (:meth:`SessionRegistry.observe_sliced`)."""
+    grid, registry = session.domain.domain, state.registry
+    if not binary:
+        move = read_move(grid, raw)
+        if move is not None:
+            return decision_json(await registry.observe_after(session, *move), grid)
+    moves, _ = read_moves(grid, raw, state.settings.max_batch_events)
+    out = await registry.observe_sliced(session, moves)
+    return batch_binary(out, grid) if binary else batch_json(out, grid)
+
+
+async def apply_positions(state: ServiceState, session: LiveSession, body: PositionsIn) -> bytes:
     """Positions in metres -> decisions (JSON list), one per move. Each reading is snapped to
     the cell holding it; a reading in the cell of the one before adds no move; a reading up to
     ``max_jump`` moves away is walked along a shortest path (one decision per cell of it); a
     reading farther away, in a wall or off the map refuses the whole batch (nothing applied)."""
+    moves = position_moves(state, session, body)
+    if moves is None:
+        return b"[]"
+    out = await state.registry.observe_sliced(session, moves)
+    return batch_json(out, session.domain.domain)
+
+
+def position_moves(
+    state: ServiceState, session: LiveSession, body: PositionsIn
+) -> tuple[IntArray, IntArray, IntArray] | None:
+    """The moves ``body``'s readings walk from the session's cell (None: none); BadInput for
+    a wall, a point off the map or a jump too far."""
     grid = session.domain.domain
     if grid.frame is None:
         raise BadInput(
@@ -172,11 +205,11 @@ def apply_positions(state: ServiceState, session: LiveSession, body: PositionsIn
         if len(visited) - 1 > most:
             raise BadInput(f"too many moves: the positions walk more than {most} in one batch", 413)
     if len(visited) == 1:
-        return b"[]"
+        return None
     s = np.array(visited[:-1], dtype=np.int64)
     s2 = np.array(visited[1:], dtype=np.int64)
     a = np.argmax(grid.next_state[s] == s2[:, None], axis=1).astype(np.int64)
-    return batch_json(state.registry.observe_batch(session, (s, a, s2)), grid)
+    return s, a, s2
 
 
 def apply_events_binary(state: ServiceState, session: LiveSession, raw: bytes | str) -> bytes:
@@ -268,6 +301,20 @@ def ingest(
     prepare_answers(domain)
     accepted = TrajectoriesAccepted(accepted=len(items), pairs=sum(len(t.pairs) for t in items))
     return accepted, domain
+
+
+def overview(state: ServiceState, detail: bool, limit: int, domain: str | None) -> bytes:
+    """*Worker thread.* ``GET /overview``: per domain its figures over its live sessions; with
+    ``detail`` (an operator's key) also the ``limit`` most recently active sessions (of
+    ``domain``), where each is and was."""
+    aggregates = state.registry.aggregates()
+    sessions = state.registry.snapshot(limit, domain) if detail else []
+    return orjson.dumps({
+        "detail": detail,
+        "domains": [overview_domain(d, aggregates.get(d.name)) for d in state.catalog.states()],
+        "total_sessions": sum(a.sessions for a in aggregates.values()),
+        "sessions": [overview_session(s) for s in sessions],
+    })  # fmt: skip
 
 
 def prepare_answers(domain: DomainState) -> None:

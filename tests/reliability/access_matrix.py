@@ -27,9 +27,10 @@ from tests.service.conftest import TINY, make_settings
 
 COLUMNS = {
     "none": "no credentials",
-    "wrong": "wrong admin key",
+    "wrong": "a wrong key",
     "other": "another session's token",
     "admin": "admin key",
+    "operator": "operator key",
     "own": "the session's own token",
 }
 E = {"state": [5, 1], "action": "E"}
@@ -40,7 +41,7 @@ TRAJECTORIES = {"trajectories": [{"steps": [E]}]}
 class Route:
     method: str
     path: str
-    who: str  # "anyone", "admin", "token" (the session's), "token or admin"
+    who: str  # a key of POLICY
     body: object = None
 
 
@@ -56,22 +57,34 @@ ROUTES = [
     Route("POST", "/domains/{name}/sessions", "anyone", {}),
     Route("POST", "/sessions/{session_id}/events", "token", E),
     Route("POST", "/sessions/{session_id}/positions", "token", {"positions": [[2.5, 1.5]]}),
-    Route("GET", "/sessions/{session_id}", "token or admin"),
+    Route("GET", "/sessions/{session_id}", "token or operator"),
     Route("DELETE", "/sessions/{session_id}", "token or admin"),
-    Route("GET", "/sessions", "admin"),
+    Route("GET", "/sessions", "operator"),
     Route("WS", "/sessions/{session_id}/stream", "token"),
-    Route("GET", "/overview", "anyone"),
+    Route("GET", "/overview", "anyone; sessions: operator"),
     Route("GET", "/viewer", "anyone"),
     Route("GET", "/", "anyone"),
     Route("GET", "/walk", "anyone"),
 ]
 #: What each kind of route answers to each column ("ok": its success status).
 POLICY = {
-    "anyone": {"none": "ok", "wrong": "ok", "other": "ok", "admin": "ok", "own": "ok"},
-    "admin": {"none": "401", "wrong": "403", "other": "401", "admin": "ok", "own": "401"},
-    "token": {"none": "401", "wrong": "401", "other": "403", "admin": "401", "own": "ok"},
-    "token or admin": {"none": "401", "wrong": "403", "other": "403", "admin": "ok", "own": "ok"},
-}
+    "anyone": {"none": "ok", "wrong": "ok", "other": "ok", "admin": "ok", "operator": "ok",
+               "own": "ok"},
+    "admin": {"none": "401", "wrong": "403", "other": "401", "admin": "ok", "operator": "403",
+              "own": "401"},
+    "operator": {"none": "401", "wrong": "403", "other": "401", "admin": "ok", "operator": "ok",
+                 "own": "401"},
+    "token": {"none": "401", "wrong": "401", "other": "403", "admin": "401", "operator": "401",
+              "own": "ok"},
+    "token or admin": {"none": "401", "wrong": "403", "other": "403", "admin": "ok",
+                       "operator": "403", "own": "ok"},
+    "token or operator": {"none": "401", "wrong": "403", "other": "403", "admin": "ok",
+                          "operator": "ok", "own": "ok"},
+    # live sessions (where explorers are and were) for the admin and operator keys only
+    "anyone; sessions: operator": {"none": "figures", "wrong": "403", "other": "figures",
+                                   "admin": "sessions", "operator": "sessions",
+                                   "own": "figures"},
+}  # fmt: skip
 #: A websocket refusal is a close code: 4400 + the HTTP status it stands for.
 WS_CLOSE = {"401": "close 4401", "403": "close 4403"}
 
@@ -91,6 +104,7 @@ class Service:
     def __init__(self, client: TestClient):
         self.client = client
         self.admin_key: str = client.app.state.service.admin_key  # type: ignore[attr-defined]
+        self.operator_key: str = client.app.state.service.operator_key  # type: ignore[attr-defined]
         self.counter = 0
         body = {"map": TINY, "resolution": 1.0}  # in metres too: positions are valid
         r = client.put("/domains/tiny", json=body, headers=self.admin)
@@ -124,9 +138,10 @@ def service() -> Iterator[Service]:
 def headers(column: str, svc: Service, own: str, other: str) -> dict[str, str]:
     return {
         "none": {},
-        "wrong": {"X-API-Key": "not-the-admin-key"},
+        "wrong": {"X-API-Key": "not-a-key-of-this-service"},
         "other": {"Authorization": f"Bearer {other}"},
         "admin": svc.admin,
+        "operator": {"X-API-Key": svc.operator_key},
         "own": {"Authorization": f"Bearer {own}"},
     }[column]
 
@@ -146,6 +161,9 @@ def measure_cell(svc: Service, route: Route, column: str) -> Cell:
         content=None if route.body is None else json.dumps(route.body),
         headers=sent | ({"Content-Type": "application/json"} if route.body is not None else {}),
     )
+    if r.is_success and route.path == "/overview":  # which view: live sessions or figures
+        listed = r.json()["detail"] and r.json()["sessions"]
+        return Cell("200 sessions" if listed else "200 figures", True)
     return Cell(str(r.status_code), r.is_success)
 
 
@@ -173,6 +191,8 @@ def expected(route: Route, column: str) -> Callable[[Cell], bool]:
     want = POLICY[route.who][column]
     if want == "ok":
         return lambda cell: cell.ok
+    if want in ("figures", "sessions"):
+        return lambda cell: cell.status == f"200 {want}"
     if route.method == "WS":
         return lambda cell: cell.status == WS_CLOSE[want]
     return lambda cell: cell.status == want

@@ -9,11 +9,12 @@ from app.advice.guide import GuideError
 from app.service import ops
 from app.service.deps import (
     BEARER,
-    AdminDep,
     DomainDep,
+    OperatorDep,
     SessionDep,
     SessionId,
     SessionOrAdminDep,
+    SessionOrOperatorDep,
     StateDep,
     client_of,
     service_of,
@@ -70,7 +71,7 @@ async def post_events(request: Request, session_id: SessionId) -> Response:
     batch with a bad event is refused whole and changes nothing."""
     state = service_of(request)
     session = session_for(request, session_id, state)  # not a dependency: see session_for
-    text = ops.apply_events(state, session, await request.body())
+    text = await ops.answer_events(state, session, await request.body())
     return Response(text, media_type="application/json")
 
 
@@ -100,13 +101,13 @@ async def post_positions(session: SessionDep, body: PositionsIn, state: StateDep
     reading in the same cell as the one before adds no move, one up to ``max_jump`` moves away
     (ADVISOR_MAX_JUMP, default 8) is walked along a shortest path, one decision per cell; a
     farther jump, a wall or a point off the map refuses the batch whole (422)."""
-    text = ops.apply_positions(state, session, body)
+    text = await ops.apply_positions(state, session, body)
     return Response(text, media_type="application/json")
 
 
 @router.get("/sessions/{session_id}", responses=ERRORS)
-async def read_session(session: SessionOrAdminDep, state: StateDep) -> SessionPublic:
-    """The session's figures (its token, or the admin key)."""
+async def read_session(session: SessionOrOperatorDep, state: StateDep) -> SessionPublic:
+    """The session's figures (its token, or the admin or operator key)."""
     return session_public(state.registry.describe(session))
 
 
@@ -118,13 +119,13 @@ async def end_session(session: SessionOrAdminDep, state: StateDep) -> SessionPub
     return session_public(final)
 
 
-@router.get("/sessions", dependencies=[AdminDep], responses=ERRORS)
+@router.get("/sessions", dependencies=[OperatorDep], responses=ERRORS)
 async def list_sessions(
     state: StateDep,
     limit: Annotated[int, Query(ge=1, le=10_000)] = 100,
     domain: Annotated[str | None, Query(max_length=64)] = None,
 ) -> SessionList:
-    """Live sessions, most recently active first (admin)."""
+    """Live sessions, most recently active first (the admin or the operator key)."""
     reg = state.registry
     total = len(reg) if domain is None else reg.count_by_domain().get(domain, 0)
     return SessionList(

@@ -91,10 +91,11 @@ async def _serve(websocket: WebSocket, session_id: str) -> None:
             await websocket.send_text(_error(413, f"the message is larger than {limit} bytes"))
             continue
         try:
+            answer = await ops.answer_events(state, session, text, binary)
             if binary:
-                await websocket.send_bytes(ops.apply_events_binary(state, session, text))
+                await websocket.send_bytes(answer)
             else:  # JSON is ASCII: decoding it is a copy
-                await websocket.send_text(ops.apply_events(state, session, text).decode())
+                await websocket.send_text(answer.decode())
         except BadInput as exc:
             await websocket.send_text(_error(exc.status, exc.detail))
         except SessionNotFound:

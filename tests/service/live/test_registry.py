@@ -4,11 +4,13 @@ budget, the session limit and the per-client quotas admit and refuse as they say
 
 from __future__ import annotations
 
+import asyncio
 import tracemalloc
 
 import numpy as np
 import pytest
 
+from app.advice.advisor import Decision
 from app.advice.strategies import STRATEGIES, StrategyParams
 from app.service.data.domains import DomainState
 from app.service.data.store import Trajectory
@@ -115,3 +117,42 @@ def test_client_quotas_count_sessions_and_bytes_per_client(service: ServiceState
         tight = SessionRegistry(Limits(1), 3600.0)
         tight.create(domain, 0.5, 300, None, start)
         tight.create(domain, 0.5, 300, None, start)
+
+
+def test_a_long_batch_runs_in_slices_and_an_event_meanwhile_waits_for_it(
+    service: ServiceState,
+) -> None:
+    """A 'mistake' session (one Python call an event: 500-event slices) sent 2,300 events:
+    the loop is free between slices; a single event sent meanwhile is decided after the whole
+    batch; the decisions are those of one batch in one go."""
+    domain = _prepared(service)
+    registry = SessionRegistry(Limits(10), 3600.0)
+    start = domain.domain.start
+    sliced, _ = registry.create(domain, 0.3, 300, None, start, "mistake")
+    whole, _ = registry.create(domain, 0.3, 300, None, start, "mistake")
+    moves = _moves(domain, 2300, 4)
+    s, a, s2 = (int(v[0]) for v in moves)
+    ticks = 0
+
+    async def run() -> tuple[list[Decision], Decision]:
+        nonlocal ticks
+
+        async def other_clients() -> None:
+            nonlocal ticks
+            while True:
+                ticks += 1
+                await asyncio.sleep(0)
+
+        other = asyncio.create_task(other_clients())
+        batch = asyncio.create_task(registry.observe_sliced(sliced, moves))
+        await asyncio.sleep(0)  # the batch has started: its first slice ran
+        one = await registry.observe_after(sliced, s, a, s2)
+        out = await batch
+        other.cancel()
+        return out.decisions(), one
+
+    decisions, one = asyncio.run(run())
+    assert ticks >= 4  # the loop ran others between the 5 slices
+    expected = registry.observe_batch(whole, moves).decisions()
+    assert decisions == expected
+    assert one == registry.observe_one(whole, s, a, s2)  # after the batch: step 2301
