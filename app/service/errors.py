@@ -142,6 +142,7 @@ class _TooLarge(Exception):
     pass
 
 
+BODY_METHODS = frozenset({"POST", "PUT", "PATCH"})
 NOT_JSON = (
     "every request body is JSON: send it with 'Content-Type: application/json' (or without a "
     "Content-Type)"
@@ -170,7 +171,7 @@ class BodyLimit:
             return
         headers = dict(scope["headers"])
         kind = headers.get(b"content-type")
-        if kind is not None and not _is_json(kind):
+        if kind is not None and scope["method"] in BODY_METHODS and not _is_json(kind):
             await _json(415, NOT_JSON)(scope, receive, send)
             return
         length = headers.get(b"content-length")

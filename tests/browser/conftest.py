@@ -57,6 +57,11 @@ class Service:
     http: httpx.Client
 
     @property
+    def operator_key(self) -> str:
+        key: str = self.app.state.service.operator_key
+        return key
+
+    @property
     def viewer(self) -> Viewer:
         viewer: Viewer = self.app.state.viewer
         return viewer
