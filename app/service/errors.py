@@ -21,6 +21,7 @@ from starlette.requests import ClientDisconnect
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from app.service.data.domains import DomainChanged, DomainNotFound
+from app.service.data.store import COUNT_MAX, CountsFull
 from app.service.live.registry import SessionNotFound
 from app.service.problems import BadInput, describe_errors
 from app.service.security import AuthError
@@ -109,6 +110,14 @@ async def _domain_changed(_: Request, exc: Exception) -> JSONResponse:
     )
 
 
+async def _counts_full(_: Request, exc: Exception) -> JSONResponse:
+    return _json(
+        409,
+        f"the stored counts of prior table {exc.args[0]!r} would pass {COUNT_MAX} (they are "
+        "32-bit): nothing was stored",
+    )
+
+
 TOO_DEEP = "the JSON body is nested too deeply to parse"
 TOO_MANY_DIGITS = (
     "the JSON body holds an integer of more than 4300 digits: no field takes one (a window, "
@@ -136,6 +145,7 @@ def install_error_handlers(app: FastAPI) -> None:
     app.add_exception_handler(SessionNotFound, _no_session)
     app.add_exception_handler(RecursionError, _too_deep)
     app.add_exception_handler(ClientDisconnect, _gone)
+    app.add_exception_handler(CountsFull, _counts_full)
 
 
 class _TooLarge(Exception):
