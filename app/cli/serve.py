@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -19,7 +22,7 @@ def serve(
         str | None, typer.Option(help="SQLAlchemy URL, e.g. postgresql+psycopg://...")
     ] = None,
     no_viewer: Annotated[
-        bool, typer.Option("--no-viewer", help="Do not start the viewer.")
+        bool, typer.Option("--no-viewer", help="Do not start the viewer (its own process).")
     ] = False,
     log_level: Annotated[str, typer.Option(help="uvicorn log level.")] = "info",
 ) -> None:
@@ -39,7 +42,33 @@ def serve(
     except ValidationError as exc:
         typer.echo(f"error: bad setting: {exc}", err=True)
         raise typer.Exit(code=2) from None
-    uvicorn.run(create_app(settings), **uvicorn_options(settings, log_level))
+    viewer = start_viewer(settings) if settings.viewer_enabled else None
+    try:
+        uvicorn.run(create_app(settings), **uvicorn_options(settings, log_level))
+    finally:
+        if viewer is not None:
+            viewer.terminate()
+            try:
+                viewer.wait(10)
+            except subprocess.TimeoutExpired:
+                viewer.kill()
+
+
+def start_viewer(settings: Settings) -> subprocess.Popen[bytes]:
+    """``python -m app viewer`` for this service, in a process of its own: it reads the API on
+    loopback with the operator key (in its environment, not on its command line) and exits
+    with this process."""
+    from app.service.security import load_operator_key
+
+    key, message = load_operator_key(settings)  # made here if new: the service reads it too
+    if message:
+        typer.echo(message, err=True)
+    api = f"http://127.0.0.1:{settings.port}"
+    cmd = [
+        sys.executable, "-m", "app", "viewer", "--api", api, "--host", settings.viewer_host,
+        "--port", str(settings.viewer_port), "--parent", str(os.getpid()),
+    ]  # fmt: skip
+    return subprocess.Popen(cmd, env=os.environ | {"ADVISOR_OPERATOR_KEY": key})
 
 
 def uvicorn_options(settings: Settings, log_level: str = "info") -> dict[str, Any]:

@@ -57,8 +57,15 @@ class Settings(BaseSettings):
     max_map_cells: int = Field(250_000, ge=4, description="Largest map (rows x cols).")
     recent_path: int = Field(100, ge=1, description="Cells of recent path kept per session.")
     recent_p_normal: int = Field(200, ge=1, description="p_normal values kept per session.")
-    viewer_enabled: bool = Field(True, description="Start the viser viewer with the service.")
+    viewer_enabled: bool = Field(
+        True, description="serve starts the viser viewer, in a process of its own."
+    )
     viewer_port: int = Field(8080, ge=0, le=65535, description="Port of the viser viewer.")
+    viewer_host: str = Field(
+        "127.0.0.1",
+        description="Interface of the viewer: loopback unless set (it shows where explorers "
+        "are and were, and asks no key of a browser).",
+    )
     static_dir: Path = Field(REPO_ROOT / "static", description="Pages served at / and /static.")
     bootstrap_experts: Literal["start", "anywhere"] = Field(
         "start", description="Where the simulated experts of the default domain start."

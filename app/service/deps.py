@@ -28,7 +28,10 @@ SESSION_ID_PATTERN = r"^[A-Za-z0-9_-]{1,64}$"
 #: ``openapi_extra`` for routes that check the bearer token through :func:`get_session`.
 BEARER: dict[str, Any] = {"security": [{"HTTPBearer": []}]}
 
-api_key_header = APIKeyHeader(name="X-API-Key", auto_error=False, description="The admin key.")
+api_key_header = APIKeyHeader(
+    name="X-API-Key", auto_error=False,
+    description="The admin key; on the routes that read live sessions, or the read-only operator key.",
+)  # fmt: skip
 bearer = HTTPBearer(auto_error=False, description="The session's token.")
 
 

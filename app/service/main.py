@@ -5,7 +5,7 @@ from __future__ import annotations
 import asyncio
 import gc
 import sys
-from collections.abc import AsyncIterator, Awaitable, Callable
+from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 
 from fastapi import FastAPI
@@ -21,16 +21,6 @@ from app.service.routes import ROUTERS
 from app.service.routes.sessions import add_event_route
 from app.service.security import redact_access_log
 from app.service.state import ServiceState, open_state
-
-Stop = Callable[[], Awaitable[None]]
-
-
-async def start_background(app: FastAPI, settings: Settings) -> list[Stop]:
-    """The one hook for services that run beside the API (the viser viewer when
-    ``settings.viewer_enabled``); returns their stop functions, called at shutdown."""
-    if not settings.viewer_enabled:
-        return []
-    return [await viewer_feed.start_viewer(app, settings)]
 
 
 async def _expire_idle(state: ServiceState) -> None:
@@ -54,12 +44,9 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
     gc.collect()
     gc.freeze()
     sweeper = asyncio.create_task(_expire_idle(state))
-    stops = await start_background(app, settings)
     try:
         yield
     finally:
-        for stop in reversed(stops):
-            await stop()
         sweeper.cancel()
         await run_in_threadpool(state.close)
 

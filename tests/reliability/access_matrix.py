@@ -63,6 +63,7 @@ ROUTES = [
     Route("WS", "/sessions/{session_id}/stream", "token"),
     Route("GET", "/overview", "anyone; sessions: operator"),
     Route("GET", "/viewer", "anyone"),
+    Route("GET", "/viewer/snapshot", "operator"),
     Route("GET", "/", "anyone"),
     Route("GET", "/walk", "anyone"),
 ]

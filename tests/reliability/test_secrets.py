@@ -56,8 +56,8 @@ def test_a_live_server_logs_no_session_token_nor_admin_key(tmp_path: Path) -> No
                 ws.send(json.dumps({"state": [28, 1], "action": "W"}))
                 assert json.loads(ws.recv())["step"] == 2
             with connect(plain, subprotocols=[Subprotocol("advisor")]) as ws:  # no token
-                ws.send("{}")
                 with pytest.raises(ConnectionClosed) as closed:
+                    ws.send("{}")
                     ws.recv()
                 assert closed.value.rcvd is not None and closed.value.rcvd.code == 4401
             r = http.get(f"/sessions/{sid}", headers={"Authorization": f"Bearer {token}"})

@@ -1,8 +1,8 @@
-"""The adapter between the service and the viewer: snapshots, the lifespan hook, GET /viewer."""
+"""The viewer's feed from a service over HTTP (``RemoteFeed`` reading ``GET /viewer/snapshot``
+with the operator key, maps and priors fetched when they change), and ``GET /viewer``."""
 
 from __future__ import annotations
 
-import threading
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -12,9 +12,8 @@ from fastapi.testclient import TestClient
 
 from app.service.config import Settings
 from app.service.main import create_app
-from app.service.viewer_feed import ServiceFeed
-from app.viewer.viewer import Viewer
-from tests.viewer.conftest import free_port, wait_until
+from app.viewer.remote import RemoteFeed
+from tests.viewer.conftest import free_port
 
 ADMIN = "viewer-test-admin-key"
 
@@ -26,6 +25,7 @@ def settings(tmp: Path, viewer: bool) -> Settings:
         viewer_enabled=viewer,
         viewer_port=free_port(),
         bootstrap_per_goal=2,
+        overview_seconds=0.0,  # every read sees the events before it
     )
 
 
@@ -51,8 +51,13 @@ def walk(client: TestClient, moves: str, kappa: float = 0.5) -> tuple[str, dict[
     return body["session_id"], auth
 
 
+def remote(client: TestClient) -> RemoteFeed:
+    """The viewer's feed, reading this service with the read-only operator key."""
+    return RemoteFeed(client, client.app.state.service.operator_key)  # type: ignore[attr-defined]
+
+
 def test_feed_snapshot_holds_domains_with_their_prior(client: TestClient) -> None:
-    feed = ServiceFeed(client.app.state.service)  # type: ignore[attr-defined]
+    feed = remote(client)
     snap = feed()
     view = snap.domains["default"]
     prior = client.get("/domains/default/prior").json()
@@ -64,7 +69,7 @@ def test_feed_snapshot_holds_domains_with_their_prior(client: TestClient) -> Non
 
 def test_feed_snapshot_holds_each_session_as_the_service_sees_it(client: TestClient) -> None:
     sid, auth = walk(client, "EEEWW", kappa=0.0)  # kappa 0: advised at every decision
-    snap = ServiceFeed(client.app.state.service)()  # type: ignore[attr-defined]
+    snap = remote(client)()
     mine = next(s for s in snap.sessions if s.session_id == sid)
     summary = client.get(f"/sessions/{sid}", headers=auth).json()
     assert mine.steps == summary["steps"] == 5
@@ -81,7 +86,7 @@ def test_feed_snapshot_holds_each_session_as_the_service_sees_it(client: TestCli
 
 
 def test_feed_prior_version_goes_up_when_trajectories_arrive(client: TestClient) -> None:
-    feed = ServiceFeed(client.app.state.service)  # type: ignore[attr-defined]
+    feed = remote(client)
     before = feed().domains["default"]
     steps = [{"state": [28, c], "action": "E"} for c in range(0, 6)]
     answer = client.post(
@@ -91,37 +96,28 @@ def test_feed_prior_version_goes_up_when_trajectories_arrive(client: TestClient)
     )
     assert answer.status_code == 201
     after = feed().domains["default"]
-    assert after.prior_version == before.prior_version + 1
+    assert after.prior_version > before.prior_version
+    assert after.domain is before.domain  # the map was not fetched again
     assert not np.array_equal(after.theta, before.theta)
 
 
 def test_viewer_status_says_disabled_without_a_viewer(client: TestClient) -> None:
     answer = client.get("/viewer")
     assert answer.status_code == 200
-    assert answer.json() == {"enabled": False, "port": None, "clients": 0, "ticks": 0}
+    assert answer.json() == {"enabled": False, "port": None, "host": None}
 
 
-def test_service_starts_and_stops_the_viewer_when_enabled(tmp_path: Path) -> None:
+def test_viewer_status_says_where_serve_starts_it(tmp_path: Path) -> None:
     cfg = settings(tmp_path, viewer=True)
-    app = create_app(cfg)
-    with TestClient(app) as c:
-        viewer: Viewer = app.state.viewer
+    with TestClient(create_app(cfg)) as c:
         status = c.get("/viewer").json()
-        assert status["enabled"] and status["clients"] == 0
-        assert status["port"] == viewer.port
-        assert viewer.port == cfg.viewer_port
-        ticked = threading.Event()
-        real_feed = viewer.feed
+    assert status == {"enabled": True, "port": cfg.viewer_port, "host": "127.0.0.1"}
 
-        def watched() -> object:
-            ticked.set()
-            return real_feed()
 
-        viewer.feed = watched  # type: ignore[assignment]
-        assert ticked.wait(timeout=10.0)  # the pump reads the service by itself
-        wait_until(lambda: c.get("/viewer").json()["ticks"] > status["ticks"])
-    assert app.state.viewer is None
-    assert viewer._thread is not None and not viewer._thread.is_alive()
+def test_the_snapshot_is_for_the_operator_and_admin_keys_only(client: TestClient) -> None:
+    assert client.get("/viewer/snapshot").status_code == 401
+    assert client.get("/viewer/snapshot", headers={"X-API-Key": "nope"}).status_code == 403
+    assert client.get("/viewer/snapshot", headers={"X-API-Key": ADMIN}).status_code == 200
 
 
 def test_feed_carries_a_goal_aware_sessions_goal_posterior(client: TestClient) -> None:
@@ -133,7 +129,7 @@ def test_feed_carries_a_goal_aware_sessions_goal_posterior(client: TestClient) -
     auth = {"Authorization": f"Bearer {created['token']}"}
     event = {"state": grid.cell(goal), "action": "NESW"[move]}
     assert client.post(f"/sessions/{created['session_id']}/events", json=event, headers=auth)
-    snap = ServiceFeed(client.app.state.service)()  # type: ignore[attr-defined]
+    snap = remote(client)()
     mine = next(s for s in snap.sessions if s.session_id == created["session_id"])
     assert mine.strategy == "goal_aware" and mine.goals is not None
     summary = client.get(f"/sessions/{created['session_id']}", headers=auth).json()
@@ -142,5 +138,5 @@ def test_feed_carries_a_goal_aware_sessions_goal_posterior(client: TestClient) -
     ]
     assert mine.goals[0][2] and not any(out for _, _, out in mine.goals[1:])
     sid, _ = walk(client, "E")
-    paper = next(s for s in ServiceFeed(client.app.state.service)().sessions if s.session_id == sid)  # type: ignore[attr-defined]
+    paper = next(s for s in remote(client)().sessions if s.session_id == sid)
     assert paper.strategy == "paper" and paper.goals is None

@@ -8,6 +8,7 @@ take :attr:`DomainState.view`, an immutable snapshot replaced in one assignment.
 
 from __future__ import annotations
 
+import itertools
 import threading
 from collections.abc import Mapping, Sequence
 from contextlib import nullcontext
@@ -29,14 +30,19 @@ class DomainChanged(RuntimeError):
     """The domain's map was replaced by another while trajectories for it were in flight."""
 
 
+_versions = itertools.count(1)
+
+
 @dataclass(frozen=True)
 class PriorView:
     """What sessions and readers use of a prior: its tables (pooled ``"*"`` plus every agent
-    type with data) and trajectory counts. Replaced whole, never changed."""
+    type with data) and trajectory counts. Replaced whole, never changed; ``version`` goes up
+    with every view made, so a reader elsewhere (the viewer) knows when to fetch it again."""
 
     alpha0: float
     tables: Mapping[str, AdviceTables]
     trajectories: Mapping[str, int]
+    version: int = field(default_factory=lambda: next(_versions))
 
     def resolve(self, agent_type: str | None) -> str:
         """The table serving ``agent_type``: its own if it has data, else the pooled one."""

@@ -16,7 +16,12 @@ router = APIRouter(tags=["pages"])
 PAGES = {"/": "index.html", "/walk": "walk.html"}
 
 
-@router.get("/overview", response_model=Overview, responses={403: {"model": ErrorPublic}})
+@router.get(
+    "/overview",
+    response_model=Overview,
+    responses={403: {"model": ErrorPublic}},
+    openapi_extra={"security": [{}, {"APIKeyHeader": []}]},  # a key is optional: it shows more
+)
 async def overview(
     state: StateDep,
     detail: OperatorView,
