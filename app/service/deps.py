@@ -30,7 +30,7 @@ BEARER: dict[str, Any] = {"security": [{"HTTPBearer": []}]}
 
 api_key_header = APIKeyHeader(
     name="X-API-Key", auto_error=False,
-    description="The admin key; on the routes that read live sessions, or the read-only operator key.",
+    description="The admin key; on routes that read live sessions, or the operator key.",
 )  # fmt: skip
 bearer = HTTPBearer(auto_error=False, description="The session's token.")
 
