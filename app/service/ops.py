@@ -13,8 +13,10 @@ import numpy.typing as npt
 import orjson
 
 from app.advice.advisor import Decision
+from app.advice.guide import GuideMap
 from app.advice.models import AdviceTables
-from app.advice.strategies import StrategyParams, strategy_params
+from app.advice.priors import GoalPriors
+from app.advice.strategies import StrategyParams, guide_params, strategy_params
 from app.domain.grid import ACTIONS, Frame, GridDomain, MapError
 from app.domain.paths import expert_trajectories, path_within
 from app.service.data.domains import DomainNotFound, DomainState
@@ -26,7 +28,7 @@ from app.service.live.registry import (
     SessionMemoryFull,
     TooManySessions,
 )
-from app.service.live.stream import StreamAdvisor
+from app.service.live.stream import StreamAdvisor, StreamGoalAware, StreamGuide
 from app.service.problems import BadInput
 from app.service.public import overview_domain, overview_session
 from app.service.schemas import (
@@ -339,3 +341,16 @@ def warm_up() -> None:
     advisor.observe_batch(*moves)
     batch_json(out, grid)
     batch_binary(out, grid)
+    # goal_aware's loops too, a prior update (new goal counts) included, and guide's
+    goals = GoalPriors(grid.n_states, grid.goals).add([np.array([[0, 1]])], [0])
+    aware = StreamGoalAware(tables, goals, kappa=0.0, window=2, beta=0.5)
+    aware.start(grid.start)
+    aware.observe_batch(*moves)
+    aware.use_tables(tables, GoalPriors(grid.n_states, grid.goals).add([np.array([[0, 1]])], [0]))
+    aware.observe(*(int(m[0]) for m in moves))
+    aware.goal_beliefs()
+    guide = StreamGuide(
+        tables, GuideMap.of(grid, goals), kappa=0.0, window=2, params=guide_params(None)
+    )
+    guide.start(grid.start)
+    guide.observe_batch(*moves)

@@ -199,6 +199,47 @@ def expected(route: Route, column: str) -> Callable[[Cell], bool]:
     return lambda cell: cell.status == want
 
 
+RULES = [
+    "## The rules",
+    "",
+    "**Keys.** Two keys go in the `X-API-Key` header: the admin key (everything) and the",
+    "read-only operator key (reads of live sessions, no writes). Each comes from its setting",
+    "(`ADVISOR_ADMIN_KEY`, `ADVISOR_OPERATOR_KEY`), else from `<data_dir>/admin_key` and",
+    "`<data_dir>/operator_key`; if neither exists, one is generated, written with mode 0600 and",
+    "shown once. A key that is neither is refused (403), not taken as none. Session routes take",
+    "the session's own token (`Authorization: Bearer`; on the websocket also the subprotocols",
+    "`advisor`, `token.<token>`, as the `/walk` page sends it, or `?token=`, which logs keep:",
+    "the service's own log writes `token=***`). Comparisons are constant-time.",
+    "",
+    "**Where explorers are is personal data.** Live positions, recent paths and where advice",
+    "was given are shown to the admin and operator keys only: `GET /overview` lists sessions",
+    "for them and gives anyone else figures per domain (sessions, steps, advice per 100",
+    "decisions, how many look lost); `GET /sessions`, `GET /sessions/{id}` and the viewer's",
+    "`GET /viewer/snapshot` are theirs (and a session's own token reads its own session). The",
+    "dashboard asks for the operator key and keeps it in the tab's session storage. The cells",
+    "an explorer was at are kept `ADVISOR_PATH_RETENTION_SECONDS` (600) at most: older ones are",
+    "dropped from its recent path and advice log (answers never show them; the sweeper forgets",
+    "them), and only its current cell stays while its session lives.",
+    "",
+    "**The viewer** (`python -m app viewer`, which `serve` starts in a process of its own) is",
+    "an operator's tool: it reads the API with the operator key, and listens on loopback",
+    "(`ADVISOR_VIEWER_HOST`, default 127.0.0.1) since it asks a browser for no key; it says so",
+    "when it starts. It refuses websockets from pages of other origins (403), messages over",
+    "4 MiB (closed), more than 8 browsers (503), and drops file uploads.",
+    "",
+    "**Quotas.** Sessions are free to open, so each client may hold at most",
+    "`ADVISOR_CLIENT_MAX_SESSIONS` (1,000) live sessions reserving at most",
+    "`ADVISOR_CLIENT_MAX_SESSION_MEMORY` (256 MiB) between them (429 beyond, saying which). A",
+    "client is the peer's address; behind proxies the operator lists in",
+    "`ADVISOR_TRUSTED_PROXIES` (addresses or CIDR networks), the last address of",
+    "`X-Forwarded-For` that is not one of them (a forwarded address from anyone else is not",
+    "believed). Sessions made with the admin key count against no client's quota. In all, at",
+    "most `ADVISOR_MAX_SESSIONS` (20,000) sessions reserving `ADVISOR_MAX_SESSION_MEMORY`",
+    "(1 GiB) live at once (503 beyond).",
+    "",
+]
+
+
 def render(matrix: Matrix) -> str:
     head = " | ".join(COLUMNS.values())
     lines = [
@@ -208,9 +249,9 @@ def render(matrix: Matrix) -> str:
         "docs/ACCESS.md`; tests/reliability/test_access.py fails when it is out of date -->",
         "",
         "What the service answers to each route with each kind of credential, measured on a",
-        "fresh service (each cell one request to a fresh session or domain). Admin",
-        "credentials: the `X-API-Key` header; session credentials: `Authorization: Bearer",
-        '<token>` (the websocket also takes `?token=`). "Another session\'s token" is a valid',
+        "fresh service (each cell one request to a fresh session or domain). Keys (admin,",
+        "operator, a wrong one): the `X-API-Key` header; session credentials: `Authorization:",
+        'Bearer <token>` (the websocket also takes `?token=`). "Another session\'s token" is a valid',
         "token of a different live session; on routes without a session, \"the session's own",
         'token" is any valid session token. A websocket is accepted (`open`: it answers',
         "events) or closed with 4400 + the HTTP status it stands for (4401 missing, 4403",
@@ -226,8 +267,10 @@ def render(matrix: Matrix) -> str:
     lines += [
         "",
         "`{new}` is a domain name not yet in use (PUT creates it: 201) or one just created",
-        "(DELETE removes it: 204).",
+        "(DELETE removes it: 204). On `GET /overview`, `figures` is the answer without live",
+        "sessions (figures per domain), `sessions` the one that lists them.",
         "",
+        *RULES,
     ]
     return "\n".join(lines)
 
