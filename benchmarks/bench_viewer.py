@@ -3,10 +3,10 @@ with the viewer on and off.
 
 1. In process: a service (its app, through an in-process HTTP client) with ``--sessions`` live
    sessions on the default maze (each with a full recent history); the time of
-   ``registry.snapshot`` (the registry lock is held that long), of one feed call (the viewer's
-   ``RemoteFeed``: ``GET /viewer/snapshot`` read and shaped), and of one viewer tick (a real
-   viser server, one browser-like client) when every session moved since the last tick (worst
-   case) and when nothing changed.
+   ``registry.snapshot`` (its numbers copied under the registry lock), of one feed call (the
+   viewer's ``RemoteFeed``: ``GET /viewer/snapshot`` read and shaped), and of one viewer tick
+   (a real viser server, one browser-like client) when every session moved since the last tick
+   (worst case) and when nothing changed.
 2. Out of process: ``python -m app serve`` without the viewer, with it (its own process) and
    nobody watching, and with it watched (a websocket client speaking viser's protocol receives
    every scene update, as a browser would, without a browser's rendering cost); one client
@@ -251,9 +251,10 @@ def main() -> None:
     api = bench_api(args.sessions, args.batch, args.requests, args.repeats)
     n, batch = args.sessions, args.batch
     rows = [
-        (f"`registry.snapshot(64)` with {n} live sessions (the registry lock is held this long "
-         "once per tick)", f"{tick['snapshot']:.2f} ms"),
-        ("one feed call (catalog + snapshot, as viewer data)", f"{tick['feed']:.2f} ms"),
+        (f"`registry.snapshot(64)` with {n} live sessions (the numbers copied under "
+         "the registry lock, shaped after it; once per tick)", f"{tick['snapshot']:.2f} ms"),
+        ("one feed call (`GET /viewer/snapshot` in process, read and shaped as viewer data)",
+         f"{tick['feed']:.2f} ms"),
         ("one pump tick, nothing changed", f"{tick['idle']:.2f} ms"),
         (f"one pump tick, all {n} sessions moved since the last tick", f"{tick['busy']:.2f} ms"),
         (f"API CPU per event, `--no-viewer` ({n} sessions, {batch} events per POST)",
