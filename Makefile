@@ -45,9 +45,10 @@ test: venv chromium lint
 run: venv
 	$(BIN)/python -m app serve
 
-## Every benchmark under benchmarks/ (never part of `make test`): 8 minutes on 2 quiet cores,
-## about 16 on busy ones; each rewrites its own section of docs/PERFORMANCE.md (and
-## bench_scaling/bench_service the curves in docs/figures/).
+## Every benchmark under benchmarks/ (never part of `make test`): 11 minutes on 2 quiet cores,
+## about 20 on busy ones; each rewrites its own section of docs/PERFORMANCE.md (bench_hostile
+## its combined load's in docs/RELIABILITY.md; bench_scaling/bench_service the curves in
+## docs/figures/).
 bench: venv wrk
 	$(BIN)/python benchmarks/bench_core.py --write docs/PERFORMANCE.md
 	$(BIN)/python benchmarks/bench_scaling.py --write docs/PERFORMANCE.md
@@ -55,6 +56,7 @@ bench: venv wrk
 	$(BIN)/python benchmarks/bench_viewer.py --write docs/PERFORMANCE.md
 	$(BIN)/python benchmarks/bench_service.py --write docs/PERFORMANCE.md
 	$(BIN)/python benchmarks/bench_buildings.py --write docs/PERFORMANCE.md
+	$(BIN)/python benchmarks/bench_hostile.py --only combined --write docs/RELIABILITY.md
 	$(BIN)/python benchmarks/rest_inprocess.py
 	$(BIN)/python benchmarks/sessions_inprocess.py
 

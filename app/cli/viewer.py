@@ -13,7 +13,6 @@ import logging
 import os
 import signal
 import threading
-import time
 from pathlib import Path
 from typing import Annotated
 
@@ -67,4 +66,3 @@ def viewer(
             break  # the service is gone (killed): so is its viewer
     view.stop()
     http.close()
-    time.sleep(0)  # let viser's thread finish its last message

@@ -203,6 +203,7 @@ class Viewer:
 
     def _run(self) -> None:
         wait = 0.0
+        failed = ""  # the last failure logged: a service that is down is said once, not per tick
         while True:
             self._wake.wait(wait)
             if self._stop.is_set():
@@ -213,8 +214,11 @@ class Viewer:
             try:
                 if watched:
                     self.tick()
-            except Exception:  # keep pumping: the next snapshot may be fine
-                log.exception("viewer pump tick failed")
+                    failed = ""
+            except Exception as exc:  # keep pumping: the next snapshot may be fine
+                if str(exc) != failed:
+                    log.warning("viewer pump tick failed: %s: %s", type(exc).__name__, exc)
+                    failed = str(exc)
             period = self.period if watched else self.idle_period
             wait = pump_wait(time.perf_counter() - started, period, self.max_share)
 
