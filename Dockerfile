@@ -1,5 +1,8 @@
 # The advice service: `docker build -t advisor . && docker run -p 127.0.0.1:8000:8000 \
-#   -p 127.0.0.1:8080:8080 -v advisor-data:/data advisor`  (API on 8000, viser viewer on 8080)
+#   -v advisor-data:/data advisor`  (API on 8000). The viser viewer (its own process, port 8080)
+# listens on the container's loopback only: it shows where explorers are and asks a browser for
+# no key. To reach it from the host, add `-e ADVISOR_VIEWER_HOST=0.0.0.0 -p 127.0.0.1:8080:8080`
+# (publish it on the host's loopback, as here, never on a public interface).
 FROM python:3.11-slim
 
 ENV PYTHONDONTWRITEBYTECODE=1 \

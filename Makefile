@@ -56,10 +56,10 @@ test: venv chromium lint
 run: run-venv
 	$(BIN)/python -m app serve
 
-## Every benchmark under benchmarks/ (never part of `make test`): about 14 minutes on 2 quiet
-## cores, twice that on busy ones; each rewrites its own section of docs/PERFORMANCE.md (and
-## bench_scaling/bench_service the curves in docs/figures/; bench_minigrid docs/RESULTS.md).
-## bench_mqtt runs Debian's mosquitto (/usr/sbin/mosquitto).
+## Every benchmark under benchmarks/ (never part of `make test`): about 25 minutes on 2 quiet
+## cores, more on busy ones; each rewrites its own section of docs/PERFORMANCE.md (bench_hostile
+## its combined load's in docs/RELIABILITY.md; bench_minigrid docs/RESULTS.md; bench_scaling
+## and bench_service the curves in docs/figures/). bench_mqtt runs Debian's mosquitto.
 bench: venv wrk
 	$(BIN)/python benchmarks/bench_core.py --write docs/PERFORMANCE.md
 	$(BIN)/python benchmarks/bench_scaling.py --write docs/PERFORMANCE.md
@@ -70,6 +70,7 @@ bench: venv wrk
 	$(BIN)/python benchmarks/bench_mqtt.py --write docs/PERFORMANCE.md
 	$(BIN)/python benchmarks/bench_minigrid.py --write docs/RESULTS.md
 	$(BIN)/python benchmarks/bench_buildings.py --write docs/PERFORMANCE.md
+	$(BIN)/python benchmarks/bench_hostile.py --only combined --write docs/RELIABILITY.md
 	$(BIN)/python benchmarks/rest_inprocess.py
 	$(BIN)/python benchmarks/sessions_inprocess.py
 

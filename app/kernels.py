@@ -15,6 +15,7 @@ kernel                    the readable form (and its test)
 ``goal_posterior``,       ``GoalAwareAdvisor`` (app/advice/goals.py) and
 ``goal_decide``           ``GoalPriors.theta_row`` (app/advice/priors.py)
 ``observe_stream``        a batch of ``Advisor.observe`` for the service's ``StreamAdvisor``
+``goal_stream``           a batch of ``GoalAwareAdvisor.observe`` for ``StreamGoalAware``
 ``episode``               ``run_episode`` (app/agents/episodes.py) with the explorers of
                           app/agents/explorers.py and every advisor of ``make_advisor``
 ``q_learning``            ``run_learning`` with ``QLearningExplorer`` (app/agents/qlearning.py)
@@ -318,6 +319,154 @@ def keep_values(
             kept[p] = 1
             n += 1
     return n
+
+
+# ---- the service's goal-aware sessions: both windows as pair keys -------------------------------
+@njit(cache=True, inline="always")
+def goal_push(
+    window: tuple[KeyArray, FlagArray, FloatArray],
+    goal_window: tuple[FlagArray, FloatArray],
+    loglik: FloatArray, goal_ll: FloatArray, alive: BoolArray, pos: int, steps: int,
+    period: int, beta: float, log_probs: FloatArray, goals: GoalTables, s: int, a: int,
+) -> tuple[int, int, int]:  # pragma: no cover - compiled  # fmt: skip
+    """``GoalAwareAdvisor.append`` on windows of pair keys: the models' window as
+    :func:`observe_stream` keeps it, the goal ruled out where the explorer stood on one, and
+    (beta > 0) each goal's log theta^g of the pairs, read from the shared ``goals`` tables
+    (values kept in ``goal_window``'s (G, W) array for pairs added under older ones). ``steps``
+    counts the pairs appended, this one included. Returns (position, model values and goal
+    values that left the window)."""
+    keys, kept, old = window
+    goal_kept, goal_old = goal_window
+    goal_of_state, _, _, _, goal_log_theta = goals
+    k = s * 4 + a
+    leaving = keys[pos]
+    n_models = loglik.shape[0]
+    gone = 0
+    if leaving < 0:  # the core's ring holds 0.0 until the window fills
+        for m in range(n_models):
+            loglik[m] += log_probs[m, k] - 0.0
+    elif kept[pos]:
+        for m in range(n_models):
+            loglik[m] += log_probs[m, k] - old[m, pos]
+        kept[pos] = 0
+        gone = 1
+    else:
+        for m in range(n_models):
+            loglik[m] += log_probs[m, k] - log_probs[m, leaving]
+    gi = goal_of_state[s]
+    if gi >= 0:  # it stood on this goal and went on: not its goal
+        alive[gi] = False
+    goal_gone = 0
+    n_goals = goal_ll.shape[0]
+    if beta > 0.0:  # beta = 0 never reads the per-goal window
+        if leaving < 0:
+            for g in range(n_goals):
+                goal_ll[g] += goal_log_theta[k, g] - 0.0
+        elif goal_kept[pos]:
+            for g in range(n_goals):
+                goal_ll[g] += goal_log_theta[k, g] - goal_old[g, pos]
+            goal_kept[pos] = 0
+            goal_gone = 1
+        else:
+            for g in range(n_goals):
+                goal_ll[g] += goal_log_theta[k, g] - goal_log_theta[leaving, g]
+    keys[pos] = k
+    pos += 1
+    size = keys.shape[0]
+    if pos == size:
+        pos = 0
+        if steps % period == 0:
+            ring = np.empty(size)
+            for m in range(n_models):
+                for p in range(size):
+                    ring[p] = old[m, p] if kept[p] else log_probs[m, keys[p]]
+                loglik[m] = fsum(ring)
+            if beta > 0.0:
+                for g in range(n_goals):
+                    for p in range(size):
+                        ring[p] = goal_old[g, p] if goal_kept[p] else goal_log_theta[keys[p], g]
+                    goal_ll[g] = fsum(ring)
+    return pos, gone, goal_gone
+
+
+@njit(cache=True)
+def goal_append(
+    window: tuple[KeyArray, FlagArray, FloatArray],
+    goal_window: tuple[FlagArray, FloatArray],
+    loglik: FloatArray, goal_ll: FloatArray, alive: BoolArray, pos: int, steps: int,
+    period: int, beta: float, log_probs: FloatArray, goals: GoalTables, s: int, a: int,
+) -> tuple[int, int, int]:  # pragma: no cover - compiled  # fmt: skip
+    """:func:`goal_push` as a call (one event)."""
+    return goal_push(
+        window, goal_window, loglik, goal_ll, alive, pos, steps, period, beta, log_probs, goals,
+        s, a,
+    )  # fmt: skip
+
+
+@njit(cache=True)
+def goal_decision(
+    loglik: FloatArray, tables: Tables, goals: GoalTables, goal_ll: FloatArray,
+    alive: BoolArray, beta: float, s: int, theta_w: FloatArray,
+) -> tuple[float, float]:  # pragma: no cover - compiled  # fmt: skip
+    """``GoalAwareAdvisor.decide``'s numbers for the explorer now at ``s``: the goal
+    posterior, theta^w_s into ``theta_w``, (KL, P(M1 | H))."""
+    w = np.empty(goal_ll.shape[0])
+    goal_posterior(goal_ll, alive, beta, w)
+    return goal_decide(loglik, tables, goals, w, s, theta_w, np.empty(loglik.shape[0]))
+
+
+@njit(cache=True)
+def goal_stream(
+    window: tuple[KeyArray, FlagArray, FloatArray],
+    goal_window: tuple[FlagArray, FloatArray],
+    sums: tuple[FloatArray, FloatArray, BoolArray],
+    pos: int,
+    steps: int,
+    period: int,
+    beta: float,
+    tables: Tables,
+    goals: GoalTables,
+    kappa: float,
+    count: int,
+    benefit: float,
+    moves: tuple[IntArray, IntArray, IntArray],
+    out: tuple[FloatArray, FloatArray, BoolArray, IntArray, FloatArray, FloatArray],
+) -> tuple[int, int, float, int, int]:  # pragma: no cover - compiled
+    """``GoalAwareAdvisor.observe`` for each (s, a, s'): :func:`goal_push`, then the goal
+    posterior and :func:`goal_decide`. ``sums`` is (log P(H | M) per model, log P(H | theta^g)
+    per goal, goals not ruled out). Fills ``out`` (kl, p_normal, advise, count, benefit, the
+    advice theta^w of each decision (n, 4)); returns (position, advice count, benefit, model
+    values and goal values that left the window)."""
+    loglik, goal_ll, alive = sums
+    states, actions, next_states = moves
+    kl_out, p_out, advise_out, count_out, benefit_out, rows = out
+    w = np.empty(goal_ll.shape[0])
+    z = np.empty(loglik.shape[0])
+    theta_w = np.empty(4)
+    gone = 0
+    goal_gone = 0
+    for i in range(states.shape[0]):
+        pos, g1, g2 = goal_push(
+            window, goal_window, loglik, goal_ll, alive, pos, steps + i + 1, period, beta,
+            tables[0], goals, states[i], actions[i],
+        )  # fmt: skip
+        gone += g1
+        goal_gone += g2
+        goal_posterior(goal_ll, alive, beta, w)
+        kl, p0 = goal_decide(loglik, tables, goals, w, next_states[i], theta_w, z)
+        if kl >= kappa:
+            count += 1
+            benefit += kl
+            advise_out[i] = True
+        else:
+            advise_out[i] = False
+        for a in range(4):
+            rows[i, a] = theta_w[a]
+        kl_out[i] = kl
+        p_out[i] = p0
+        count_out[i] = count
+        benefit_out[i] = benefit
+    return pos, count, benefit, gone, goal_gone
 
 
 # ---- guide: leading lost explorers to a destination ---------------------------------------------

@@ -240,7 +240,11 @@ def start_advisor(
     (``log_level`` info: uvicorn's access log on, written to the server's log file)."""
     port = free_port()
     data = workdir / f"data-{port}"
-    settings = {"ADVISOR_ADMIN_KEY": "bench", "ADVISOR_MAX_SESSIONS": str(max_sessions)}
+    settings = {  # one client measuring capacity: the per-client quotas as the service's own
+        "ADVISOR_ADMIN_KEY": "bench", "ADVISOR_MAX_SESSIONS": str(max_sessions),
+        "ADVISOR_CLIENT_MAX_SESSIONS": str(max_sessions),
+        "ADVISOR_CLIENT_MAX_SESSION_MEMORY": str(1024 * 1024 * 1024),
+    }  # fmt: skip
     cmd = [sys.executable, "-m", "app", "serve", "--no-viewer", "--port", str(port),
            "--data-dir", str(data), "--log-level", log_level]  # fmt: skip
     log = workdir / f"advisor-{port}.log"

@@ -1,10 +1,14 @@
-// The dashboard: polls GET /overview about once a second and redraws two tables.
+// The dashboard: polls GET /overview about once a second and redraws two tables. Live sessions
+// (where explorers are and were) are listed for an operator's key only: the page asks for it
+// and keeps it in this tab's sessionStorage; without it, the figures per domain.
 "use strict";
 
 (() => {
   const { ACTIONS, ARROWS, fetchJSON, showViewerLink, fmt } = MazeUI;
   const POLL_MS = 1000;
+  const KEY = "advisor-operator-key";
   const $ = (id) => document.getElementById(id);
+  let refused = null; // the service's reason, when the key given was refused
 
   function cell(text, className = "") {
     const td = document.createElement("td");
@@ -68,7 +72,7 @@
   function renderDomains(domains) {
     const body = $("domains").tBodies[0];
     if (!domains.length) {
-      body.replaceChildren(emptyRow(6, "No domains."));
+      body.replaceChildren(emptyRow(9, "No domains."));
       return;
     }
     body.replaceChildren(...domains.map((d) => {
@@ -81,7 +85,8 @@
       a.textContent = "walk it";
       walk.append(a);
       tr.append(cell(d.name, "left"), cell(`${d.rows}×${d.cols}`), cell(d.n_states),
-                cell(d.trajectories), cell(d.sessions), walk);
+                cell(d.trajectories), cell(d.sessions), cell(d.steps),
+                cell(fmt(d.advice_per_100, 1)), cell(d.looking_lost), walk);
       return tr;
     }));
   }
@@ -97,10 +102,16 @@
     return td;
   }
 
-  function renderSessions(sessions, total) {
+  function renderSessions(sessions, total, detail) {
     const body = $("sessions").tBodies[0];
     $("session-total").textContent = total > sessions.length
       ? `(${total} live; the ${sessions.length} most recently active shown)` : `(${total} live)`;
+    if (!detail) {
+      body.replaceChildren(emptyRow(13, refused
+        ? `The key was refused (${refused}): enter the operator key to see live sessions.`
+        : "Live sessions are shown with the operator key (above)."));
+      return;
+    }
     if (!sessions.length) {
       body.replaceChildren(emptyRow(13, "No live sessions. Walk the maze, or run python -m app simulate."));
       return;
@@ -118,11 +129,49 @@
     }));
   }
 
+  function key() {
+    return sessionStorage.getItem(KEY) || "";
+  }
+
+  async function overview() {
+    const given = key();
+    if (!given) return fetchJSON("/overview");
+    try {
+      const answer = await fetchJSON("/overview", { headers: { "X-API-Key": given } });
+      refused = null;
+      return answer;
+    } catch (err) {
+      if (!err.message.startsWith("403")) throw err;
+      refused = err.message;
+      return fetchJSON("/overview"); // the figures anyone may see
+    }
+  }
+
+  function showKeyForm() {
+    const known = Boolean(key());
+    $("forget-key").hidden = !known;
+    $("key").placeholder = known ? "(a key is set for this tab)" : "X-API-Key (data/operator_key)";
+  }
+
+  $("key-form").addEventListener("submit", (event) => {
+    event.preventDefault();
+    const value = $("key").value.trim();
+    if (value) sessionStorage.setItem(KEY, value);
+    $("key").value = "";
+    showKeyForm();
+  });
+  $("forget-key").addEventListener("click", () => {
+    sessionStorage.removeItem(KEY);
+    refused = null;
+    showKeyForm();
+  });
+  showKeyForm();
+
   async function poll() {
     try {
-      const overview = await fetchJSON("/overview");
-      renderDomains(overview.domains);
-      renderSessions(overview.sessions, overview.total_sessions);
+      const answer = await overview();
+      renderDomains(answer.domains);
+      renderSessions(answer.sessions, answer.total_sessions, answer.detail);
       $("status").textContent = `Updated ${new Date().toLocaleTimeString()}`;
       $("status").classList.remove("error");
     } catch (err) {

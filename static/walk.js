@@ -192,8 +192,9 @@
   function openSocket(created) {
     const scheme = location.protocol === "https:" ? "wss" : "ws";
     const url = `${scheme}://${location.host}/sessions/${encodeURIComponent(created.session_id)}` +
-      `/stream?token=${encodeURIComponent(created.token)}`;
-    const socket = new WebSocket(url);
+      "/stream";
+    // the token travels as a subprotocol, not in the URL (which logs and proxies keep)
+    const socket = new WebSocket(url, ["advisor", `token.${created.token}`]);
     walk.socket = socket;
     socket.addEventListener("open", () => {
       if (walk.socket === socket) setStatus("Connected: walk with the arrow keys.");

@@ -192,7 +192,7 @@ class Advisor:
     def reset(self) -> None:
         """Forget the history and the cost (a new explorer)."""
         m = self.tables.n_models
-        self._ring = [[0.0] * self.window for _ in range(m)]
+        self._reset_window()
         self._loglik = [0.0] * m
         self._pos = 0
         self.steps = 0
@@ -201,6 +201,11 @@ class Advisor:
         self.benefit = 0.0
 
     # ---- the window ---------------------------------------------------------------------
+    def _reset_window(self) -> None:
+        """An empty window: per model, W log-probabilities of 0.0 (forms that keep the window
+        otherwise, the service's pair keys, make theirs here instead)."""
+        self._ring = [[0.0] * self.window for _ in range(self.tables.n_models)]
+
     def _check(self, state: int, action: int | None = None) -> None:
         if not 0 <= state < self.tables.n_states:
             raise ValueError(f"state {state} out of range 0..{self.tables.n_states - 1}")

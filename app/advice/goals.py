@@ -66,10 +66,14 @@ class GoalAwareAdvisor(Advisor):
         super().reset()
         g = self.priors.n_goals
         self.alive = [True] * g
-        # the per-goal window, only where it is read (beta > 0)
-        self._goal_ring = [[0.0] * g for _ in range(self.window)] if self.beta > 0.0 else []
+        self._reset_goal_window()
         self._goal_ll = [0.0] * g
         self._goal_pos = 0
+
+    def _reset_goal_window(self) -> None:
+        """The per-goal window, only where it is read (beta > 0): W rows of G values."""
+        g = self.priors.n_goals
+        self._goal_ring = [[0.0] * g for _ in range(self.window)] if self.beta > 0.0 else []
 
     def append(self, state: int, action: int) -> None:
         super().append(state, action)

@@ -361,6 +361,7 @@ class GoalPriors:
         self.goal_counts = np.zeros((len(self.goals), n_states, N_ACTIONS))
         self.unknown_counts = np.zeros((n_states, N_ACTIONS))
         self._rows: GoalRows | None = None
+        self._arrays: GoalArrays | None = None
 
     @property
     def n_goals(self) -> int:
@@ -384,6 +385,7 @@ class GoalPriors:
             else:
                 self.goal_counts[g] += counts
         self._rows = None
+        self._arrays = None
         return self
 
     def copy(self, alpha0: float | None = None) -> GoalPriors:
@@ -439,6 +441,28 @@ class GoalPriors:
                 self.goal_log_theta().reshape(g, -1).T.tolist(),
             )
         return self._rows
+
+    def arrays(self) -> GoalArrays:
+        """The counts as app/kernels.py reads them (its ``GoalTables``): (goal index of each
+        state (S,), alpha0, unknown counts (S*4,), goal counts (S*4, G), each goal's log theta
+        (S*4, G)). The two (S*4, G) arrays are transposed views of (G, S*4) ones, the goal
+        counts a view of :attr:`goal_counts` itself: made once per change of the counts, 32
+        bytes per goal, state and action beside the counts, shared by every reader."""
+        if self._arrays is None:
+            g, s = self.n_goals, self.n_states
+            of_state = np.full(s, -1, dtype=np.int64)
+            of_state[list(self.goals)] = np.arange(g)
+            self._arrays = (
+                of_state,
+                self.alpha0,
+                self.unknown_counts.reshape(-1),
+                self.goal_counts.reshape(g, -1).T,
+                self.goal_log_theta().reshape(g, -1).T,
+            )
+        return self._arrays
+
+
+GoalArrays = tuple[npt.NDArray[np.int64], float, FloatArray, FloatArray, FloatArray]
 
 
 @dataclass(frozen=True, slots=True)

@@ -1,7 +1,8 @@
 """The command line, ``python -m app`` (or ``advisor``): the composition root.
 
 Each command wires the parts it needs and nothing else: ``serve`` builds the service (which
-learns the default domain's prior from simulated experts on first start), ``simulate`` drives
+learns the default domain's prior from simulated experts on first start) and starts ``viewer``,
+the 3D viewer, in a process of its own that reads the service over HTTP; ``simulate`` drives
 simulated explorers through a running service as a client, ``experiment`` runs the paper's
 experiments in process, ``maze`` and ``train`` work on maps and priors. Heavy imports (the
 service, numba kernels, matplotlib) wait until a command runs.
@@ -20,6 +21,7 @@ from app.cli.maze import maze_cli
 from app.cli.serve import serve
 from app.cli.simulate import simulate
 from app.cli.train import train
+from app.cli.viewer import viewer
 
 cli = typer.Typer(
     help="An advisor for agents with hidden goals (Rosman & Ramamoorthy, ICRA 2014).",
@@ -59,6 +61,7 @@ cli.command()(train)
 cli.add_typer(experiment_cli, name="experiment")
 cli.command()(serve)
 cli.command()(simulate)
+cli.command()(viewer)
 
 
 def main() -> None:

@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import errno
+import os
 import socket
+import subprocess
+import sys
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -21,7 +24,7 @@ def serve(
         str | None, typer.Option(help="SQLAlchemy URL, e.g. postgresql+psycopg://...")
     ] = None,
     no_viewer: Annotated[
-        bool, typer.Option("--no-viewer", help="Do not start the viewer.")
+        bool, typer.Option("--no-viewer", help="Do not start the viewer (its own process).")
     ] = False,
     log_level: Annotated[str, typer.Option(help="uvicorn log level.")] = "info",
 ) -> None:
@@ -45,7 +48,33 @@ def serve(
     if busy:  # before anything is created (the data directory, a new admin key)
         typer.echo(f"error: {busy}", err=True)
         raise typer.Exit(code=2)
-    uvicorn.run(create_app(settings), **uvicorn_options(settings, log_level))
+    viewer = start_viewer(settings) if settings.viewer_enabled else None
+    try:
+        uvicorn.run(create_app(settings), **uvicorn_options(settings, log_level))
+    finally:
+        if viewer is not None:
+            viewer.terminate()
+            try:
+                viewer.wait(10)
+            except subprocess.TimeoutExpired:
+                viewer.kill()
+
+
+def start_viewer(settings: Settings) -> subprocess.Popen[bytes]:
+    """``python -m app viewer`` for this service, in a process of its own: it reads the API on
+    loopback with the operator key (in its environment, not on its command line) and exits
+    with this process."""
+    from app.service.security import load_operator_key
+
+    key, message = load_operator_key(settings)  # made here if new: the service reads it too
+    if message:
+        typer.echo(message, err=True)
+    api = f"http://127.0.0.1:{settings.port}"
+    cmd = [
+        sys.executable, "-m", "app", "viewer", "--api", api, "--host", settings.viewer_host,
+        "--port", str(settings.viewer_port), "--parent", str(os.getpid()),
+    ]  # fmt: skip
+    return subprocess.Popen(cmd, env=os.environ | {"ADVISOR_OPERATOR_KEY": key})
 
 
 def setting_errors(exc: ValidationError) -> str:
@@ -77,16 +106,39 @@ def port_taken(host: str, port: int) -> str | None:
 
 
 def uvicorn_options(settings: Settings, log_level: str = "info") -> dict[str, Any]:
-    """How ``serve`` runs uvicorn (one worker); the benchmarks' baseline apps run the same."""
+    """How ``serve`` runs uvicorn (one worker); the benchmarks' baseline apps run the same.
+    HTTP goes through :mod:`app.service.guard` (bounded headers, read deadlines, a cap on
+    connections); uvicorn's reading of X-Forwarded-For is off (it would trust any from
+    127.0.0.1): :mod:`app.service.clients` reads it from the proxies the settings trust."""
+    from app.service.guard import guarded_http
+
+    http = guarded_http(
+        settings.max_header_bytes, settings.header_timeout, settings.body_timeout,
+        connection_cap(settings.max_connections),
+    )  # fmt: skip
     options: dict[str, Any] = {
         "host": settings.host,
         "port": settings.port,
         "log_level": log_level,
         "ws_max_size": settings.max_body_bytes + 1024,
         "ws_per_message_deflate": False,  # compressing 100 kB frames costs more than it saves
+        "proxy_headers": False,
+        "http": http,
     }
     if settings.log_format == "json":
         from app.service.logs import json_log_config
 
         options["log_config"] = json_log_config(log_level)
     return options
+
+
+def connection_cap(wanted: int) -> int:
+    """``wanted``, or fewer if the process may not open that many files (each connection is
+    one; 64 are kept for the database, logs and the rest)."""
+    import resource
+
+    soft, _ = resource.getrlimit(resource.RLIMIT_NOFILE)
+    if soft != resource.RLIM_INFINITY and soft - 64 < wanted:
+        typer.echo(f"max_connections {wanted} lowered to {soft - 64} (open files limit {soft})")
+        return max(soft - 64, 1)
+    return wanted

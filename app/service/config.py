@@ -6,8 +6,10 @@ from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Literal
 
-from pydantic import Field, SecretStr
+from pydantic import Field, SecretStr, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
+
+from app.service.clients import networks
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 try:
@@ -31,6 +33,11 @@ class Settings(BaseSettings):
     admin_key: SecretStr | None = Field(
         None, description="X-API-Key for admin routes; generated and stored if not given."
     )
+    operator_key: SecretStr | None = Field(
+        None,
+        description="Read-only X-API-Key for live positions and paths (/overview's sessions, "
+        "GET /sessions, the viewer); generated and stored if not given.",
+    )
     session_idle_seconds: float = Field(1800.0, gt=0, description="Idle sessions expire.")
     sweep_seconds: float = Field(15.0, gt=0, description="How often expired sessions go.")
     max_sessions: int = Field(20_000, ge=1, description="Live sessions at most (then 503).")
@@ -50,8 +57,15 @@ class Settings(BaseSettings):
     max_map_cells: int = Field(250_000, ge=4, description="Largest map (rows x cols).")
     recent_path: int = Field(100, ge=1, description="Cells of recent path kept per session.")
     recent_p_normal: int = Field(200, ge=1, description="p_normal values kept per session.")
-    viewer_enabled: bool = Field(True, description="Start the viser viewer with the service.")
+    viewer_enabled: bool = Field(
+        True, description="serve starts the viser viewer, in a process of its own."
+    )
     viewer_port: int = Field(8080, ge=0, le=65535, description="Port of the viser viewer.")
+    viewer_host: str = Field(
+        "127.0.0.1",
+        description="Interface of the viewer: loopback unless set (it shows where explorers "
+        "are and were, and asks no key of a browser).",
+    )
     static_dir: Path = Field(REPO_ROOT / "static", description="Pages served at / and /static.")
     bootstrap_experts: Literal["start", "anywhere"] = Field(
         "start", description="Where the simulated experts of the default domain start."
@@ -79,6 +93,64 @@ class Settings(BaseSettings):
     mqtt_queue: int = Field(
         1000, ge=1, description="MQTT messages waiting to be handled or published, at most."
     )
+
+    # ---- what one client, or all of them, may take (docs/RELIABILITY.md) -----------------
+    max_session_memory: int = Field(
+        1024 * MiB, ge=MiB,
+        description="Bytes the live sessions may reserve in all: each reserves the most its "
+        "state can take (its window, its goals); beyond it new sessions get 503.",
+    )  # fmt: skip
+    client_max_sessions: int = Field(
+        1000, ge=1, description="Live sessions one client (key or address) may hold (then 429)."
+    )
+    client_max_session_memory: int = Field(
+        256 * MiB, ge=MiB, description="Session memory one client may reserve (then 429)."
+    )
+    trusted_proxies: list[str] = Field(
+        default_factory=list,
+        description="Addresses or networks (CIDR) of proxies in front of the service: for a "
+        "request from one of them, the client is the last address of X-Forwarded-For that is "
+        "not a trusted proxy. Empty: the peer's address is the client.",
+    )
+    max_goal_cells: int = Field(
+        2_097_152, ge=1,
+        description="goal_aware and guide keep per-goal tables of goals x cells: maps of more "
+        "are refused (PUT: 422).",
+    )  # fmt: skip
+    max_goal_window: int = Field(
+        1_048_576, ge=1,
+        description="A goal_aware session with beta > 0 keeps a per-goal window of goals x "
+        "window values: more is refused (422).",
+    )  # fmt: skip
+
+    overview_seconds: float = Field(
+        1.0, ge=0, description="GET /overview is made at most once per this many seconds."
+    )
+    path_retention_seconds: float = Field(
+        600.0, gt=0,
+        description="Seconds the cells an explorer was at (its recent path, where it was "
+        "advised) are kept; its current cell stays while its session lives.",
+    )  # fmt: skip
+    max_header_bytes: int = Field(
+        16 * 1024, ge=1024, description="Request headers at most this many bytes (then 431)."
+    )
+    header_timeout: float = Field(
+        10.0, gt=0, description="Seconds a request's headers may take to arrive (then 408)."
+    )
+    body_timeout: float = Field(
+        30.0, gt=0, description="Seconds a request's body may take after its headers (408)."
+    )
+    max_connections: int = Field(
+        1000, ge=1,
+        description="Open connections at most, websockets included (then 503 and closed); "
+        "lowered to the process's file descriptor limit less 64 if that is lower.",
+    )  # fmt: skip
+
+    @field_validator("trusted_proxies")
+    @classmethod
+    def _networks(cls, entries: list[str]) -> list[str]:
+        networks(entries)  # ValueError names an entry that is no address or network
+        return entries
 
     @property
     def db_url(self) -> str:

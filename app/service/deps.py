@@ -11,17 +11,27 @@ from fastapi import Depends, Path
 from fastapi.security import APIKeyHeader, HTTPAuthorizationCredentials, HTTPBearer
 from starlette.requests import HTTPConnection
 
+from app.service.clients import client_address
 from app.service.data.domains import DomainState
 from app.service.live.registry import LiveSession
 from app.service.schemas import NAME_PATTERN
-from app.service.security import AuthError, check_admin, check_session_token
+from app.service.security import (
+    AuthError,
+    check_admin,
+    check_session_token,
+    is_operator,
+    same_secret,
+)
 from app.service.state import ServiceState
 
 SESSION_ID_PATTERN = r"^[A-Za-z0-9_-]{1,64}$"
 #: ``openapi_extra`` for routes that check the bearer token through :func:`get_session`.
 BEARER: dict[str, Any] = {"security": [{"HTTPBearer": []}]}
 
-api_key_header = APIKeyHeader(name="X-API-Key", auto_error=False, description="The admin key.")
+api_key_header = APIKeyHeader(
+    name="X-API-Key", auto_error=False,
+    description="The admin key; on routes that read live sessions, or the operator key.",
+)  # fmt: skip
 bearer = HTTPBearer(auto_error=False, description="The session's token.")
 
 
@@ -43,6 +53,22 @@ async def require_admin(
     state: StateDep, key: Annotated[str | None, Depends(api_key_header)] = None
 ) -> None:
     check_admin(key, state.admin_key)
+
+
+async def operator_view(
+    state: StateDep, key: Annotated[str | None, Depends(api_key_header)] = None
+) -> bool:
+    """Whether the caller may see live positions and paths: the admin key or the read-only
+    operator key (403 for a key that is neither; False without one)."""
+    return is_operator(key, state.admin_key, state.operator_key)
+
+
+async def require_operator(
+    state: StateDep, key: Annotated[str | None, Depends(api_key_header)] = None
+) -> None:
+    if not key:
+        raise AuthError(401, "send the admin key or the read-only operator key as X-API-Key")
+    is_operator(key, state.admin_key, state.operator_key)
 
 
 async def get_domain(name: DomainName, state: StateDep) -> DomainState:
@@ -99,9 +125,38 @@ async def get_session_or_admin(
     return await get_session(conn, session_id)
 
 
+async def get_session_or_operator(
+    conn: HTTPConnection,
+    session_id: SessionId,
+    state: StateDep,
+    credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(bearer)] = None,
+    key: Annotated[str | None, Depends(api_key_header)] = None,
+) -> LiveSession:
+    """As :func:`get_session`, or any session for the admin or operator key (to read it)."""
+    if key and not credentials:
+        is_operator(key, state.admin_key, state.operator_key)
+        return state.registry.get(session_id)
+    return await get_session(conn, session_id)
+
+
+def client_of(conn: HTTPConnection, state: ServiceState) -> str | None:
+    """Whom a new session's quota counts against: None for the admin key (no per-client
+    quota), else the client's address (:func:`app.service.clients.client_address`)."""
+    key = conn.headers.get("x-api-key")
+    if key and same_secret(key, state.admin_key):
+        return None
+    return "address " + client_address(conn, state.trusted)
+
+
 AdminDep = Depends(require_admin)
+OperatorDep = Depends(require_operator)
+OperatorView = Annotated[bool, Depends(operator_view)]
 DomainDep = Annotated[DomainState, Depends(get_domain)]
 SessionDep = Annotated[LiveSession, Depends(get_session)]
 SessionOrAdminDep = Annotated[LiveSession, Depends(get_session_or_admin)]
+SessionOrOperatorDep = Annotated[LiveSession, Depends(get_session_or_operator)]
 
-__all__ = ["AdminDep", "AuthError", "DomainDep", "SessionDep", "SessionOrAdminDep", "StateDep"]
+__all__ = [
+    "AdminDep", "AuthError", "DomainDep", "OperatorDep", "OperatorView", "SessionDep",
+    "SessionOrAdminDep", "SessionOrOperatorDep", "StateDep",
+]  # fmt: skip

@@ -2,7 +2,8 @@
 
 * request validation: 422, ``detail`` one readable line (``where: what``), ``errors`` the list;
 * our own checks (:class:`BadInput`), unknown domains/sessions, credentials: their status;
-* bodies over the limit: 413 from :class:`BodyLimit` before the app reads them;
+* bodies over the limit: 413 from :class:`BodyLimit` before the app reads them, bodies that say
+  they are not JSON (a ``Content-Type`` other than ``application/json``): 415;
 * JSON nested too deeply for the parser: 400 (instead of the RecursionError's 500).
 """
 
@@ -16,9 +17,11 @@ from fastapi.exception_handlers import http_exception_handler
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.requests import ClientDisconnect
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from app.service.data.domains import DomainChanged, DomainNotFound
+from app.service.data.store import COUNT_MAX, CountsFull
 from app.service.live.registry import SessionNotFound
 from app.service.problems import BadInput, describe_errors
 from app.service.security import AuthError
@@ -69,6 +72,8 @@ def _unreadable_body(request: Request, cause: BaseException | None) -> JSONRespo
         return _json(400, TOO_DEEP)
     if isinstance(cause, UnicodeDecodeError):
         return _json(400, f"the JSON body is not valid UTF-8 text: {cause.reason}")
+    if isinstance(cause, ValueError) and "digits" in str(cause):  # Python's int() limit
+        return _json(422, TOO_MANY_DIGITS)
     return None
 
 
@@ -105,11 +110,29 @@ async def _domain_changed(_: Request, exc: Exception) -> JSONResponse:
     )
 
 
+async def _counts_full(_: Request, exc: Exception) -> JSONResponse:
+    return _json(
+        409,
+        f"the stored counts of prior table {exc.args[0]!r} would pass {COUNT_MAX} (they are "
+        "32-bit): nothing was stored",
+    )
+
+
 TOO_DEEP = "the JSON body is nested too deeply to parse"
+TOO_MANY_DIGITS = (
+    "the JSON body holds an integer of more than 4300 digits: no field takes one (a window, "
+    "a cell or a parameter is a few digits long)"
+)
 
 
 async def _too_deep(_: Request, exc: Exception) -> JSONResponse:
     return _json(400, TOO_DEEP)
+
+
+async def _gone(_: Request, exc: Exception) -> Response:
+    """The client disconnected while its body was arriving: no one to answer (and nothing to
+    log: a client may hang up whenever it likes)."""
+    return Response(status_code=400)
 
 
 def install_error_handlers(app: FastAPI) -> None:
@@ -121,10 +144,27 @@ def install_error_handlers(app: FastAPI) -> None:
     app.add_exception_handler(DomainChanged, _domain_changed)
     app.add_exception_handler(SessionNotFound, _no_session)
     app.add_exception_handler(RecursionError, _too_deep)
+    app.add_exception_handler(ClientDisconnect, _gone)
+    app.add_exception_handler(CountsFull, _counts_full)
 
 
 class _TooLarge(Exception):
     pass
+
+
+BODY_METHODS = frozenset({"POST", "PUT", "PATCH"})
+NOT_JSON = (
+    "every request body is JSON: send it with 'Content-Type: application/json' (or without a "
+    "Content-Type)"
+)
+
+
+def _is_json(kind: bytes) -> bool:
+    """``application/json`` or a ``+json`` type, with any parameters (``; charset=utf-8``)."""
+    media = kind.split(b";", 1)[0].strip().lower()
+    return media == b"application/json" or (
+        media.startswith(b"application/") and media.endswith(b"+json")
+    )
 
 
 class BodyLimit:
@@ -139,7 +179,12 @@ class BodyLimit:
         if scope["type"] != "http":
             await self.app(scope, receive, send)
             return
-        length = dict(scope["headers"]).get(b"content-length")
+        headers = dict(scope["headers"])
+        kind = headers.get(b"content-type")
+        if kind is not None and scope["method"] in BODY_METHODS and not _is_json(kind):
+            await _json(415, NOT_JSON)(scope, receive, send)
+            return
+        length = headers.get(b"content-length")
         if length is not None:
             if not length.isdigit() or int(length) > self.max_bytes:
                 await self._refuse(scope, receive, send, length.isdigit())

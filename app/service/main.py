@@ -28,11 +28,10 @@ Stop = Callable[[], Awaitable[None]]
 
 
 async def start_background(app: FastAPI, settings: Settings) -> list[Stop]:
-    """The one hook for services that run beside the API (the viser viewer when
-    ``settings.viewer_enabled``); returns their stop functions, called at shutdown."""
-    stops = []
-    if settings.viewer_enabled:
-        stops.append(await viewer_feed.start_viewer(app, settings))
+    """The one hook for services that run beside the API in its process (the MQTT bridge when
+    ``settings.mqtt_url``; the viewer runs in a process of its own, started by ``serve``);
+    returns their stop functions, called at shutdown."""
+    stops: list[Stop] = []
     if settings.mqtt_url:
         from app.service.mqtt import start_bridge
 
@@ -44,6 +43,7 @@ async def _expire_idle(state: ServiceState) -> None:
     while True:
         await asyncio.sleep(state.settings.sweep_seconds)
         state.registry.expire()
+        state.registry.forget_old()  # the retention of where explorers were
 
 
 @asynccontextmanager
@@ -83,8 +83,14 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         static_url=apidocs.STATIC_URL,
         title="Hidden-goal advisor",
         version=VERSION,
-        description="Advice for explorers with hidden goals (Rosman & Ramamoorthy, ICRA 2014).",
+        description="Advice for explorers with hidden goals (Rosman & Ramamoorthy, ICRA 2014). "
+        f"Request bodies are JSON of at most {settings.max_body_bytes} bytes (413 beyond, 415 "
+        "for another Content-Type); request headers at most 16 KiB in all (431).",
         lifespan=lifespan,
+        # a body without a Content-Type is read as JSON on every route, as the events and
+        # trajectories routes (which read their bytes themselves) always did; a Content-Type
+        # that is not JSON is refused (415) by BodyLimit on every route
+        strict_content_type=False,
     )
     app.state.settings = settings
     install_error_handlers(app)

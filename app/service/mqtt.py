@@ -264,7 +264,7 @@ class Bridge:
                 if session is None:
                     session, first = await self._open(key, payload)
                     out.append(first)
-                answer = ops.apply_events(state, session, payload)
+                answer = await ops.answer_events(state, session, payload)
             except SessionNotFound:
                 self.sessions.pop(key, None)
                 out.clear()

@@ -13,6 +13,7 @@ from fastapi import FastAPI
 from fastapi.openapi.utils import get_openapi
 from pydantic import TypeAdapter
 
+from app.service.config import Settings
 from app.service.schemas import ErrorPublic, EventIn, TrajectoriesCreate
 
 REF = "#/components/schemas/{model}"
@@ -36,6 +37,9 @@ def body(name: str) -> dict[str, Any]:
 
 
 def install_openapi(app: FastAPI) -> None:
+    """The document: FastAPI's, the bodies the routes read themselves, and the limits of this
+    service's settings (request bodies at most ``max_body_bytes``: the API's description)."""
+
     def openapi() -> dict[str, Any]:
         if app.openapi_schema is None:
             schema = get_openapi(
@@ -51,7 +55,38 @@ def install_openapi(app: FastAPI) -> None:
                 components[name] = js
             # validation errors are answered as {"detail": "where: what", "errors": [...]}
             components["HTTPValidationError"] = ErrorPublic.model_json_schema(ref_template=REF)
+            state_limits(components, app.state.settings)
             app.openapi_schema = schema
         return app.openapi_schema
 
     app.openapi = openapi  # type: ignore[method-assign]
+
+
+def state_limits(components: dict[str, Any], settings: Settings) -> None:
+    """The limits this service enforces (its settings), in the schemas they bound."""
+    window = components["SessionCreate"]["properties"]["window"]
+    window["maximum"] = settings.max_window
+    window["description"] += (
+        f" At most {settings.max_window}; with goal_aware and beta > 0, goals x window at most "
+        f"{settings.max_goal_window}."
+    )
+    for branch in components["Events"]["anyOf"]:
+        if branch.get("type") == "array":
+            branch["maxItems"] = settings.max_batch_events
+    rows = components["DomainPut"]["properties"]["map"]
+    rows["description"] += (
+        f" At most {settings.max_map_cells} cells (rows x the longest row), and goals x free "
+        f"cells at most {settings.max_goal_cells}."
+    )
+    rows["x-max-cells"] = settings.max_map_cells
+    rows["x-max-goal-cells"] = settings.max_goal_cells
+    trajectories = components["TrajectoriesCreate"]
+    trajectories["description"] = (
+        f"At most {settings.max_trajectory_steps} steps in all in one request."
+    )
+    trajectories["x-max-steps"] = settings.max_trajectory_steps
+    positions = components["PositionsIn"]["properties"]["positions"]
+    positions["description"] = (
+        f"The moves they walk: at most {settings.max_batch_events} in one request; one reading "
+        f"at most {settings.max_jump} moves from the one before."
+    )

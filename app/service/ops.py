@@ -9,20 +9,29 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import numpy.typing as npt
+import orjson
 
 from app.advice.advisor import Decision, DecisionBatch
-from app.advice.guide import GuideError
+from app.advice.guide import GuideMap
 from app.advice.models import AdviceTables
-from app.advice.strategies import strategy_params
+from app.advice.priors import GoalPriors
+from app.advice.strategies import StrategyParams, guide_params, strategy_params
 from app.domain.grid import ACTIONS, Frame, GridDomain, MapError
 from app.domain.paths import expert_trajectories, path_within
 from app.service.data.domains import DomainNotFound, DomainState
 from app.service.data.ingest import parse_trajectories, to_trajectories
 from app.service.data.store import POOLED, Trajectory
-from app.service.live.registry import LiveSession, TooManySessions
-from app.service.live.stream import StreamAdvisor
+from app.service.live.registry import (
+    ClientQuotaReached,
+    LiveSession,
+    SessionMemoryFull,
+    TooManySessions,
+)
+from app.service.live.stream import StreamAdvisor, StreamGoalAware, StreamGuide
 from app.service.metrics import METRICS, ingested
 from app.service.problems import BadInput
+from app.service.public import overview_domain, overview_session
 from app.service.schemas import (
     Cell,
     DomainPut,
@@ -35,6 +44,7 @@ from app.service.state import ServiceState
 from app.service.wire.encode import batch_binary, batch_json, decision_json, theta_text
 from app.service.wire.events import read_move, read_moves
 
+IntArray = npt.NDArray[np.int64]
 #: an expert walk's longest (``expert_trajectory``'s default ``max_steps``)
 EXPERT_MAX_STEPS = 10_000
 
@@ -46,35 +56,77 @@ def cell_state(domain: GridDomain, cell: Cell, what: str) -> int:
         raise BadInput(f"{what}: {exc}") from None
 
 
-def create_session(
-    state: ServiceState, domain: DomainState, body: SessionCreate
-) -> tuple[LiveSession, Decision]:
-    limit = state.settings.max_window
+def session_params(state: ServiceState, domain: DomainState, body: SessionCreate) -> StrategyParams:
+    """The strategy's parameters of a session request, checked against this service's limits
+    before anything is built for it: the window, the parameters, and for goal_aware and guide
+    the per-goal tables (goals x cells) and goal_aware's per-goal window (goals x window)."""
+    settings = state.settings
+    limit = settings.max_window
     if body.window > limit:
         raise BadInput(f"window: {body.window} is larger than this service allows ({limit})")
-    grid = domain.domain
-    start = grid.start if body.start is None else cell_state(grid, body.start, "start")
     given = body.params.model_dump(exclude_unset=True) if body.params else {}
     try:
         params = strategy_params(body.strategy, given)
     except ValueError as exc:
         raise BadInput(f"params: {exc}") from None
-    if body.strategy == "goal_aware" and domain.goal_priors is None:
-        state.catalog.goal_priors(domain)  # reads the store once; routes call it off the loop
-    if body.strategy == "guide" and domain.guide_map is None:
-        try:
-            state.catalog.guide_map(domain)  # BFS from each destination, once per map
-        except GuideError as exc:
-            raise BadInput(f"strategy guide: {exc}") from None
+    if body.strategy in ("goal_aware", "guide"):
+        goals, cells = len(domain.domain.goals), domain.domain.n_states
+        if goals * cells > settings.max_goal_cells:
+            raise BadInput(
+                f"strategy {body.strategy}: domain {domain.name!r} has {goals} goals x {cells} "
+                f"free cells = {goals * cells} per-goal entries, more than this service keeps "
+                f"({settings.max_goal_cells}, ADVISOR_MAX_GOAL_CELLS)"
+            )
+    if body.strategy == "goal_aware" and params.beta > 0.0:
+        goals, most = len(domain.domain.goals), settings.max_goal_window
+        if goals * body.window > most:
+            raise BadInput(
+                f"window: goal_aware with beta > 0 keeps a value per goal and pair: {goals} "
+                f"goals x window {body.window} = {goals * body.window} is more than this service "
+                f"allows ({most}, ADVISOR_MAX_GOAL_WINDOW): a smaller window, or beta 0"
+            )
+    return params
+
+
+def create_session(
+    state: ServiceState, domain: DomainState, body: SessionCreate,
+    params: StrategyParams | None = None, client: str | None = None,
+) -> tuple[LiveSession, Decision]:  # fmt: skip
+    """A session for a request checked by :func:`session_params` (``params``: its answer; the
+    domain's goal tables built, for goal_aware and guide, off the event loop:
+    :meth:`DomainCatalog.goal_priors`, :meth:`DomainCatalog.guide_map`); ``client``: whom its
+    quota counts against (None: no per-client quota)."""
+    if params is None:
+        params = session_params(state, domain, body)
+    grid = domain.domain
+    start = grid.start if body.start is None else cell_state(grid, body.start, "start")
+    registry = state.registry
     try:
-        session, decision = state.registry.create(
-            domain, body.kappa, body.window, body.agent_type, start, body.strategy, params
-        )
+        session, decision = registry.create(
+            domain, body.kappa, body.window, body.agent_type, start, body.strategy, params,
+            client,
+        )  # fmt: skip
     except TooManySessions:
         raise BadInput(
-            f"the service has its maximum of {state.registry.max_sessions} live sessions: "
+            f"the service has its maximum of {registry.max_sessions} live sessions: "
             "end one (DELETE /sessions/{id}) or retry after idle sessions expire",
             503,
+        ) from None
+    except SessionMemoryFull as exc:
+        raise BadInput(
+            f"the live sessions hold the {exc.args[0]} bytes this service keeps for sessions "
+            "(ADVISOR_MAX_SESSION_MEMORY): end one, ask for a smaller window, or retry after "
+            "idle sessions expire",
+            503,
+        ) from None
+    except ClientQuotaReached as exc:
+        who, what, limit = exc.args
+        held = f"{limit} live sessions" if what == "sessions" else f"{limit} bytes of sessions"
+        raise BadInput(
+            f"this client ({who}) holds {held}, the most one client may "
+            f"(ADVISOR_CLIENT_MAX_{'SESSIONS' if what == 'sessions' else 'SESSION_MEMORY'}): "
+            "end some (DELETE /sessions/{id}) or retry after idle ones expire",
+            429,
         ) from None
     _count(state, session, 1, int(decision.advise))
     return session, decision
@@ -91,7 +143,8 @@ def _count_batch(state: ServiceState, session: LiveSession, out: DecisionBatch) 
 
 
 def apply_events(state: ServiceState, session: LiveSession, raw: bytes | str) -> bytes:
-    """Events (JSON text: one or a list) -> decisions (JSON: one or a list, in order)."""
+    """Events (JSON text: one or a list) -> decisions (JSON: one or a list, in order), in one
+    go (the routes run :func:`answer_events`, the same work with long batches in slices)."""
     grid = session.domain.domain
     move = read_move(grid, raw)
     if move is not None:  # one event object: plain ints and one decision
@@ -104,11 +157,43 @@ def apply_events(state: ServiceState, session: LiveSession, raw: bytes | str) ->
     return batch_json(out, grid)
 
 
-def apply_positions(state: ServiceState, session: LiveSession, body: PositionsIn) -> bytes:
+async def answer_events(
+    state: ServiceState, session: LiveSession, raw: bytes | str, binary: bool = False
+) -> bytes:
+    """:func:`apply_events` (or, ``binary``, :func:`apply_events_binary`) as the routes run it:
+    a long batch in slices, the event loop free for others between them
+    (:meth:`SessionRegistry.observe_sliced`)."""
+    grid, registry = session.domain.domain, state.registry
+    if not binary:
+        move = read_move(grid, raw)
+        if move is not None:
+            d = await registry.observe_after(session, *move)
+            _count(state, session, 1, int(d.advise))
+            return decision_json(d, grid)
+    moves, _ = read_moves(grid, raw, state.settings.max_batch_events)
+    out = await registry.observe_sliced(session, moves)
+    _count_batch(state, session, out)
+    return batch_binary(out, grid) if binary else batch_json(out, grid)
+
+
+async def apply_positions(state: ServiceState, session: LiveSession, body: PositionsIn) -> bytes:
     """Positions in metres -> decisions (JSON list), one per move. Each reading is snapped to
     the cell holding it; a reading in the cell of the one before adds no move; a reading up to
     ``max_jump`` moves away is walked along a shortest path (one decision per cell of it); a
     reading farther away, in a wall or off the map refuses the whole batch (nothing applied)."""
+    moves = position_moves(state, session, body)
+    if moves is None:
+        return b"[]"
+    out = await state.registry.observe_sliced(session, moves)
+    _count_batch(state, session, out)
+    return batch_json(out, session.domain.domain)
+
+
+def position_moves(
+    state: ServiceState, session: LiveSession, body: PositionsIn
+) -> tuple[IntArray, IntArray, IntArray] | None:
+    """The moves ``body``'s readings walk from the session's cell (None: none); BadInput for
+    a wall, a point off the map or a jump too far."""
     grid = session.domain.domain
     if grid.frame is None:
         raise BadInput(
@@ -143,13 +228,11 @@ def apply_positions(state: ServiceState, session: LiveSession, body: PositionsIn
         if len(visited) - 1 > most:
             raise BadInput(f"too many moves: the positions walk more than {most} in one batch", 413)
     if len(visited) == 1:
-        return b"[]"
+        return None
     s = np.array(visited[:-1], dtype=np.int64)
     s2 = np.array(visited[1:], dtype=np.int64)
     a = np.argmax(grid.next_state[s] == s2[:, None], axis=1).astype(np.int64)
-    out = state.registry.observe_batch(session, (s, a, s2))
-    _count_batch(state, session, out)
-    return batch_json(out, grid)
+    return s, a, s2
 
 
 def apply_events_binary(state: ServiceState, session: LiveSession, raw: bytes | str) -> bytes:
@@ -174,6 +257,13 @@ def put_domain(state: ServiceState, name: str, body: DomainPut) -> tuple[DomainS
         grid = state.catalog.parse_map(body.map, name, frame)
     except MapError as exc:
         raise BadInput(f"map: {exc}") from None
+    goals, most = len(grid.goals), state.settings.max_goal_cells
+    if goals * grid.n_states > most:
+        raise BadInput(
+            f"map: {goals} goals x {grid.n_states} free cells = {goals * grid.n_states}; this "
+            f"service keeps per-goal tables (goal_aware, guide) for at most {most} "
+            "(ADVISOR_MAX_GOAL_CELLS): fewer goals or a smaller map"
+        )
     experts = None
     if body.experts is not None and not _keeps_data(state, name, grid):
         experts = simulated_experts(grid, body.experts, state.settings.max_expert_pairs)
@@ -246,6 +336,20 @@ def ingest(
     return accepted, domain
 
 
+def overview(state: ServiceState, detail: bool, limit: int, domain: str | None) -> bytes:
+    """*Worker thread.* ``GET /overview``: per domain its figures over its live sessions; with
+    ``detail`` (an operator's key) also the ``limit`` most recently active sessions (of
+    ``domain``), where each is and was."""
+    aggregates = state.registry.aggregates()
+    sessions = state.registry.snapshot(limit, domain) if detail else []
+    return orjson.dumps({
+        "detail": detail,
+        "domains": [overview_domain(d, aggregates.get(d.name)) for d in state.catalog.states()],
+        "total_sessions": sum(a.sessions for a in aggregates.values()),
+        "sessions": [overview_session(s) for s in sessions],
+    })  # fmt: skip
+
+
 def prepare_answers(domain: DomainState) -> None:
     """*Worker thread.* The text of theta that batch answers copy their advice from, for each
     table of the domain's current prior, made here rather than at the first batch after the
@@ -268,3 +372,16 @@ def warm_up() -> None:
     advisor.observe_batch(*moves)
     batch_json(out, grid)
     batch_binary(out, grid)
+    # goal_aware's loops too, a prior update (new goal counts) included, and guide's
+    goals = GoalPriors(grid.n_states, grid.goals).add([np.array([[0, 1]])], [0])
+    aware = StreamGoalAware(tables, goals, kappa=0.0, window=2, beta=0.5)
+    aware.start(grid.start)
+    aware.observe_batch(*moves)
+    aware.use_tables(tables, GoalPriors(grid.n_states, grid.goals).add([np.array([[0, 1]])], [0]))
+    aware.observe(*(int(m[0]) for m in moves))
+    aware.goal_beliefs()
+    guide = StreamGuide(
+        tables, GuideMap.of(grid, goals), kappa=0.0, window=2, params=guide_params(None)
+    )
+    guide.start(grid.start)
+    guide.observe_batch(*moves)

@@ -2,21 +2,19 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from app.advice.advisor import Decision
 from app.domain.grid import ACTIONS, GridDomain
 from app.service.data.domains import DomainState
 from app.service.data.store import POOLED
-from app.service.live.registry import LiveSession, SessionSnapshot
+from app.service.live.registry import Aggregate, LiveSession, SessionSnapshot
 from app.service.schemas import (
-    AdviceGiven,
-    AdvicePublic,
     DecisionPublic,
     DomainPublic,
     GoalBelief,
-    OverviewDomain,
-    OverviewSession,
     PriorPublic,
     SessionCreated,
     SessionPublic,
@@ -81,20 +79,20 @@ def session_public(s: SessionSnapshot) -> SessionPublic:
     )  # fmt: skip
 
 
-def overview_session(s: SessionSnapshot) -> OverviewSession:
+def overview_session(s: SessionSnapshot) -> dict[str, Any]:
+    """A live session as the overview lists it (``OverviewSession``), as plain data: an
+    overview of 1,000 sessions is written by orjson, not built as pydantic models."""
     last = None
     if s.advice:
         step, cell, advice = s.advice[-1]
-        last = AdviceGiven(
-            step=step, state=cell, advice=AdvicePublic(**dict(zip("NESW", advice, strict=True)))
-        )
-    return OverviewSession(
-        session_id=s.id, domain=s.domain, agent_type=s.agent_type, kappa=s.kappa,
-        strategy=s.strategy, goals=_goals(s), steps=s.steps,
-        position=s.position, p_normal=s.p_normal, advice_count=s.advice_count,
-        total_cost=s.total_cost, advice_per_100=s.advice_per_100, last_advice=last,
-        path=s.path, p_normal_history=s.p_history,
-    )  # fmt: skip
+        last = {"step": step, "state": cell, "advice": dict(zip("NESW", advice, strict=True))}
+    return {
+        "session_id": s.id, "domain": s.domain, "agent_type": s.agent_type, "kappa": s.kappa,
+        "strategy": s.strategy, "goals": _goal_dicts(s), "steps": s.steps,
+        "position": s.position, "p_normal": s.p_normal, "advice_count": s.advice_count,
+        "total_cost": s.total_cost, "advice_per_100": s.advice_per_100, "last_advice": last,
+        "path": s.path, "p_normal_history": s.p_history,
+    }  # fmt: skip
 
 
 def _goals(s: SessionSnapshot) -> list[GoalBelief] | None:
@@ -103,9 +101,21 @@ def _goals(s: SessionSnapshot) -> list[GoalBelief] | None:
     return [GoalBelief(goal=cell, p=p, ruled_out=out) for cell, p, out in s.goals]
 
 
-def overview_domain(d: DomainState, sessions: int) -> OverviewDomain:
+def _goal_dicts(s: SessionSnapshot) -> list[dict[str, Any]] | None:
+    if s.goals is None:
+        return None
+    return [{"goal": cell, "p": p, "ruled_out": out} for cell, p, out in s.goals]
+
+
+def overview_domain(d: DomainState, agg: Aggregate | None) -> dict[str, Any]:
+    """A domain as the overview shows it (``OverviewDomain``): its size, its data, and
+    figures over its live sessions (no session's own)."""
     rows, cols = d.domain.shape
-    return OverviewDomain(
-        name=d.name, rows=rows, cols=cols, n_states=d.domain.n_states,
-        trajectories=d.view.trajectories.get(POOLED, 0), sessions=sessions,
-    )  # fmt: skip
+    agg = agg or Aggregate()
+    per_100 = 100.0 * agg.advice / agg.decisions if agg.decisions else 0.0
+    return {
+        "name": d.name, "rows": rows, "cols": cols, "n_states": d.domain.n_states,
+        "trajectories": d.view.trajectories.get(POOLED, 0), "sessions": agg.sessions,
+        "steps": agg.steps, "advice_count": agg.advice, "advice_per_100": per_100,
+        "looking_lost": agg.looking_lost,
+    }  # fmt: skip

@@ -388,11 +388,15 @@ class OverviewDomain(BaseModel):
     cols: int
     n_states: int
     trajectories: int
-    sessions: int
+    sessions: int = Field(description="Live sessions on it.")
+    steps: int = Field(description="Moves its live sessions reported, in all.")
+    advice_count: int = Field(description="Advice its live sessions were given, in all.")
+    advice_per_100: float = Field(description="Advice per 100 decisions over its sessions.")
+    looking_lost: int = Field(description="Live sessions whose P(M1 | H) is below 1/2.")
 
 
 class OverviewSession(SessionBase):
-    """A live session as the public overview shows it (no token, no parameters)."""
+    """A live session as the overview shows it to an operator (no token, no parameters)."""
 
     last_advice: AdviceGiven | None
     path: list[Cell] = Field(description="Recent cells, oldest first.")
@@ -400,6 +404,13 @@ class OverviewSession(SessionBase):
 
 
 class Overview(BaseModel):
+    detail: bool = Field(
+        description="Whether live sessions are listed: for the admin key or the read-only "
+        "operator key (X-API-Key) only; anyone else sees the figures per domain."
+    )
     domains: list[OverviewDomain]
     total_sessions: int
-    sessions: list[OverviewSession] = Field(description="Most recently active first.")
+    sessions: list[OverviewSession] = Field(
+        description="Most recently active first, with where each explorer is and was (the "
+        "last cells within the retention); empty without an operator's key."
+    )

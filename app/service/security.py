@@ -1,7 +1,8 @@
-"""Credentials: the admin key (``X-API-Key``) and per-session bearer tokens.
+"""Credentials: the admin key and the read-only operator key (``X-API-Key``), per-session
+bearer tokens.
 
-The admin key comes from settings, else from ``<data_dir>/admin_key``; if neither exists one is
-generated, written with mode 0600 and shown once. Comparisons are constant-time.
+Each key comes from settings, else from ``<data_dir>/admin_key`` (``operator_key``); if neither
+exists one is generated, written with mode 0600 and shown once. Comparisons are constant-time.
 """
 
 from __future__ import annotations
@@ -14,9 +15,12 @@ import secrets
 import stat
 from pathlib import Path
 
+from pydantic import SecretStr
+
 from app.service.config import Settings
 
 ADMIN_KEY_FILE = "admin_key"
+OPERATOR_KEY_FILE = "operator_key"
 
 
 class AuthError(Exception):
@@ -38,10 +42,21 @@ def same_secret(given: str, expected: str) -> bool:
 
 def load_admin_key(settings: Settings) -> tuple[str, str | None]:
     """(key, message to show once or None). Creates the key file on first start."""
-    if settings.admin_key is not None:
-        return settings.admin_key.get_secret_value(), None
-    path = settings.data_dir / ADMIN_KEY_FILE
-    settings.data_dir.mkdir(parents=True, exist_ok=True)
+    return load_key(settings.admin_key, settings.data_dir / ADMIN_KEY_FILE, "the admin key")
+
+
+def load_operator_key(settings: Settings) -> tuple[str, str | None]:
+    """The read-only operator key (live positions and paths, the viewer): as the admin key."""
+    path = settings.data_dir / OPERATOR_KEY_FILE
+    return load_key(settings.operator_key, path, "the read-only operator key")
+
+
+def load_key(given: SecretStr | None, path: Path, what: str) -> tuple[str, str | None]:
+    """``given``, else the key kept in ``path``, else a new one written there (mode 0600):
+    (key, message to show once or None)."""
+    if given is not None:
+        return given.get_secret_value(), None
+    path.parent.mkdir(parents=True, exist_ok=True)
     key = secrets.token_urlsafe(32)
     try:
         fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
@@ -50,7 +65,7 @@ def load_admin_key(settings: Settings) -> tuple[str, str | None]:
     with os.fdopen(fd, "w", encoding="utf-8") as f:
         f.write(key + "\n")
     return key, (
-        f"Generated the admin key (send it as X-API-Key); stored in {path} (mode 0600), "
+        f"Generated {what} (send it as X-API-Key); stored in {path} (mode 0600), "
         f"shown only now: {key}"
     )
 
@@ -70,6 +85,16 @@ def check_admin(given: str | None, expected: str) -> None:
         raise AuthError(401, "admin route: send the admin key in the X-API-Key header")
     if not same_secret(given, expected):
         raise AuthError(403, "the X-API-Key is not the admin key")
+
+
+def is_operator(given: str | None, admin: str, operator: str) -> bool:
+    """Whether ``given`` (an X-API-Key, or None) may see live positions and paths: the admin
+    key or the operator key. A key that is neither is refused (403), not taken as none."""
+    if not given:
+        return False
+    if same_secret(given, admin) | same_secret(given, operator):  # both compared, always
+        return True
+    raise AuthError(403, "the X-API-Key is neither the admin key nor the operator key")
 
 
 def check_session_token(given: str | None, expected: str, session_id: str) -> None:

@@ -1,129 +1,128 @@
-"""The one adapter between the service and the viser viewer.
+"""The API's side of the viewer, which runs in a process of its own (``python -m app viewer``,
+started by ``serve``) and reads the service over HTTP like any client:
 
-The viewer (:mod:`app.viewer`) knows nothing of the service: it calls a feed that returns a
-plain :class:`~app.viewer.state.Snapshot`. This module builds that feed from the catalog and
-the session registry (one ``registry.snapshot`` per pump tick, never per event), starts and
-stops the viewer from the service's lifespan hook, and answers ``GET /viewer`` so pages can
-link to it.
+* ``GET /viewer/snapshot`` (the admin or the read-only operator key): the domains, each with
+  the version of its prior (the viewer fetches a domain's map and prior, ``GET /domains/{name}``
+  and ``/prior``, only when they change), and the 64 most recently active sessions with their
+  recent history; made at most 20 times a second, in a worker thread;
+* ``GET /viewer``: where the viewer runs, for pages that link to it.
+
+Nothing a browser sends to the viewer reaches this process.
 """
 
 from __future__ import annotations
 
-import asyncio
-import logging
-from collections.abc import Awaitable, Callable
-from typing import TYPE_CHECKING
+from datetime import datetime
+from typing import Any
 
-from fastapi import APIRouter, FastAPI, Request
+import orjson
+from fastapi import APIRouter, Request, Response
 from pydantic import BaseModel, Field
 
-from app.service.config import Settings
-from app.service.data.domains import DomainState
-from app.service.data.store import POOLED
+from app.service.deps import OperatorDep, StateDep
 from app.service.live.registry import SessionSnapshot
 from app.service.metrics import viewer_tick
+from app.service.schemas import Cell, ErrorPublic, GoalBelief
 from app.service.state import ServiceState
-from app.viewer.state import DomainView, Feed, SessionView, Snapshot
 
-if TYPE_CHECKING:  # viser is imported only when the viewer starts
-    from app.viewer.viewer import Viewer
-
-log = logging.getLogger(__name__)
-
-#: Sessions handed to the viewer per tick at most (the most recently active).
+#: Sessions handed to the viewer per snapshot at most (the most recently active).
 VIEWER_SESSIONS = 64
 
-Stop = Callable[[], Awaitable[None]]
+
+class ViewerDomain(BaseModel):
+    name: str
+    updated_at: datetime = Field(description="Changes when the domain is PUT again.")
+    prior_version: int = Field(description="Changes whenever its prior does.")
 
 
-def session_view(s: SessionSnapshot) -> SessionView:
-    return SessionView(
-        session_id=s.id,
-        domain=s.domain,
-        steps=s.steps,
-        position=s.position,
-        p_normal=s.p_normal,
-        advice_count=s.advice_count,
-        total_cost=s.total_cost,
-        kappa=s.kappa,
-        path=s.path,
-        p_normal_history=s.p_history,
-        advice=s.advice,  # (step, cell, theta_s) triples, the shape AdviceGiven names
-        agent_type=s.agent_type,
-        strategy=s.strategy,
-        goals=s.goals,
+class ViewerSession(BaseModel):
+    session_id: str
+    domain: str
+    steps: int
+    position: Cell
+    p_normal: float
+    advice_count: int
+    total_cost: float
+    kappa: float
+    path: list[Cell] = Field(description="Recent cells within the retention, oldest first.")
+    p_normal_history: list[float]
+    advice: list[tuple[int, Cell, tuple[float, float, float, float]]] = Field(
+        description="(step, cell, advice as N, E, S, W) of the recent advice, oldest first."
     )
+    agent_type: str | None
+    strategy: str
+    goals: list[GoalBelief] | None
 
 
-class ServiceFeed:
-    """A :data:`~app.viewer.state.Feed` over a running service's state.
-
-    The pooled prior is shown. A domain's ``prior_version`` goes up whenever its prior view
-    object is replaced (new trajectories), so the viewer redraws the arrows only then.
-    """
-
-    def __init__(self, state: ServiceState, max_sessions: int = VIEWER_SESSIONS):
-        self.state = state
-        self.max_sessions = max_sessions
-        self._views: dict[str, tuple[DomainState, object, DomainView]] = {}
-
-    def _domain_view(self, d: DomainState) -> DomainView:
-        prior = d.view
-        cached = self._views.get(d.name)
-        if cached is not None and cached[0] is d and cached[1] is prior:
-            return cached[2]
-        version = cached[2].prior_version + 1 if cached is not None else 0
-        view = DomainView(d.domain, prior.tables[POOLED].theta, version)
-        self._views[d.name] = (d, prior, view)
-        return view
-
-    def __call__(self) -> Snapshot:
-        domains = {d.name: self._domain_view(d) for d in self.state.catalog.states()}
-        for gone in set(self._views) - set(domains):
-            del self._views[gone]
-        sessions = self.state.registry.snapshot(self.max_sessions)
-        return Snapshot(domains, [session_view(s) for s in sessions])
+class ViewerSnapshot(BaseModel):
+    domains: list[ViewerDomain]
+    sessions: list[ViewerSession] = Field(description="Most recently active first.")
 
 
-def viewer_of(app: FastAPI) -> Viewer | None:
-    viewer: Viewer | None = getattr(app.state, "viewer", None)
-    return viewer
+def snapshot(state: ServiceState) -> bytes:
+    """*Worker thread.* What the viewer draws now, as JSON."""
+    domains = [
+        {"name": d.name, "updated_at": d.updated_at, "prior_version": d.view.version}
+        for d in state.catalog.states()
+    ]
+    sessions = [_session(s) for s in state.registry.snapshot(VIEWER_SESSIONS)]
+    return orjson.dumps({"domains": domains, "sessions": sessions})
 
 
-async def start_viewer(app: FastAPI, settings: Settings) -> Stop:
-    """Start the viewer on ``settings.viewer_port`` (or the next free port, as viser does)."""
-    from app.viewer.viewer import Viewer
-
-    feed: Feed = ServiceFeed(app.state.service)
-    on_tick = viewer_tick if settings.metrics_enabled else None
-    viewer = Viewer(feed, host=settings.host, port=settings.viewer_port, on_tick=on_tick)
-    await asyncio.to_thread(viewer.start)
-    app.state.viewer = viewer
-    if viewer.port != settings.viewer_port:
-        log.warning("viewer port %d was busy; using %d", settings.viewer_port, viewer.port)
-
-    async def stop() -> None:
-        app.state.viewer = None
-        await asyncio.to_thread(viewer.stop)
-
-    return stop
+def _session(s: SessionSnapshot) -> dict[str, Any]:
+    goals = None
+    if s.goals is not None:
+        goals = [{"goal": cell, "p": p, "ruled_out": out} for cell, p, out in s.goals]
+    return {
+        "session_id": s.id, "domain": s.domain, "steps": s.steps, "position": s.position,
+        "p_normal": s.p_normal, "advice_count": s.advice_count, "total_cost": s.total_cost,
+        "kappa": s.kappa, "path": s.path, "p_normal_history": s.p_history,
+        "advice": s.advice, "agent_type": s.agent_type, "strategy": s.strategy, "goals": goals,
+    }  # fmt: skip
 
 
 class ViewerStatus(BaseModel):
-    enabled: bool = Field(description="Whether the viser viewer runs beside the API.")
-    port: int | None = Field(description="Its port on the same host (null when not running).")
-    clients: int = Field(description="Browsers connected to it now.")
-    ticks: int = Field(description="Scene updates (pump ticks) since the service started.")
+    enabled: bool = Field(description="Whether `serve` starts the viser viewer beside the API.")
+    port: int | None = Field(description="Its port (null when not enabled).")
+    host: str | None = Field(description="The interface it listens on (null when not enabled).")
 
 
 router = APIRouter(tags=["pages"])
 
 
+@router.get(
+    "/viewer/snapshot",
+    dependencies=[OperatorDep],
+    response_model=ViewerSnapshot,
+    responses={code: {"model": ErrorPublic} for code in (401, 403)},
+)
+async def viewer_snapshot(state: StateDep, request: Request) -> Response:
+    """What the viewer draws (the admin or the read-only operator key): the domains with the
+    version of their prior, and the most recently active sessions with where each is and was.
+    The viewer reports its last tick's duration in seconds as ``X-Viewer-Tick`` (counted in
+    ``advisor_viewer_tick_seconds``; a value that is not a number from 0 to 3600 is ignored)."""
+    tick = request.headers.get("x-viewer-tick")
+    if tick is not None and state.settings.metrics_enabled:
+        seconds = _seconds(tick)
+        if seconds is not None:
+            viewer_tick(seconds)
+    age = min(0.05, state.settings.overview_seconds)
+    text = await state.fresh.get(("viewer",), age, lambda: snapshot(state))
+    return Response(text, media_type="application/json")
+
+
+def _seconds(text: str) -> float | None:
+    try:
+        value = float(text[:32])
+    except ValueError:
+        return None
+    return value if 0.0 <= value <= 3600.0 else None  # NaN fails both comparisons
+
+
 @router.get("/viewer")
 async def viewer_status(request: Request) -> ViewerStatus:
-    """Where the 3D viewer is: same host as this API, this port."""
-    viewer = viewer_of(request.app)
-    if viewer is None or viewer.server is None:
-        return ViewerStatus(enabled=False, port=None, clients=0, ticks=0)
-    clients = len(viewer.server.get_clients())
-    return ViewerStatus(enabled=True, port=viewer.port, clients=clients, ticks=viewer.ticks)
+    """Where the 3D viewer is: this host, this port (``serve`` starts it unless --no-viewer)."""
+    settings = request.app.state.settings
+    if not settings.viewer_enabled:
+        return ViewerStatus(enabled=False, port=None, host=None)
+    return ViewerStatus(enabled=True, port=settings.viewer_port, host=settings.viewer_host)

@@ -36,10 +36,11 @@ LAYER_LABELS = {
 
 
 class Controls:
-    """The GUI handles and what the person chose with them."""
+    """The GUI handles of one browser (``client.gui``: each browser has its own) and what the
+    person chose with them. Every value is read as a browser may have sent it, anything: a
+    value a control would never give is put back (the control shows what is used)."""
 
-    def __init__(self, server: viser.ViserServer):
-        gui = server.gui
+    def __init__(self, gui: viser.GuiApi):
         self._shown: tuple[object, ...] | None = None
         self.domain = gui.add_dropdown("Domain", (NONE,))
         self.session = gui.add_dropdown("Session", (NONE,), hint="Sessions on this domain")
@@ -83,11 +84,17 @@ class Controls:
     # ---- reading the choices -------------------------------------------------------------
     @property
     def picked_domain(self) -> str | None:
-        return None if self.domain.value == NONE else self.domain.value
+        value = picked(self.domain)
+        return None if value == NONE else value
 
     @property
     def picked_session(self) -> str | None:
-        return None if self.session.value == NONE else self.session.value
+        value = picked(self.session)
+        return None if value == NONE else value
+
+    @property
+    def lost_mode(self) -> str:
+        return picked(self.lost)
 
     @property
     def picked_kappa(self) -> float:
@@ -110,7 +117,11 @@ class Controls:
         return v
 
     def layer_visible(self, layer: str) -> bool:
-        return bool(self.layers[layer].value)
+        box = self.layers[layer]
+        if not isinstance(box.value, bool):  # what a raw message can leave there
+            box._impl.value = False  # viser's setter casts to the held value's type
+            box.value = True
+        return bool(box.value)
 
     # ---- refreshing from the pump --------------------------------------------------------
     def set_domains(self, names: Sequence[str]) -> None:
@@ -161,6 +172,18 @@ def goal_lines(s: SessionView) -> str:
         for i, (cell, p, out) in enumerate(s.goals)
     ]
     return "\n\nGoal posterior: " + ", ".join(rows)
+
+
+def picked(dropdown: viser.GuiDropdownHandle[str]) -> str:
+    """The dropdown's value if it is one of its options; else (a browser's message may hold
+    anything) its first option, which the dropdown then shows."""
+    value = dropdown.value
+    if isinstance(value, str) and value in dropdown.options:
+        return value
+    first = dropdown.options[0]
+    dropdown._impl.value = ""  # viser's setter casts to the held value's type, and sends
+    dropdown.value = first  # type: ignore[misc]  # a change from "": the first is sent
+    return first
 
 
 def set_options(dropdown: viser.GuiDropdownHandle[str], options: tuple[str, ...]) -> None:

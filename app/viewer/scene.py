@@ -19,7 +19,7 @@ from collections.abc import Sequence
 import numpy as np
 import numpy.typing as npt
 import viser
-from viser import SceneNodeHandle
+from viser import BatchedMeshHandle, ImageHandle, SceneNodeHandle
 
 from app.domain.grid import GridDomain
 from app.viewer import geometry as geo
@@ -46,12 +46,24 @@ def top_down_camera(domain: GridDomain) -> tuple[FloatArray, FloatArray, FloatAr
     return centre + np.array([0.0, 0.0, height]), centre, np.array([0.0, 1.0, 0.0])
 
 
-class MazeScene:
-    """One domain drawn into a viser server, with its prior and the live sessions on it."""
+Target = viser.ViserServer | viser.ClientHandle
+#: Above this many free cells a map is drawn in a bounded form: walls and the kappa shading as
+#: images (a few bytes a cell), and the prior's arrows not at all (44 bytes an arrow, four a
+#: cell: a 500 x 500 map would send 55 MB). Below it, everything is drawn as instances.
+DETAIL_CELLS = 10_000
 
-    def __init__(self, server: viser.ViserServer, domain: GridDomain, theta: npt.ArrayLike):
+
+class MazeScene:
+    """One domain drawn into a viser scene (a server's, shown to every browser, or one
+    client's), with its prior and the live sessions on it."""
+
+    def __init__(self, server: Target, domain: GridDomain, theta: npt.ArrayLike):
         self.server = server
         self.domain = domain
+        self.detailed = domain.n_states <= DETAIL_CELLS
+        self.walls: BatchedMeshHandle | None = None  # none on a big map: an image instead
+        self.prior_arrows: BatchedMeshHandle | None = None  # none on a big map
+        self.shading: BatchedMeshHandle | ImageHandle | None = None
         self.frames = {name: server.scene.add_frame(f"/{name}", show_axes=False) for name in LAYERS}
         self.maze_frame = server.scene.add_frame("/maze", show_axes=False)
         self._draw_static()
@@ -63,6 +75,9 @@ class MazeScene:
     def _draw_static(self) -> None:
         d, scene = self.domain, self.server.scene
         rows, cols = d.shape
+        if not self.detailed:
+            self._draw_map_image()
+            return
         scene.add_box(
             "/maze/floor",
             color=FLOOR_COLOUR,
@@ -100,8 +115,26 @@ class MazeScene:
         for i, pos in enumerate(goals + np.array([0.0, 0.0, 0.2])):
             scene.add_label(f"/maze/goal_labels/G{i}", f"G{i}", position=tuple(pos))
 
+    def _draw_map_image(self) -> None:
+        """A big map as one image on the floor: walls dark, start and goals in their colours
+        (one pixel a cell, sent as a PNG)."""
+        d, scene = self.domain, self.server.scene
+        rows, cols = d.shape
+        image = np.empty((rows, cols, 3), dtype=np.uint8)
+        image[:] = FLOOR_COLOUR
+        image[d.walls] = WALL_COLOUR
+        for g in d.goals:
+            image[d.cell(g)] = GOAL_COLOUR
+        image[d.cell(d.start)] = START_COLOUR
+        scene.add_image(
+            "/maze/image", image, render_width=cols, render_height=rows, format="png",
+            position=(cols / 2, rows / 2, 0.002), cast_shadow=False, receive_shadow=False,
+        )  # fmt: skip
+
     # ---- the prior and the kappa shading -------------------------------------------------
     def _draw_prior(self, theta: npt.ArrayLike) -> None:
+        if not self.detailed:  # not drawn: four arrows a cell would be too many
+            return
         positions, wxyzs, scales, opacities = geo.prior_arrows(self.domain, theta)
         vertices, faces = geo.flat_arrow_mesh()
         self.prior_arrows = self.server.scene.add_batched_meshes_simple(
@@ -122,6 +155,8 @@ class MazeScene:
 
     def set_prior(self, theta: npt.ArrayLike) -> None:
         """The prior changed: resize and re-shade the arrows in place."""
+        if self.prior_arrows is None:
+            return
         _, _, scales, opacities = geo.prior_arrows(self.domain, theta)
         self.prior_arrows.batched_scales = scales.astype(np.float32)
         self.prior_arrows.batched_opacities = opacities.astype(np.float32)
@@ -129,6 +164,9 @@ class MazeScene:
     def _draw_shading(self) -> None:
         d = self.domain
         n = d.n_states
+        self.shaded = np.zeros(n, dtype=bool)
+        if not self.detailed:  # an image, made at the first shade
+            return
         vertices, faces = geo.box_mesh()
         self.shading = self.server.scene.add_batched_meshes_simple(
             "/shading/cells",
@@ -144,16 +182,30 @@ class MazeScene:
             receive_shadow=False,
             lod="off",
         )
-        self.shaded = np.zeros(n, dtype=bool)
 
     def shade(self, theta: npt.ArrayLike, kappa: float, p_normal: float = 0.0) -> int:
         """Shade the cells where an explorer with P(M1 | H) = ``p_normal`` would be advised at
         ``kappa`` (see :func:`geometry.advised_cells`); returns how many cells that is."""
         mask = geo.advised_cells(theta, kappa, p_normal)
-        if not np.array_equal(mask, self.shaded):
+        if not np.array_equal(mask, self.shaded) or (self.shading is None and not self.detailed):
             self.shaded = mask
-            self.shading.batched_opacities = np.where(mask, SHADE_OPACITY, 0.0).astype(np.float32)
+            if isinstance(self.shading, BatchedMeshHandle):
+                opacity = np.where(mask, SHADE_OPACITY, 0.0).astype(np.float32)
+                self.shading.batched_opacities = opacity
+            else:
+                self._shade_image(mask)
         return int(mask.sum())
+
+    def _shade_image(self, mask: npt.NDArray[np.bool_]) -> None:
+        d = self.domain
+        rows, cols = d.shape
+        image = np.zeros((rows, cols, 4), dtype=np.uint8)
+        cells = d.cells[mask]
+        image[cells[:, 0], cells[:, 1]] = (*SHADE_COLOUR, int(255 * SHADE_OPACITY))
+        self.shading = self.server.scene.add_image(
+            "/shading/image", image, render_width=cols, render_height=rows, format="png",
+            position=(cols / 2, rows / 2, 0.004), cast_shadow=False, receive_shadow=False,
+        )  # fmt: skip
 
     def set_layer(self, layer: str, visible: bool) -> None:
         if layer not in self.frames:

@@ -45,9 +45,9 @@ def palette_colour(index: int) -> tuple[int, int, int]:
 
 
 class SessionLayers:
-    """The live sessions of one domain, drawn into a viser server."""
+    """The live sessions of one domain, drawn into a viser scene (a server's or a client's)."""
 
-    def __init__(self, server: viser.ViserServer, domain: GridDomain):
+    def __init__(self, server: viser.ViserServer | viser.ClientHandle, domain: GridDomain):
         self.server = server
         self.domain = domain
         self.session_ids: tuple[str, ...] = ()

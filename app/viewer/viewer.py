@@ -1,27 +1,32 @@
-"""The live viewer: a viser server, the maze scene and its controls, driven by a pump.
+"""The live viewer: a viser server, a scene and controls for each browser, driven by a pump.
 
-The pump is a daemon thread that, ``rate_hz`` times a second, takes one :class:`Snapshot` from
-the feed and brings the scene up to date, inside ``server.atomic()``. Nothing is drawn per
-event, so however fast explorers report, the viewer costs the service one snapshot per tick.
+It runs in a process of its own (``python -m app viewer``, which ``serve`` starts), fed by the
+API's snapshots over HTTP (:mod:`app.viewer.remote`): nothing a browser sends reaches the API's
+memory or its event loop. Each browser has its own controls and scene (:class:`ClientView`);
+every value it sends is checked (:mod:`app.viewer.controls`) and its messages are bounded
+(:mod:`app.viewer.guard`).
 
-The pump shares the service's process (and its GIL), so it also paces itself: with no browser
-connected it ticks only ``idle_rate_hz`` times a second (enough to keep the pickers current),
-and after an expensive tick it waits long enough that ticking takes at most ``max_share`` of
-the time (many busy sessions then lower the frame rate, not the API's throughput). What a person
-does cuts the wait short: a browser connecting, or any control changing, wakes the pump for one
-tick at once, so a choice never waits for the pacing.
+The pump is a daemon thread that, ``rate_hz`` times a second while a browser is connected,
+takes one :class:`Snapshot` from the feed and brings each browser's scene up to date, inside
+its ``client.atomic()``. Nothing is drawn per event, so however fast explorers report, the
+viewer costs the service one snapshot per tick; with no browser it does not tick at all. After
+an expensive tick it waits long enough that ticking takes at most ``max_share`` of the time.
+What a person does cuts the wait short: a browser connecting, or any control changing, wakes
+the pump for one tick at once, so a choice never waits for the pacing.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import logging
 import threading
 import time
-from collections.abc import Callable
 
 import viser
 
 from app.viewer.controls import LOST_PICKED, Controls
+from app.viewer.guard import MAX_CLIENTS, bounded_server, client_without_uploads
 from app.viewer.scene import LAYERS, MazeScene, top_down_camera
 from app.viewer.state import DomainView, Feed, Snapshot
 
@@ -35,8 +40,77 @@ MAX_SHARE = 0.10
 MAX_DRAWN_SESSIONS = 64
 
 
+class ClientView:
+    """What one browser sees: its own controls (``client.gui``) and its own scene
+    (``client.scene``), so that one browser's choices never change another's view."""
+
+    def __init__(self, client: viser.ClientHandle):
+        self.client = client
+        self.controls = Controls(client.gui)
+        self.scene: MazeScene | None = None
+        self._drawn: tuple[str, int] | None = None  # (domain name, prior version)
+
+    def apply(self, snap: Snapshot) -> None:
+        """Bring this browser's scene and panel up to date with ``snap``."""
+        controls = self.controls
+        controls.set_domains(sorted(snap.domains))
+        view = snap.domains.get(controls.picked_domain or "")
+        if view is None:
+            self.clear()
+            return
+        self._draw_domain(view)
+        scene = self.scene
+        assert scene is not None
+        sessions = sorted(snap.sessions_of(view.name), key=lambda s: s.session_id)
+        controls.set_sessions([s.session_id for s in sessions])
+        picked = next((s for s in sessions if s.session_id == controls.picked_session), None)
+        drawn = sorted(sessions, key=lambda s: -s.steps)[:MAX_DRAWN_SESSIONS]
+        if picked is not None and picked not in drawn:
+            drawn.append(picked)
+        scene.update_sessions(drawn, picked.session_id if picked else None)
+        for layer in LAYERS:
+            scene.set_layer(layer, controls.layer_visible(layer))
+        kappa, lost = controls.picked_kappa, controls.lost_mode  # both checked every tick
+        p = picked.p_normal if picked is not None and lost == LOST_PICKED else 0.0
+        shaded = scene.shade(view.theta, kappa, p)
+        controls.show_shading(shaded, view.domain.n_states, kappa, p)
+        controls.show_session(picked)
+
+    def _draw_domain(self, view: DomainView) -> None:
+        if self.scene is not None and self.scene.domain is view.domain:
+            if self._drawn != (view.name, view.prior_version):
+                self.scene.set_prior(view.theta)
+                self._drawn = (view.name, view.prior_version)
+            return
+        self.clear()
+        self.scene = MazeScene(self.client, view.domain, view.theta)
+        self._drawn = (view.name, view.prior_version)
+        self.aim()
+
+    def aim(self) -> None:
+        """Look at this browser's map from above, north up."""
+        if self.scene is not None:
+            position, look_at, up = top_down_camera(self.scene.domain)
+            camera = self.client.camera
+            camera.up_direction = tuple(up)
+            camera.position = tuple(position)
+            camera.look_at = tuple(look_at)
+
+    def clear(self) -> None:
+        if self.scene is not None:
+            self.scene.remove()
+            self.scene = None
+            self._drawn = None
+        self.controls.set_sessions([])
+        self.controls.show_session(None)
+
+
 class Viewer:
-    """Serve the scene on ``host:port`` and keep it in step with ``feed``."""
+    """Serve the scene on ``host:port`` and keep every browser's view in step with ``feed``.
+
+    The web server is viser's, with the bounds of :mod:`app.viewer.guard` (message sizes, the
+    page's origin, the number of browsers, no uploads). Each browser gets a :class:`ClientView`
+    when it connects."""
 
     def __init__(
         self,
@@ -46,6 +120,7 @@ class Viewer:
         rate_hz: float = DEFAULT_RATE_HZ,
         idle_rate_hz: float = IDLE_RATE_HZ,
         max_share: float = MAX_SHARE,
+        max_clients: int = MAX_CLIENTS,
         on_tick: Callable[[float], None] | None = None,
     ):
         for name, value in (("rate_hz", rate_hz), ("idle_rate_hz", idle_rate_hz)):
@@ -59,13 +134,11 @@ class Viewer:
         self.period = 1.0 / rate_hz
         self.idle_period = 1.0 / idle_rate_hz
         self.max_share = max_share
-        #: called with each pump tick's duration in seconds (the service's metrics hook)
-        self.on_tick = on_tick
+        self.max_clients = max_clients
+        self.on_tick = on_tick  # called with each tick's duration in seconds (metrics)
         self.server: viser.ViserServer | None = None
-        self.controls: Controls | None = None
-        self.scene: MazeScene | None = None
+        self.views: dict[int, ClientView] = {}
         self.ticks = 0
-        self._drawn: tuple[str, int] | None = None  # (domain name, prior version)
         self._stop = threading.Event()
         self._wake = threading.Event()  # a control changed or a browser connected: tick now
         self._thread: threading.Thread | None = None
@@ -74,7 +147,7 @@ class Viewer:
     # ---- lifecycle -----------------------------------------------------------------------
     def start(self, pump: bool = True) -> None:
         """Start the web server (and, unless ``pump`` is false, the pump thread)."""
-        server = viser.ViserServer(host=self.host, port=self.requested_port, verbose=False)
+        server = bounded_server(self.host, self.requested_port, max_clients=self.max_clients)
         server.gui.configure_theme(
             titlebar_content=None, control_width="medium", show_share_button=False
         )
@@ -82,9 +155,8 @@ class Viewer:
         server.scene.configure_environment_map(hdri=None)
         server.scene.configure_default_lights(enabled=True, cast_shadow=False)
         self.server = server
-        self.controls = Controls(server)
-        self.controls.on_change(self._changed)
         server.on_client_connect(self._on_connect)
+        server.on_client_disconnect(self._on_disconnect)
         log.info("viewer on http://%s:%d", self.host, self.port)
         if pump:
             self._thread = threading.Thread(target=self._run, name="viewer-pump", daemon=True)
@@ -103,101 +175,70 @@ class Viewer:
         """The port actually bound (viser moves on if the requested one is busy)."""
         return self.server.get_port() if self.server else self.requested_port
 
+    @property
+    def controls(self) -> Controls | None:
+        """The controls of the first browser connected (None without one)."""
+        view = next(iter(self.views.values()), None)
+        return view.controls if view is not None else None
+
+    @property
+    def scene(self) -> MazeScene | None:
+        """The scene of the first browser connected (None without one, or no domain)."""
+        view = next(iter(self.views.values()), None)
+        return view.scene if view is not None else None
+
     def _changed(self) -> None:
         """A control changed: tick now (a change the pump made itself needs no tick)."""
         if threading.current_thread() is not self._thread:
             self._wake.set()
 
     def _on_connect(self, client: viser.ClientHandle) -> None:
-        """A browser connected: aim its camera, and tick now (not after an idle wait)."""
-        self._aim(client)
+        """A browser connected: its own controls and scene; tick now (not after a wait)."""
+        client_without_uploads(client)
+        view = ClientView(client)
+        view.controls.on_change(self._changed)
+        with self._lock:
+            self.views[client.client_id] = view
         self._wake.set()
 
-    def _aim(self, client: viser.ClientHandle) -> None:
-        if self.scene is not None:
-            position, look_at, up = top_down_camera(self.scene.domain)
-            client.camera.up_direction = tuple(up)
-            client.camera.position = tuple(position)
-            client.camera.look_at = tuple(look_at)
+    def _on_disconnect(self, client: viser.ClientHandle) -> None:
+        with self._lock:
+            self.views.pop(client.client_id, None)
 
     def _run(self) -> None:
         wait = 0.0
+        failed = ""  # the last failure logged: a service that is down is said once, not per tick
         while True:
             self._wake.wait(wait)
             if self._stop.is_set():
                 return
             self._wake.clear()
-            watched = self.server is not None and bool(self.server.get_clients())
+            watched = bool(self.views)
             started = time.perf_counter()
             try:
-                self.tick()
-            except Exception:  # keep pumping: the next snapshot may be fine
-                log.exception("viewer pump tick failed")
-            took = time.perf_counter() - started
-            if self.on_tick is not None:
-                self.on_tick(took)
+                if watched:
+                    self.tick()
+                    failed = ""
+            except Exception as exc:  # keep pumping: the next snapshot may be fine
+                if str(exc) != failed:
+                    log.warning("viewer pump tick failed: %s: %s", type(exc).__name__, exc)
+                    failed = str(exc)
             period = self.period if watched else self.idle_period
-            wait = pump_wait(took, period, self.max_share)
+            wait = pump_wait(time.perf_counter() - started, period, self.max_share)
 
     # ---- one tick ------------------------------------------------------------------------
     def tick(self) -> None:
-        """Bring the scene up to date with one snapshot (the pump calls this)."""
-        assert self.server is not None and self.controls is not None, "call start() first"
+        """Bring every browser's view up to date with one snapshot (the pump calls this)."""
+        assert self.server is not None, "call start() first"
+        started = time.perf_counter()
         snapshot = self.feed()
-        with self._lock, self.server.atomic():
-            self._apply(snapshot)
+        with self._lock:
+            for view in list(self.views.values()):
+                with view.client.atomic():
+                    view.apply(snapshot)
         self.ticks += 1
-
-    def _apply(self, snap: Snapshot) -> None:
-        controls = self.controls
-        assert controls is not None
-        controls.set_domains(sorted(snap.domains))
-        view = snap.domains.get(controls.picked_domain or "")
-        if view is None:
-            self._clear()
-            return
-        self._draw_domain(view)
-        scene = self.scene
-        assert scene is not None
-        sessions = sorted(snap.sessions_of(view.name), key=lambda s: s.session_id)
-        controls.set_sessions([s.session_id for s in sessions])
-        picked = next((s for s in sessions if s.session_id == controls.picked_session), None)
-        drawn = sorted(sessions, key=lambda s: -s.steps)[:MAX_DRAWN_SESSIONS]
-        if picked is not None and picked not in drawn:
-            drawn.append(picked)
-        scene.update_sessions(drawn, picked.session_id if picked else None)
-        for layer in LAYERS:
-            scene.set_layer(layer, controls.layer_visible(layer))
-        kappa = controls.picked_kappa
-        p = picked.p_normal if picked is not None and controls.lost.value == LOST_PICKED else 0.0
-        shaded = scene.shade(view.theta, kappa, p)
-        controls.show_shading(shaded, view.domain.n_states, kappa, p)
-        controls.show_session(picked)
-
-    def _draw_domain(self, view: DomainView) -> None:
-        assert self.server is not None
-        if self.scene is not None and self.scene.domain is view.domain:
-            if self._drawn != (view.name, view.prior_version):
-                self.scene.set_prior(view.theta)
-                self._drawn = (view.name, view.prior_version)
-            return
-        self._clear()
-        self.scene = MazeScene(self.server, view.domain, view.theta)
-        self._drawn = (view.name, view.prior_version)
-        position, look_at, up = top_down_camera(view.domain)
-        cam = self.server.initial_camera
-        cam.position, cam.look_at, cam.up = tuple(position), tuple(look_at), tuple(up)
-        for client in self.server.get_clients().values():
-            self._aim(client)
-
-    def _clear(self) -> None:
-        if self.scene is not None:
-            self.scene.remove()
-            self.scene = None
-            self._drawn = None
-        if self.controls is not None:
-            self.controls.set_sessions([])
-            self.controls.show_session(None)
+        if self.on_tick is not None:
+            self.on_tick(time.perf_counter() - started)
 
 
 def pump_wait(elapsed: float, period: float, max_share: float) -> float:

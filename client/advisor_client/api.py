@@ -74,6 +74,8 @@ class Call:
     headers: dict[str, str] = field(default_factory=dict)
     admin: bool = False
     idempotent: bool = False
+    #: send the client's key if it has one (the answer then shows more: /overview's sessions)
+    key_if_any: bool = False
 
     def __post_init__(self) -> None:
         if self.method in ("GET", "HEAD", "PUT", "DELETE"):
@@ -169,7 +171,8 @@ def sessions(limit: int = 100) -> Call:
 
 
 def overview(limit: int = 100) -> Call:
-    return Call("GET", "/overview", params={"limit": limit})
+    """Figures per domain; the live sessions too with the admin or the operator key."""
+    return Call("GET", "/overview", params={"limit": limit}, key_if_any=True)
 
 
 def stream_url(base_url: str, session: Session, binary: bool = False) -> str:

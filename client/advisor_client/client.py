@@ -113,6 +113,8 @@ class _Base:
             if self.admin_key is None:
                 raise AdvisorError(401, "this call needs the admin key: pass admin_key=...")
             headers["X-API-Key"] = self.admin_key
+        elif call.key_if_any and self.admin_key is not None:
+            headers["X-API-Key"] = self.admin_key
         kwargs: dict[str, Any] = {"params": call.params, "headers": headers}
         if call.json is not None:
             kwargs["json"] = call.json

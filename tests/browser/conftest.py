@@ -1,4 +1,5 @@
-"""Real service (uvicorn in a thread, temp data dir, free ports) and real headless Chromium.
+"""Real service (uvicorn in a thread, temp data dir, free ports), its viewer reading it over
+HTTP, and real headless Chromium.
 
 Every page a test opens records console errors and uncaught exceptions; the ``page`` fixture
 fails the test if there were any. Screenshots go to ``test-artifacts/`` at the repository root.
@@ -23,6 +24,7 @@ from playwright.sync_api import Browser, ConsoleMessage, Page, sync_playwright
 
 from app.service.config import Settings
 from app.service.main import create_app
+from app.viewer.remote import RemoteFeed
 from app.viewer.viewer import Viewer
 
 CHROMIUM = "/usr/bin/chromium"
@@ -55,11 +57,12 @@ class Service:
     app: FastAPI
     base: str
     http: httpx.Client
+    viewer: Viewer
 
     @property
-    def viewer(self) -> Viewer:
-        viewer: Viewer = self.app.state.viewer
-        return viewer
+    def operator_key(self) -> str:
+        key: str = self.app.state.service.operator_key
+        return key
 
     def new_session(self, moves: str = "", kappa: float = 0.5) -> tuple[str, dict[str, str]]:
         """A session on ``default`` that made ``moves`` (one list of events)."""
@@ -89,6 +92,7 @@ def service(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Service]:
         admin_key=ADMIN,
         viewer_enabled=True,
         viewer_port=free_port(),
+        overview_seconds=0.0,  # every read sees the events before it
     )
     app = create_app(settings)
     server = uvicorn.Server(
@@ -98,8 +102,15 @@ def service(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Service]:
     thread.start()
     wait_until(lambda: server.started, 60.0, "uvicorn to start")
     base = f"http://127.0.0.1:{settings.port}"
-    with httpx.Client(base_url=base, timeout=30.0) as http:
-        yield Service(app, base, http)
+    # the viewer as `python -m app viewer` runs it (serve starts that process): reading the
+    # service over HTTP with the operator key; here in the test's process, to look inside it
+    with httpx.Client(base_url=base, timeout=30.0) as http, \
+            httpx.Client(base_url=base, timeout=30.0) as feed_http:  # fmt: skip
+        key = app.state.service.operator_key
+        viewer = Viewer(RemoteFeed(feed_http, key), port=settings.viewer_port)
+        viewer.start()
+        yield Service(app, base, http, viewer)
+        viewer.stop()
     server.should_exit = True
     thread.join(timeout=30.0)
 

@@ -15,6 +15,12 @@ pytestmark = pytest.mark.browser
 def test_dashboard_lists_a_session_and_refreshes_its_figures(service: Service, page: Page) -> None:
     sid, auth = service.new_session("EEE")
     page.goto(service.base + "/")
+    # without a key: the figures per domain, no session's
+    expect(page.locator('tr[data-domain="default"]')).to_be_visible()
+    expect(page.locator("#sessions")).to_contain_text("shown with the operator key")
+    expect(page.locator(f'tr[data-session-id="{sid}"]')).to_have_count(0)
+    page.fill("#key", service.operator_key)
+    page.click("#key-form button[type=submit]")
     row = page.locator(f'tr[data-session-id="{sid}"]')
     expect(row).to_be_visible()
     expect(row.locator("td").nth(3)).to_have_text("paper")  # strategy

@@ -1,4 +1,5 @@
-"""The viser viewer, started by the service: a browser connects and the scene holds the maze."""
+"""The viser viewer, reading the service over HTTP: a browser connects and its scene holds the
+maze."""
 
 from __future__ import annotations
 
@@ -26,14 +27,18 @@ def test_viewer_page_connects_and_shows_maze_prior_and_sessions(
 ) -> None:
     sessions = [service.new_session(moves)[0] for moves in ("EEEEN", "SSWWNNEE", "EEEWWWEEE")]
     # `python -m app simulate` fills the scene with several explorers (sessions kept open)
-    before = {s["session_id"] for s in service.http.get("/overview").json()["sessions"]}
+    operator = {"X-API-Key": service.operator_key}  # live sessions are an operator's to see
+    before = {
+        s["session_id"] for s in service.http.get("/overview", headers=operator).json()["sessions"]
+    }
     simulate = [
         sys.executable, "-m", "app", "simulate", "--server", service.base, "--explorers", "4",
         "--episodes", "4", "--steps", "60", "--keep", "--seed", "1",
     ]  # fmt: skip
     ran = subprocess.run(simulate, capture_output=True, text=True, timeout=120, check=False)
     assert ran.returncode == 0, ran.stderr
-    simulated = {s["session_id"] for s in service.http.get("/overview").json()["sessions"]}
+    overview = service.http.get("/overview", headers=operator).json()
+    simulated = {s["session_id"] for s in overview["sessions"]}
     simulated -= before
     assert len(simulated) == 4
     viewer = service.viewer
@@ -54,8 +59,10 @@ def test_viewer_page_connects_and_shows_maze_prior_and_sessions(
         scene = viewer.scene
         assert scene is not None
         domain = scene.domain
-        names = set(server.scene._handle_from_node_name)
+        view = next(iter(viewer.views.values()))  # the browser's own scene
+        names = set(view.client.scene._handle_from_node_name)
         assert names >= SCENE_NODES, SCENE_NODES - names
+        assert scene.walls is not None and scene.prior_arrows is not None
         assert scene.walls.batched_positions.shape == (int(domain.walls.sum()), 3)
         assert scene.prior_arrows.batched_positions.shape == (4 * domain.n_states, 3)
         drawn: dict[str, Any] = scene.session_nodes  # handles of several kinds

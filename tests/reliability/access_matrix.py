@@ -27,9 +27,10 @@ from tests.service.conftest import TINY, make_settings
 
 COLUMNS = {
     "none": "no credentials",
-    "wrong": "wrong admin key",
+    "wrong": "a wrong key",
     "other": "another session's token",
     "admin": "admin key",
+    "operator": "operator key",
     "own": "the session's own token",
 }
 E = {"state": [5, 1], "action": "E"}
@@ -40,7 +41,7 @@ TRAJECTORIES = {"trajectories": [{"steps": [E]}]}
 class Route:
     method: str
     path: str
-    who: str  # "anyone", "admin", "token" (the session's), "token or admin"
+    who: str  # a key of POLICY
     body: object = None
 
 
@@ -56,23 +57,36 @@ ROUTES = [
     Route("POST", "/domains/{name}/sessions", "anyone", {}),
     Route("POST", "/sessions/{session_id}/events", "token", E),
     Route("POST", "/sessions/{session_id}/positions", "token", {"positions": [[2.5, 1.5]]}),
-    Route("GET", "/sessions/{session_id}", "token or admin"),
+    Route("GET", "/sessions/{session_id}", "token or operator"),
     Route("DELETE", "/sessions/{session_id}", "token or admin"),
-    Route("GET", "/sessions", "admin"),
+    Route("GET", "/sessions", "operator"),
     Route("WS", "/sessions/{session_id}/stream", "token"),
-    Route("GET", "/overview", "anyone"),
+    Route("GET", "/overview", "anyone; sessions: operator"),
     Route("GET", "/viewer", "anyone"),
     Route("GET", "/metrics", "anyone"),
+    Route("GET", "/viewer/snapshot", "operator"),
     Route("GET", "/", "anyone"),
     Route("GET", "/walk", "anyone"),
 ]
 #: What each kind of route answers to each column ("ok": its success status).
 POLICY = {
-    "anyone": {"none": "ok", "wrong": "ok", "other": "ok", "admin": "ok", "own": "ok"},
-    "admin": {"none": "401", "wrong": "403", "other": "401", "admin": "ok", "own": "401"},
-    "token": {"none": "401", "wrong": "401", "other": "403", "admin": "401", "own": "ok"},
-    "token or admin": {"none": "401", "wrong": "403", "other": "403", "admin": "ok", "own": "ok"},
-}
+    "anyone": {"none": "ok", "wrong": "ok", "other": "ok", "admin": "ok", "operator": "ok",
+               "own": "ok"},
+    "admin": {"none": "401", "wrong": "403", "other": "401", "admin": "ok", "operator": "403",
+              "own": "401"},
+    "operator": {"none": "401", "wrong": "403", "other": "401", "admin": "ok", "operator": "ok",
+                 "own": "401"},
+    "token": {"none": "401", "wrong": "401", "other": "403", "admin": "401", "operator": "401",
+              "own": "ok"},
+    "token or admin": {"none": "401", "wrong": "403", "other": "403", "admin": "ok",
+                       "operator": "403", "own": "ok"},
+    "token or operator": {"none": "401", "wrong": "403", "other": "403", "admin": "ok",
+                          "operator": "ok", "own": "ok"},
+    # live sessions (where explorers are and were) for the admin and operator keys only
+    "anyone; sessions: operator": {"none": "figures", "wrong": "403", "other": "figures",
+                                   "admin": "sessions", "operator": "sessions",
+                                   "own": "figures"},
+}  # fmt: skip
 #: A websocket refusal is a close code: 4400 + the HTTP status it stands for.
 WS_CLOSE = {"401": "close 4401", "403": "close 4403"}
 
@@ -92,6 +106,7 @@ class Service:
     def __init__(self, client: TestClient):
         self.client = client
         self.admin_key: str = client.app.state.service.admin_key  # type: ignore[attr-defined]
+        self.operator_key: str = client.app.state.service.operator_key  # type: ignore[attr-defined]
         self.counter = 0
         body = {"map": TINY, "resolution": 1.0}  # in metres too: positions are valid
         r = client.put("/domains/tiny", json=body, headers=self.admin)
@@ -125,9 +140,10 @@ def service() -> Iterator[Service]:
 def headers(column: str, svc: Service, own: str, other: str) -> dict[str, str]:
     return {
         "none": {},
-        "wrong": {"X-API-Key": "not-the-admin-key"},
+        "wrong": {"X-API-Key": "not-a-key-of-this-service"},
         "other": {"Authorization": f"Bearer {other}"},
         "admin": svc.admin,
+        "operator": {"X-API-Key": svc.operator_key},
         "own": {"Authorization": f"Bearer {own}"},
     }[column]
 
@@ -147,6 +163,9 @@ def measure_cell(svc: Service, route: Route, column: str) -> Cell:
         content=None if route.body is None else json.dumps(route.body),
         headers=sent | ({"Content-Type": "application/json"} if route.body is not None else {}),
     )
+    if r.is_success and route.path == "/overview":  # which view: live sessions or figures
+        listed = r.json()["detail"] and r.json()["sessions"]
+        return Cell("200 sessions" if listed else "200 figures", True)
     return Cell(str(r.status_code), r.is_success)
 
 
@@ -174,9 +193,52 @@ def expected(route: Route, column: str) -> Callable[[Cell], bool]:
     want = POLICY[route.who][column]
     if want == "ok":
         return lambda cell: cell.ok
+    if want in ("figures", "sessions"):
+        return lambda cell: cell.status == f"200 {want}"
     if route.method == "WS":
         return lambda cell: cell.status == WS_CLOSE[want]
     return lambda cell: cell.status == want
+
+
+RULES = [
+    "## The rules",
+    "",
+    "**Keys.** Two keys go in the `X-API-Key` header: the admin key (everything) and the",
+    "read-only operator key (reads of live sessions, no writes). Each comes from its setting",
+    "(`ADVISOR_ADMIN_KEY`, `ADVISOR_OPERATOR_KEY`), else from `<data_dir>/admin_key` and",
+    "`<data_dir>/operator_key`; if neither exists, one is generated, written with mode 0600 and",
+    "shown once. A key that is neither is refused (403), not taken as none. Session routes take",
+    "the session's own token (`Authorization: Bearer`; on the websocket also the subprotocols",
+    "`advisor`, `token.<token>`, as the `/walk` page sends it, or `?token=`, which logs keep:",
+    "the service's own log writes `token=***`). Comparisons are constant-time.",
+    "",
+    "**Where explorers are is personal data.** Live positions, recent paths and where advice",
+    "was given are shown to the admin and operator keys only: `GET /overview` lists sessions",
+    "for them and gives anyone else figures per domain (sessions, steps, advice per 100",
+    "decisions, how many look lost); `GET /sessions`, `GET /sessions/{id}` and the viewer's",
+    "`GET /viewer/snapshot` are theirs (and a session's own token reads its own session). The",
+    "dashboard asks for the operator key and keeps it in the tab's session storage. The cells",
+    "an explorer was at are kept `ADVISOR_PATH_RETENTION_SECONDS` (600) at most: older ones are",
+    "dropped from its recent path and advice log (answers never show them; the sweeper forgets",
+    "them), and only its current cell stays while its session lives.",
+    "",
+    "**The viewer** (`python -m app viewer`, which `serve` starts in a process of its own) is",
+    "an operator's tool: it reads the API with the operator key, and listens on loopback",
+    "(`ADVISOR_VIEWER_HOST`, default 127.0.0.1) since it asks a browser for no key; it says so",
+    "when it starts. It refuses websockets from pages of other origins (403), messages over",
+    "4 MiB (closed), more than 8 browsers (503), and drops file uploads.",
+    "",
+    "**Quotas.** Sessions are free to open, so each client may hold at most",
+    "`ADVISOR_CLIENT_MAX_SESSIONS` (1,000) live sessions reserving at most",
+    "`ADVISOR_CLIENT_MAX_SESSION_MEMORY` (256 MiB) between them (429 beyond, saying which). A",
+    "client is the peer's address; behind proxies the operator lists in",
+    "`ADVISOR_TRUSTED_PROXIES` (addresses or CIDR networks), the last address of",
+    "`X-Forwarded-For` that is not one of them (a forwarded address from anyone else is not",
+    "believed). Sessions made with the admin key count against no client's quota. In all, at",
+    "most `ADVISOR_MAX_SESSIONS` (20,000) sessions reserving `ADVISOR_MAX_SESSION_MEMORY`",
+    "(1 GiB) live at once (503 beyond).",
+    "",
+]
 
 
 def render(matrix: Matrix) -> str:
@@ -188,10 +250,10 @@ def render(matrix: Matrix) -> str:
         "docs/ACCESS.md`; tests/reliability/test_access.py fails when it is out of date -->",
         "",
         "What the service answers to each route with each kind of credential, measured on a",
-        "fresh service (each cell one request to a fresh session or domain). Admin",
-        "credentials: the `X-API-Key` header; session credentials: `Authorization: Bearer",
-        '<token>` (the websocket also takes `?token=`). "Another session\'s token" is a valid',
-        "token of a different live session; on routes without a session, \"the session's own",
+        "fresh service (each cell one request to a fresh session or domain). Keys (admin,",
+        "operator, a wrong one): the `X-API-Key` header; session credentials: `Authorization:",
+        'Bearer <token>` (the websocket also takes `?token=`). "Another session\'s token" is a',
+        "valid token of a different live session; on routes without a session, \"the session's own",
         'token" is any valid session token. A websocket is accepted (`open`: it answers',
         "events) or closed with 4400 + the HTTP status it stands for (4401 missing, 4403",
         "wrong). Bodies are valid, so a refusal is about credentials alone.",
@@ -206,8 +268,10 @@ def render(matrix: Matrix) -> str:
     lines += [
         "",
         "`{new}` is a domain name not yet in use (PUT creates it: 201) or one just created",
-        "(DELETE removes it: 204).",
+        "(DELETE removes it: 204). On `GET /overview`, `figures` is the answer without live",
+        "sessions (figures per domain), `sessions` the one that lists them.",
         "",
+        *RULES,
     ]
     return "\n".join(lines)
 

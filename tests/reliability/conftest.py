@@ -42,17 +42,21 @@ class Live:
 
 def start(
     data_dir: Path, port: int | None = None, timeout: float = 60.0, log_level: str = "warning",
-    **env: str,
+    viewer_port: int | None = None, **env: str,
 ) -> Live:  # fmt: skip
     """Start the service on 127.0.0.1 and wait until ``/health`` answers (or fail, showing its
     log). ``env``: extra settings, e.g. ``ADVISOR_MAX_SESSIONS="5"``; ``log_level`` "info"
-    writes uvicorn's access log too."""
+    writes uvicorn's access log too; ``viewer_port``: with its viewer there (else none)."""
     port = port or free_port()
     data_dir.mkdir(parents=True, exist_ok=True)
     log = data_dir.parent / f"server-{port}.log"
     environ = os.environ | {"ADVISOR_BOOTSTRAP_PER_GOAL": "2"} | env
     cmd = [sys.executable, "-m", "app", "serve", "--host", "127.0.0.1", "--port", str(port),
-           "--data-dir", str(data_dir), "--no-viewer", "--log-level", log_level]  # fmt: skip
+           "--data-dir", str(data_dir), "--log-level", log_level]  # fmt: skip
+    if viewer_port is None:
+        cmd.append("--no-viewer")
+    else:
+        environ = environ | {"ADVISOR_VIEWER_PORT": str(viewer_port)}
     with log.open("ab") as out:
         proc = subprocess.Popen(cmd, cwd=REPO, env=environ, stdout=out, stderr=out)
     url = f"http://127.0.0.1:{port}"

@@ -19,6 +19,7 @@ from starlette.websockets import WebSocketDisconnect
 from app.service.main import create_app
 from tests.reliability.soak import EVENTS, eventually, soak
 from tests.service.conftest import make_settings, open_session
+from tests.service.test_strategies import operator
 
 E = {"state": [28, 0], "action": "E"}
 W = {"state": [28, 1], "action": "W"}
@@ -52,7 +53,8 @@ def test_idle_sessions_are_evicted_and_active_ones_kept(short_lived: TestClient)
             # sessions without touching them (reading one with its token would keep it alive)
             r = client.post(f"/sessions/{kept_id}/events", json=E, headers=kept_auth)
             assert r.status_code == 200, r.text
-            listed = {s["session_id"] for s in client.get("/overview").json()["sessions"]}
+            overview = client.get("/overview", headers=operator(client)).json()
+            listed = {s["session_id"] for s in overview["sessions"]}
             return not {idle_id, ws_id} & listed
 
         assert eventually(idle_gone)

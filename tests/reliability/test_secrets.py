@@ -8,7 +8,10 @@ import logging
 from pathlib import Path
 
 import httpx
+import pytest
+from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import connect
+from websockets.typing import Subprotocol
 
 from app.service.security import RedactTokens, redact
 from tests.reliability.conftest import start, stop
@@ -47,6 +50,19 @@ def test_a_live_server_logs_no_session_token_nor_admin_key(tmp_path: Path) -> No
             with connect(ws_url) as ws:
                 ws.send(json.dumps({"state": created["decision"]["state"], "action": "E"}))
                 assert json.loads(ws.recv())["step"] == 1
+            # as the /walk page connects: the token as a subprotocol, the server answering
+            # "advisor" (a browser needs one of its offers back), never the token
+            plain = live.url.replace("http", "ws") + f"/sessions/{sid}/stream"
+            offer = [Subprotocol("advisor"), Subprotocol(f"token.{token}")]
+            with connect(plain, subprotocols=offer) as ws:
+                assert ws.subprotocol == "advisor"
+                ws.send(json.dumps({"state": [28, 1], "action": "W"}))
+                assert json.loads(ws.recv())["step"] == 2
+            with connect(plain, subprotocols=[Subprotocol("advisor")]) as ws:  # no token
+                with pytest.raises(ConnectionClosed) as closed:
+                    ws.send("{}")
+                    ws.recv()
+                assert closed.value.rcvd is not None and closed.value.rcvd.code == 4401
             r = http.get(f"/sessions/{sid}", headers={"Authorization": f"Bearer {token}"})
             assert r.status_code == 200
             assert http.get("/domains", headers=live.admin).status_code == 200
@@ -54,5 +70,6 @@ def test_a_live_server_logs_no_session_token_nor_admin_key(tmp_path: Path) -> No
         stop(live)
     text = live.log.read_text(errors="replace")
     assert f"/sessions/{sid}/stream?token=***" in text  # the access log was written
+    assert text.count(f"/sessions/{sid}/stream") >= 3
     assert token not in text
     assert key not in text

@@ -29,6 +29,7 @@ CONTRACT = {
     ("DELETE", "/sessions/{session_id}"), ("GET", "/sessions"), ("GET", "/overview"),
     ("GET", "/viewer"),  # where the viser viewer runs (app/service/viewer_feed.py)
     ("GET", "/metrics"),  # Prometheus text (app/service/metrics.py)
+    ("GET", "/viewer/snapshot"),  # what the viewer process draws (operator key)
 }  # fmt: skip
 NAMES = ["default", "nowhere", "%E2%98%83", "a" * 100, "..", "%00"]
 

@@ -9,6 +9,7 @@ from fastapi.testclient import TestClient
 
 from app.domain.grid import GridDomain
 from app.service.data.store import POOLED
+from app.service.public import prior_public
 from app.service.state import ServiceState
 from tests.service.conftest import TINY, open_session, put_tiny
 
@@ -223,3 +224,20 @@ def test_replacing_the_map_ends_sessions_and_the_same_map_keeps_them(
     assert r.status_code == 200
     assert r.json()["trajectories"] == 0
     assert client.get(f"/sessions/{sid}", headers=auth).status_code == 404
+
+
+def test_the_prior_s_answer_is_the_readable_form_s(
+    client: TestClient, admin: dict[str, str], service: ServiceState
+) -> None:
+    """GET /domains/{name}/prior is made once per prior version as text (orjson over numpy,
+    walls turned to null: app/service/answers.py); it says what the readable form, pydantic
+    over Python lists (``public.prior_public``), says, for every table and an unknown type."""
+    put_tiny(client, admin)
+    steps = [{"state": [5, 1], "action": "E"}, {"state": [5, 2], "action": "E"}]
+    body = {"trajectories": [{"agent_type": "staff", "steps": steps}]}
+    assert client.post("/domains/tiny/trajectories", json=body, headers=admin).status_code == 201
+    for agent_type in (None, "staff", "martian"):
+        params = {} if agent_type is None else {"agent_type": agent_type}
+        got = client.get("/domains/tiny/prior", params=params).json()
+        readable = prior_public(service.catalog.get("tiny"), agent_type)
+        assert got == readable.model_dump(mode="json")

@@ -176,7 +176,7 @@ def test_goal_aware_session_rules_out_a_goal_it_walked_past(
     assert after[0]["ruled_out"] and after[0]["p"] == 0.0
     assert not any(g["ruled_out"] for g in after[1:])
     assert math.isclose(sum(g["p"] for g in after), 1.0)
-    listed = client.get("/overview").json()["sessions"]
+    listed = client.get("/overview", headers=operator(client)).json()["sessions"]
     mine = next(x for x in listed if x["session_id"] == sid)
     assert mine["strategy"] == "goal_aware" and mine["goals"] == after
 
@@ -267,7 +267,7 @@ def test_goal_aware_advice_shown_is_the_advice_given(tmp_path: Path) -> None:
             for e in events[: own[-1] + 1]
         ]  # fmt: skip
         assert one == got[: own[-1] + 1]
-        overview = client.get("/overview").json()["sessions"]
+        overview = client.get("/overview", headers=operator(client)).json()["sessions"]
         mine = next(x for x in overview if x["session_id"] == sid)
         assert mine["last_advice"] == {
             "step": one[-1]["step"],
@@ -318,3 +318,9 @@ def test_a_guide_session_on_a_map_too_big_for_guide_is_refused_saying_why(
     monkeypatch.undo()
     r = client.post("/domains/small/sessions", json={"strategy": "guide"})
     assert r.status_code == 201 and r.json()["strategy"] == "guide"
+
+
+def operator(client: TestClient) -> dict[str, str]:
+    """The read-only operator key: /overview lists live sessions only for it (or the admin)."""
+    state: ServiceState = client.app.state.service  # type: ignore[attr-defined]
+    return {"X-API-Key": state.operator_key}

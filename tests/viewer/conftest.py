@@ -2,14 +2,22 @@
 
 from __future__ import annotations
 
+import contextlib
 import socket
+import threading
 import time
 from collections.abc import Callable, Iterator
 from typing import Any
 
+import msgspec
 import numpy as np
 import pytest
 import viser
+from viser import _messages
+from viser.infra import Message
+from websockets.exceptions import ConnectionClosed
+from websockets.sync.client import connect
+from websockets.typing import Origin, Subprotocol
 
 from app.advice.advisor import Advisor
 from app.advice.models import AdviceTables
@@ -75,11 +83,54 @@ def feed() -> FakeFeed:
     return FakeFeed()
 
 
+class Browser:
+    """A program that connects to a viser server as its web client does (the subprotocol
+    ``viser-v<version>``) and reads, in a thread, everything the server sends it (counting the
+    bytes), so that the server has one more client, as when a browser opens the page."""
+
+    def __init__(self, port: int, origin: str | None = None, max_size: int | None = None):
+        protocol = Subprotocol(f"viser-v{viser.__version__}")
+        self.socket = connect(
+            f"ws://127.0.0.1:{port}", subprotocols=[protocol], max_size=max_size,
+            origin=None if origin is None else Origin(origin), open_timeout=20,
+        )  # fmt: skip
+        self.received = 0
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
+        # viser makes a client of a connection at its first camera pose, as a page sends it
+        self.send(_messages.ViewerCameraMessage(
+            wxyz=(1.0, 0.0, 0.0, 0.0), position=(0.0, 0.0, 10.0), fov=1.0, near=0.01, far=1000.0,
+            image_height=480, image_width=640, look_at=(0.0, 0.0, 0.0),
+            up_direction=(0.0, 1.0, 0.0),
+        ))  # fmt: skip
+
+    def send(self, message: Message) -> None:
+        """A message as the web client writes it (msgpack of its fields and type)."""
+        self.socket.send(msgspec.msgpack.encode(message.as_serializable_dict()))
+
+    def send_raw(self, fields: dict[str, Any]) -> None:
+        """A message of any content, as a page could forge it."""
+        self.socket.send(msgspec.msgpack.encode(fields))
+
+    def _read(self) -> None:
+        with contextlib.suppress(ConnectionClosed, OSError):
+            for message in self.socket:
+                self.received += len(message)
+
+    def close(self) -> None:
+        self.socket.close()
+        self._reader.join(timeout=10)
+
+
 @pytest.fixture
 def viewer(feed: FakeFeed) -> Iterator[Viewer]:
+    """A viewer with one browser connected (its pump off: tests tick it)."""
     v = Viewer(feed, port=free_port())
     v.start(pump=False)
+    browser = Browser(v.port)
+    wait_until(lambda: len(v.views) == 1)
     yield v
+    browser.close()
     v.stop()
 
 

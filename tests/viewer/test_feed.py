@@ -1,9 +1,9 @@
-"""The adapter between the service and the viewer: snapshots, the lifespan hook, GET /viewer."""
+"""The viewer's feed from a service over HTTP (``RemoteFeed`` reading ``GET /viewer/snapshot``
+with the operator key, maps and priors fetched when they change), and ``GET /viewer``."""
 
 from __future__ import annotations
 
 import re
-import threading
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -13,9 +13,8 @@ from fastapi.testclient import TestClient
 
 from app.service.config import Settings
 from app.service.main import create_app
-from app.service.viewer_feed import ServiceFeed
-from app.viewer.viewer import Viewer
-from tests.viewer.conftest import free_port, wait_until
+from app.viewer.remote import RemoteFeed
+from tests.viewer.conftest import free_port
 
 ADMIN = "viewer-test-admin-key"
 
@@ -27,6 +26,7 @@ def settings(tmp: Path, viewer: bool) -> Settings:
         viewer_enabled=viewer,
         viewer_port=free_port(),
         bootstrap_per_goal=2,
+        overview_seconds=0.0,  # every read sees the events before it
     )
 
 
@@ -52,8 +52,13 @@ def walk(client: TestClient, moves: str, kappa: float = 0.5) -> tuple[str, dict[
     return body["session_id"], auth
 
 
+def remote(client: TestClient) -> RemoteFeed:
+    """The viewer's feed, reading this service with the read-only operator key."""
+    return RemoteFeed(client, client.app.state.service.operator_key)  # type: ignore[attr-defined]
+
+
 def test_feed_snapshot_holds_domains_with_their_prior(client: TestClient) -> None:
-    feed = ServiceFeed(client.app.state.service)  # type: ignore[attr-defined]
+    feed = remote(client)
     snap = feed()
     view = snap.domains["default"]
     prior = client.get("/domains/default/prior").json()
@@ -65,7 +70,7 @@ def test_feed_snapshot_holds_domains_with_their_prior(client: TestClient) -> Non
 
 def test_feed_snapshot_holds_each_session_as_the_service_sees_it(client: TestClient) -> None:
     sid, auth = walk(client, "EEEWW", kappa=0.0)  # kappa 0: advised at every decision
-    snap = ServiceFeed(client.app.state.service)()  # type: ignore[attr-defined]
+    snap = remote(client)()
     mine = next(s for s in snap.sessions if s.session_id == sid)
     summary = client.get(f"/sessions/{sid}", headers=auth).json()
     assert mine.steps == summary["steps"] == 5
@@ -82,7 +87,7 @@ def test_feed_snapshot_holds_each_session_as_the_service_sees_it(client: TestCli
 
 
 def test_feed_prior_version_goes_up_when_trajectories_arrive(client: TestClient) -> None:
-    feed = ServiceFeed(client.app.state.service)  # type: ignore[attr-defined]
+    feed = remote(client)
     before = feed().domains["default"]
     steps = [{"state": [28, c], "action": "E"} for c in range(0, 6)]
     answer = client.post(
@@ -92,41 +97,28 @@ def test_feed_prior_version_goes_up_when_trajectories_arrive(client: TestClient)
     )
     assert answer.status_code == 201
     after = feed().domains["default"]
-    assert after.prior_version == before.prior_version + 1
+    assert after.prior_version > before.prior_version
+    assert after.domain is before.domain  # the map was not fetched again
     assert not np.array_equal(after.theta, before.theta)
 
 
 def test_viewer_status_says_disabled_without_a_viewer(client: TestClient) -> None:
     answer = client.get("/viewer")
     assert answer.status_code == 200
-    assert answer.json() == {"enabled": False, "port": None, "clients": 0, "ticks": 0}
+    assert answer.json() == {"enabled": False, "port": None, "host": None}
 
 
-def test_service_starts_and_stops_the_viewer_when_enabled(tmp_path: Path) -> None:
+def test_viewer_status_says_where_serve_starts_it(tmp_path: Path) -> None:
     cfg = settings(tmp_path, viewer=True)
-    app = create_app(cfg)
-    with TestClient(app) as c:
-        viewer: Viewer = app.state.viewer
+    with TestClient(create_app(cfg)) as c:
         status = c.get("/viewer").json()
-        assert status["enabled"] and status["clients"] == 0
-        assert status["port"] == viewer.port
-        assert viewer.port == cfg.viewer_port
-        ticked = threading.Event()
-        real_feed = viewer.feed
+    assert status == {"enabled": True, "port": cfg.viewer_port, "host": "127.0.0.1"}
 
-        def watched() -> object:
-            ticked.set()
-            return real_feed()
 
-        viewer.feed = watched  # type: ignore[assignment]
-        assert ticked.wait(timeout=10.0)  # the pump reads the service by itself
-        wait_until(lambda: c.get("/viewer").json()["ticks"] > status["ticks"])
-        # each tick's duration reaches the metrics through the viewer's hook
-        tick_count = re.compile(r"^advisor_viewer_tick_seconds_count (\S+)$", re.M)
-        timed = float(tick_count.search(c.get("/metrics").text).group(1))  # type: ignore[union-attr]
-        assert timed >= 1
-    assert app.state.viewer is None
-    assert viewer._thread is not None and not viewer._thread.is_alive()
+def test_the_snapshot_is_for_the_operator_and_admin_keys_only(client: TestClient) -> None:
+    assert client.get("/viewer/snapshot").status_code == 401
+    assert client.get("/viewer/snapshot", headers={"X-API-Key": "nope"}).status_code == 403
+    assert client.get("/viewer/snapshot", headers={"X-API-Key": ADMIN}).status_code == 200
 
 
 def test_feed_carries_a_goal_aware_sessions_goal_posterior(client: TestClient) -> None:
@@ -138,7 +130,7 @@ def test_feed_carries_a_goal_aware_sessions_goal_posterior(client: TestClient) -
     auth = {"Authorization": f"Bearer {created['token']}"}
     event = {"state": grid.cell(goal), "action": "NESW"[move]}
     assert client.post(f"/sessions/{created['session_id']}/events", json=event, headers=auth)
-    snap = ServiceFeed(client.app.state.service)()  # type: ignore[attr-defined]
+    snap = remote(client)()
     mine = next(s for s in snap.sessions if s.session_id == created["session_id"])
     assert mine.strategy == "goal_aware" and mine.goals is not None
     summary = client.get(f"/sessions/{created['session_id']}", headers=auth).json()
@@ -147,5 +139,26 @@ def test_feed_carries_a_goal_aware_sessions_goal_posterior(client: TestClient) -
     ]
     assert mine.goals[0][2] and not any(out for _, _, out in mine.goals[1:])
     sid, _ = walk(client, "E")
-    paper = next(s for s in ServiceFeed(client.app.state.service)().sessions if s.session_id == sid)  # type: ignore[attr-defined]
+    paper = next(s for s in remote(client)().sessions if s.session_id == sid)
     assert paper.strategy == "paper" and paper.goals is None
+
+
+def test_the_viewers_tick_time_reaches_the_metrics(client: TestClient) -> None:
+    """The viewer process reports each tick's duration with its next snapshot request; the
+    service counts it in ``advisor_viewer_tick_seconds``; a value that is not a duration is
+    ignored, not an error."""
+
+    def ticks() -> float:
+        m = re.search(r"^advisor_viewer_tick_seconds_count (\S+)$", client.get("/metrics").text, re.M)
+        return float(m.group(1)) if m else 0.0
+
+    before = ticks()
+    feed = RemoteFeed(client, ADMIN)
+    feed.report_tick(0.012)
+    feed()
+    assert ticks() == before + 1
+    assert feed.last_tick is None  # sent once
+    for bad in ("nan", "-1", "1e9", "soon", "9" * 100):
+        r = client.get("/viewer/snapshot", headers={"X-API-Key": ADMIN, "X-Viewer-Tick": bad})
+        assert r.status_code == 200
+    assert ticks() == before + 1

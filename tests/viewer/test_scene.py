@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 import pytest
 import viser
+from viser import BatchedMeshHandle
 
 from app.domain.grid import N_ACTIONS, GridDomain
 from app.viewer import geometry as geo
@@ -28,6 +29,7 @@ def nodes(server: viser.ViserServer) -> set[str]:
 
 def test_scene_draws_walls_as_one_batched_mesh(scene: MazeScene, domain: GridDomain) -> None:
     assert {"/maze/walls", "/maze/floor", "/maze/start", "/maze/goals"} <= nodes(scene.server)
+    assert scene.walls is not None  # instances: a small map
     walls = scene.walls.batched_positions
     assert walls.shape == (int(domain.walls.sum()), 3)
     expected = geo.cell_centres(domain, np.argwhere(domain.walls))[:, :2]
@@ -40,6 +42,7 @@ def test_scene_prior_arrows_follow_theta(
     scene: MazeScene, domain: GridDomain, theta: np.ndarray
 ) -> None:
     arrows = scene.prior_arrows
+    assert arrows is not None
     assert arrows.batched_positions.shape == (domain.n_states * N_ACTIONS, 3)
     assert arrows.batched_scales is not None
     np.testing.assert_allclose(arrows.batched_scales[:, 0], geo.ARROW_REACH * theta.ravel(), 1e-6)
@@ -55,6 +58,7 @@ def test_scene_shading_marks_exactly_the_advised_cells(scene: MazeScene, theta: 
         count = scene.shade(theta, kappa, p)
         expected = geo.advised_cells(theta, kappa, p)
         assert count == int(expected.sum())
+        assert isinstance(scene.shading, BatchedMeshHandle)
         opacities = scene.shading.batched_opacities
         assert opacities is not None and np.array_equal(opacities > 0, expected)
     assert scene.shade(theta, 0.0) == len(theta)  # kappa = 0: advise everywhere

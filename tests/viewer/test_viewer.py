@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import threading
+import time
 from dataclasses import replace
 from typing import Any
 
@@ -17,7 +18,7 @@ from app.viewer import geometry as geo
 from app.viewer.controls import KAPPA_MAX, LOST_PICKED, NONE
 from app.viewer.state import DomainView, Snapshot
 from app.viewer.viewer import Viewer, pump_wait
-from tests.viewer.conftest import FakeFeed, choose, free_port, wait_until, walk
+from tests.viewer.conftest import Browser, FakeFeed, choose, free_port, wait_until, walk
 
 
 def snapshot(domain: GridDomain, theta: np.ndarray, n_sessions: int, version: int = 0) -> Snapshot:
@@ -37,8 +38,8 @@ def test_viewer_tick_draws_the_first_domain(
     assert viewer.scene.domain is domain
     assert viewer.controls.session.options == (NONE, "w0", "w1")
     assert set(viewer.scene.session_ids) == {"w0", "w1"}
-    assert viewer.server is not None
-    assert viewer.server.initial_camera.look_at[2] == 0.0
+    view = next(iter(viewer.views.values()))
+    assert view.client.camera.look_at[2] == 0.0  # looking down at the map
 
 
 def test_viewer_session_options_follow_the_live_sessions(
@@ -87,7 +88,7 @@ def test_viewer_updates_the_prior_when_its_version_changes(
     new = np.roll(theta, 2, axis=1)
     feed.snapshot = Snapshot({domain.name: DomainView(domain, new, 1)})
     viewer.tick()
-    assert viewer.scene is not None
+    assert viewer.scene is not None and viewer.scene.prior_arrows is not None
     scales = viewer.scene.prior_arrows.batched_scales
     assert scales is not None
     scales = scales[:, 0]
@@ -119,6 +120,7 @@ def test_viewer_switches_domains_and_clears_when_none_left(
     choose(viewer.controls.domain, other.name)
     viewer.tick()
     assert viewer.scene is not None and viewer.scene.domain is other
+    assert viewer.scene.walls is not None
     assert viewer.scene.walls.batched_positions.shape[0] == int(other.walls.sum())
     feed.snapshot = Snapshot()
     viewer.tick()
@@ -143,12 +145,16 @@ def test_viewer_pump_ticks_by_itself_and_survives_a_failing_feed(
     viewer = Viewer(flaky, port=free_port(), rate_hz=50.0, idle_rate_hz=50.0)
     viewer.start()
     try:
+        time.sleep(0.3)
+        assert calls["n"] == 0  # no browser, no tick: nothing is read for no one
+        browser = Browser(viewer.port)
         assert ticked.wait(timeout=10.0)
         # the pump is not per event: it read the feed, it did not get pushed to
         assert calls["n"] >= 2
+        wait_until(lambda: viewer.scene is not None and viewer.scene.domain is domain)
+        browser.close()
     finally:
         viewer.stop()
-    assert viewer.scene is not None and viewer.scene.domain is domain
 
 
 def test_a_control_change_wakes_the_pump_from_its_paced_wait(
@@ -160,6 +166,7 @@ def test_a_control_change_wakes_the_pump_from_its_paced_wait(
     feed.snapshot = snapshot(domain, theta, 2)
     viewer = Viewer(feed, port=free_port(), rate_hz=0.001, idle_rate_hz=0.001)
     viewer.start()
+    browser = Browser(viewer.port)  # its connecting wakes the pump at once
     try:
         wait_until(lambda: viewer.ticks >= 1)  # the first tick, then a 1,000 s wait
         assert viewer.ticks == 1  # its own choice of the domain did not wake it
@@ -170,6 +177,7 @@ def test_a_control_change_wakes_the_pump_from_its_paced_wait(
         wait_until(lambda: viewer.controls is not None and viewer.controls.plot.visible)
         assert "**w1**" in viewer.controls.stats.content
     finally:
+        browser.close()
         viewer.stop()
 
 

@@ -8,6 +8,7 @@ take :attr:`DomainState.view`, an immutable snapshot replaced in one assignment.
 
 from __future__ import annotations
 
+import itertools
 import threading
 from collections.abc import Mapping, Sequence
 from contextlib import nullcontext
@@ -29,14 +30,19 @@ class DomainChanged(RuntimeError):
     """The domain's map was replaced by another while trajectories for it were in flight."""
 
 
+_versions = itertools.count(1)
+
+
 @dataclass(frozen=True)
 class PriorView:
     """What sessions and readers use of a prior: its tables (pooled ``"*"`` plus every agent
-    type with data) and trajectory counts. Replaced whole, never changed."""
+    type with data) and trajectory counts. Replaced whole, never changed; ``version`` goes up
+    with every view made, so a reader elsewhere (the viewer) knows when to fetch it again."""
 
     alpha0: float
     tables: Mapping[str, AdviceTables]
     trajectories: Mapping[str, int]
+    version: int = field(default_factory=lambda: next(_versions))
 
     def resolve(self, agent_type: str | None) -> str:
         """The table serving ``agent_type``: its own if it has data, else the pooled one."""
@@ -141,7 +147,7 @@ class DomainCatalog:
         guide = None
         if goals is not None:
             goals = goals.copy(alpha0=rec.alpha0)
-            goals.rows()  # built here, in the worker thread, not at a session's first event
+            goals.arrays()  # built here, in the worker thread, not at a session's first event
             if keep is not None and keep.guide_map is not None:  # the same map: same distances
                 guide = keep.guide_map.replace_counts(goals)
         return DomainState(
@@ -218,8 +224,8 @@ class DomainCatalog:
 
 def add_goals(priors: GoalPriors, items: Sequence[Trajectory]) -> GoalPriors:
     """``priors`` with ``items`` added under the goals they ended at (if one of the map's),
-    and the flat lists sessions read built (this runs in a worker thread, not on the loop)."""
+    and the tables sessions share built (this runs in a worker thread, not on the loop)."""
     goal_index = [priors.goal_index.get(t.goal) if t.goal is not None else None for t in items]
     priors.add([t.pairs for t in items], goal_index)
-    priors.rows()
+    priors.arrays()
     return priors

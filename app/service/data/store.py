@@ -114,6 +114,20 @@ class Trajectory:
     goal: int | None = None
 
 
+#: The largest stored count (and trajectory number): counts are int32, the column 4 bytes on
+#: PostgreSQL. Past it, ingestion is refused whole (:class:`CountsFull`), never wrapped round.
+COUNT_MAX = 2**31 - 1
+
+
+class CountsFull(ValueError):
+    """Adding these trajectories would take a stored count past :data:`COUNT_MAX`."""
+
+
+def _check_fits(table: str, n_trajectories: int, counts: IntArray) -> None:
+    if n_trajectories > COUNT_MAX or (counts.size and int(counts.max()) > COUNT_MAX):
+        raise CountsFull(table)
+
+
 def _pack(a: npt.ArrayLike) -> bytes:
     return np.ascontiguousarray(a, dtype="<i4").tobytes()
 
@@ -279,16 +293,15 @@ class Store:
             select(CountsRow.n_trajectories, CountsRow.counts).where(where).with_for_update()
         ).one_or_none()
         if row is None:
+            _check_fits(key, inc.n_trajectories, inc.counts)
             values = {"domain_id": dom, "agent_type": key, "n_trajectories": inc.n_trajectories,
                       "counts": _pack(inc.counts)}  # fmt: skip
             conn.execute(insert(CountsRow).values(**values))
             return
         total = _unpack(row.counts, 4) + inc.counts
-        conn.execute(
-            update(CountsRow)
-            .where(where)
-            .values(n_trajectories=row.n_trajectories + inc.n_trajectories, counts=_pack(total))
-        )
+        n = row.n_trajectories + inc.n_trajectories
+        _check_fits(key, n, total)
+        conn.execute(update(CountsRow).where(where).values(n_trajectories=n, counts=_pack(total)))
 
     def counts(self, name: str) -> dict[str, TableCounts]:
         """The stored counts of every table of a domain (empty if it has none)."""

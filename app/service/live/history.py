@@ -62,23 +62,34 @@ class Recent:
         self._count += k
 
     def tolist(self) -> list[Any]:
+        out: list[Any] = self.array().tolist()
+        return out
+
+    def array(self) -> npt.NDArray[Any]:
+        """The numbers kept, oldest first (a copy)."""
         size = len(self._buf)
         m = min(self._count, size)
-        out: list[Any] = self._view()[np.arange(self._count - m, self._count) % size].tolist()
-        return out
+        return self._view()[np.arange(self._count - m, self._count) % size]
+
+    def __len__(self) -> int:
+        return min(self._count, len(self._buf))
+
+
+ROWS = 4  # an advice log's rows: step, state, tables index, when (ms)
 
 
 class AdviceLog:
     """The last ``size`` pieces of advice as (step, state, tables that advised), oldest first,
     in one numpy ring (the tables as an index into a short list: they change only when the
-    prior does). About 1.3 kB for 50 entries where a deque of tuples takes about 7 kB:
-    100,000 sessions hold one each (docs/PERFORMANCE.md, memory)."""
+    prior does), with when each was given (milliseconds into the session, for the retention
+    of where explorers were: :meth:`forget_before`). About 1.7 kB for 50 entries where a deque
+    of tuples takes about 7 kB: 100,000 sessions hold one each (docs/PERFORMANCE.md, memory)."""
 
     __slots__ = ("_buf", "_count", "_own", "_tables")
 
     def __init__(self, size: int):
-        # rows step, state, index into _tables; an array.array, as in Recent
-        self._buf = array("q", bytes(8 * 3 * size))
+        # rows step, state, index into _tables, when; an array.array, as in Recent
+        self._buf = array("q", bytes(8 * ROWS * size))
         self._count = 0
         self._tables: list[AdviceTables] = []
         # the advice itself, for advisors whose advice is not theta_s (made at the first one)
@@ -86,11 +97,11 @@ class AdviceLog:
 
     def extend(
         self, steps: IntArray, states: IntArray, tables: AdviceTables,
-        advice: npt.NDArray[np.float64] | None = None,
+        advice: npt.NDArray[np.float64] | None = None, when: int = 0,
     ) -> None:  # fmt: skip
-        """Log advice given at ``states`` (arrays): theta_s of ``tables``, or the rows of
-        ``advice`` (one per entry) for advisors whose advice is not theta_s."""
-        k, size = len(steps), len(self._buf) // 3
+        """Log advice given at ``states`` (arrays) at ``when`` (ms): theta_s of ``tables``, or
+        the rows of ``advice`` (one per entry) for advisors whose advice is not theta_s."""
+        k, size = len(steps), len(self._buf) // ROWS
         if not k:
             return
         which, buf = self._index(tables), self._rows()
@@ -104,6 +115,7 @@ class AdviceLog:
             buf[0, ring] = tail_steps[part]
             buf[1, ring] = tail_states[part]
             buf[2, ring] = which
+            buf[3, ring] = when
         if advice is not None and self._own is None:
             self._own = np.full((size, 4), np.nan)
         if self._own is not None:  # NaN rows: theta_s of the tables
@@ -112,12 +124,15 @@ class AdviceLog:
                 self._own[ring] = rows[part]
         self._count += k
 
-    def add(self, step: int, state: int, tables: AdviceTables, advice: Advice | None) -> None:
+    def add(
+        self, step: int, state: int, tables: AdviceTables, advice: Advice | None, when: int = 0
+    ) -> None:
         """:meth:`extend` for one piece of advice (``advice`` None: theta_s of ``tables``;
         pass it only for advisors whose advice is not theta_s), without index arrays."""
-        which, buf, size = self._index(tables), self._buf, len(self._buf) // 3
+        which, buf, size = self._index(tables), self._buf, len(self._buf) // ROWS
         at = self._count % size
         buf[at], buf[size + at], buf[2 * size + at] = step, state, which
+        buf[3 * size + at] = when
         if advice is not None and self._own is None:
             self._own = np.full((size, 4), np.nan)
         if self._own is not None:  # NaN row: theta_s of the tables
@@ -133,8 +148,8 @@ class AdviceLog:
         return len(self._tables) - 1
 
     def _rows(self) -> npt.NDArray[np.int64]:
-        """The ring as a (3, size) numpy view."""
-        return np.frombuffer(self._buf, dtype=np.int64).reshape(3, -1)
+        """The ring as a (4, size) numpy view."""
+        return np.frombuffer(self._buf, dtype=np.int64).reshape(ROWS, -1)
 
     def _compact(self) -> None:
         """Forget tables no entry refers to any more (so the list stays short).
@@ -145,7 +160,7 @@ class AdviceLog:
         changes often, e.g. one trajectory per ingest request: O(1), not a set.)"""
         if len(self._tables) < 4:
             return
-        size = len(self._buf) // 3
+        size = len(self._buf) // ROWS
         oldest = (self._count - min(self._count, size)) % size
         first = self._buf[2 * size + oldest]
         if first:
@@ -153,13 +168,26 @@ class AdviceLog:
             del self._tables[:first]
 
     def _order(self) -> npt.NDArray[np.int64]:
-        size = len(self._buf) // 3
+        size = len(self._buf) // ROWS
         m = min(self._count, size)
         return np.arange(self._count - m, self._count) % size
 
+    def forget_before(self, when: int) -> int:
+        """Drop the entries logged before ``when`` (ms): how many are left."""
+        order = self._order()
+        times = self._rows()[3, order]
+        keep = int(np.count_nonzero(times >= when))  # times only grow along the ring
+        if keep < len(order):  # the kept ones are the newest: to the start, in order
+            newest = order[len(order) - keep :]
+            self._rows()[:, :keep] = self._rows()[:, newest]
+            if self._own is not None:
+                self._own[:keep] = self._own[newest]
+            self._count = keep
+        return keep
+
     def items(self) -> list[tuple[int, int, AdviceTables | Advice]]:
         order = self._order()
-        steps, states, which = self._rows()[:, order].tolist()
+        steps, states, which, _ = self._rows()[:, order].tolist()
         if self._own is None:
             return [(a, s, self._tables[t]) for a, s, t in zip(steps, states, which, strict=True)]
         own = self._own[order].tolist()

@@ -14,24 +14,26 @@ strategy, whether its advice is its own, its parameters and goal beliefs) it dec
 
 from __future__ import annotations
 
+import asyncio
 import secrets
 import threading
 import time
 from collections import Counter
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import UTC, datetime
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
-from app.advice.advisor import Advisor, Decision, DecisionBatch
+from app.advice.advisor import Decision, DecisionBatch
 from app.advice.guide import GuideMap
 from app.advice.models import AdviceTables
 from app.advice.priors import GoalPriors
-from app.advice.strategies import StrategyParams, guide_params, make_advisor
+from app.advice.strategies import StrategyParams, guide_params
 from app.service.data.domains import DomainState
 from app.service.live.history import Advice, AdviceLog, Recent
-from app.service.live.stream import StreamAdvisor, StreamGuide
+from app.service.live.stream import StreamAdvisor, StreamGoalAware, StreamGuide, StreamRule
 
 IntArray = npt.NDArray[np.int64]
 RECENT_ADVICE = 50
@@ -45,20 +47,55 @@ class TooManySessions(RuntimeError):
     """The registry holds ``max_sessions`` live sessions already."""
 
 
+class SessionMemoryFull(RuntimeError):
+    """The live sessions have reserved the registry's memory budget (``args[0]`` bytes)."""
+
+
+class ClientQuotaReached(RuntimeError):
+    """One client holds as many sessions (``args[1] == "sessions"``) or as much session
+    memory (``"memory"``) as one client may; ``args[0]`` is the client, ``args[2]`` the limit."""
+
+
+#: What a session costs beside its advisor's arrays (:meth:`footprint`) and its history rings:
+#: the session and advisor objects, their numbers and lists, the advice log (measured under
+#: 10 kB for every strategy: tests/service/live/test_registry.py).
+SESSION_OVERHEAD = 16 * 1024
+
+
+@dataclass(frozen=True)
+class Limits:
+    """What the registry admits: live sessions in all, the bytes their state may reserve in
+    all, and per client (None: no per-client limit)."""
+
+    max_sessions: int
+    max_memory: int | None = None
+    client_sessions: int | None = None
+    client_memory: int | None = None
+
+
+ServiceAdvisor = StreamAdvisor | StreamRule | StreamGoalAware | StreamGuide
+
+
 def new_advisor(
     strategy: str, tables: AdviceTables, kappa: float, window: int,
     params: StrategyParams | None, goal_priors: GoalPriors | None,
     guide_map: GuideMap | None = None,
-) -> Advisor:  # fmt: skip
-    """The advisor of a session: the paper's rule and guide with compiled batches, or the
-    core's advisor of the strategy (one call per event)."""
+) -> ServiceAdvisor:  # fmt: skip
+    """The advisor of a session (:mod:`app.service.live.stream`): the paper's rule, goal_aware
+    and guide with compiled batches, the other rules one call per event; every window as pair
+    keys."""
     if strategy == "paper":
         return StreamAdvisor(tables, kappa, window)
     if strategy == "guide":
         if guide_map is None:
             raise ValueError("guide advice needs the map's destinations (a guide map)")
         return StreamGuide(tables, guide_map, kappa, window, params=guide_params(params))
-    return make_advisor(strategy, tables, kappa, window, params, goal_priors)
+    if strategy == "goal_aware":
+        if goal_priors is None:
+            raise ValueError("goal_aware advice needs the experts' goals (goal priors)")
+        beta = (params or StrategyParams()).beta
+        return StreamGoalAware(tables, goal_priors, kappa, window, beta)
+    return StreamRule(tables, strategy, kappa, window, params)
 
 
 @dataclass(eq=False, slots=True)
@@ -70,7 +107,7 @@ class LiveSession:
     domain: DomainState
     agent_type: str | None
     table_key: str
-    advisor: Advisor
+    advisor: ServiceAdvisor
     position: int
     p_normal: float
     created_at: datetime
@@ -84,15 +121,39 @@ class LiveSession:
     # created at the first advice
     advice_log: AdviceLog | None = None
     closed: bool = False
+    client: str | None = None  # who its quota counts against (None: no quota)
+    reserved: int = 0  # bytes it reserved of the registry's budget
+    busy: asyncio.Lock | None = None  # held while a batch runs in slices (made at the first)
+    born: float = 0.0  # time.monotonic() at creation
+    path_times: Recent | None = None  # seconds into the session of each cell of ``path``
 
     def _rings(self) -> tuple[Recent, Recent]:
         """The recent path and P(M1 | H) rings, made at the first event (until then the
         session's start alone is its history)."""
-        if self.path is None or self.p_history is None:
+        if self.path is None or self.p_history is None or self.path_times is None:
             self.path = Recent(self.sizes[0], np.int32, self.position)
+            self.path_times = Recent(self.sizes[0], np.float32, self.last_seen - self.born)
             # for plots only: 7 significant digits are plenty, at half the memory
             self.p_history = Recent(self.sizes[1], np.float32, self.p_normal)
         return self.path, self.p_history
+
+    def forget(self, now: float, retention: float) -> None:
+        """Forget the cells it was at (recent path, where it was advised) more than
+        ``retention`` seconds ago; its current cell stays (advice needs it)."""
+        cutoff = now - self.born - retention
+        if self.path is not None and self.path_times is not None:
+            times = self.path_times.array()
+            keep = int(np.count_nonzero(times >= cutoff))  # times only grow along the ring
+            if keep == 0:
+                self.path = self.path_times = None
+            elif keep < len(times):
+                cells = self.path.array()[-keep:]
+                self.path = Recent(self.sizes[0], np.int32, int(cells[0]))
+                self.path.extend(cells[1:])
+                self.path_times = Recent(self.sizes[0], np.float32, float(times[-keep]))
+                self.path_times.extend(times[len(times) - keep + 1 :])
+        if self.advice_log is not None and not self.advice_log.forget_before(int(cutoff * 1000)):
+            self.advice_log = None
 
     def _log(self) -> AdviceLog:
         """The advice log, made at the first piece of advice."""
@@ -100,19 +161,22 @@ class LiveSession:
             self.advice_log = AdviceLog(RECENT_ADVICE)
         return self.advice_log
 
-    def record_one(self, d: Decision, tables: AdviceTables) -> None:
-        """Remember one decision made with ``tables`` (recent path, posterior, advice)."""
+    def record_one(self, d: Decision, tables: AdviceTables, now: float) -> None:
+        """Remember one decision made with ``tables`` at ``now`` (recent path, posterior,
+        advice)."""
         path, p_history = self._rings()
         self.position = d.state
         self.p_normal = d.p_normal
         path.push(d.state)
+        at = now - self.born
+        self.path_times.push(at)  # type: ignore[union-attr]  # made with the rings
         p_history.push(d.p_normal)
         if d.advise:
             own = d.advice if self.advisor.own_advice else None
-            self._log().add(d.step, d.state, tables, own)
+            self._log().add(d.step, d.state, tables, own, int(at * 1000))
 
-    def record_batch(self, out: DecisionBatch, tables: AdviceTables) -> None:
-        """:meth:`record_one` for a batch of decisions made with ``tables``."""
+    def record_batch(self, out: DecisionBatch, tables: AdviceTables, now: float) -> None:
+        """:meth:`record_one` for a batch of decisions made with ``tables`` at ``now``."""
         n = len(out)
         if not n:
             return
@@ -120,11 +184,14 @@ class LiveSession:
         self.position = int(out.state[-1])
         self.p_normal = float(out.p_normal[-1])
         path.extend(out.state)
+        at = now - self.born
+        self.path_times.extend(np.full(n, at, dtype=np.float32))  # type: ignore[union-attr]
         p_history.extend(out.p_normal)
         advised = np.flatnonzero(out.advise)[-RECENT_ADVICE:]
         if len(advised):
             own = out.advice[-len(advised) :] if self.advisor.own_advice else None
-            self._log().extend(advised + out.first_step, out.state[advised], tables, own)
+            when = int(at * 1000)
+            self._log().extend(advised + out.first_step, out.state[advised], tables, own, when)
 
 
 @dataclass(frozen=True, slots=True)
@@ -159,13 +226,37 @@ class SessionRegistry:
     """Every live session by id, bounded in number and idle time."""
 
     def __init__(
-        self, max_sessions: int, idle_seconds: float, recent_path: int = 100, recent_p: int = 200
-    ):
-        self.max_sessions = max_sessions
+        self, limits: Limits | int, idle_seconds: float, recent_path: int = 100,
+        recent_p: int = 200,
+    ):  # fmt: skip
+        self.limits = limits if isinstance(limits, Limits) else Limits(limits)
         self.idle_seconds = idle_seconds
         self.history_sizes = (recent_path, recent_p)
         self.lock = threading.Lock()
         self._sessions: dict[str, LiveSession] = {}
+        self.reserved = 0  # bytes reserved by the live sessions
+        self._clients: dict[str, list[int]] = {}  # client -> [sessions, bytes]
+        #: seconds the cells an explorer was at are kept (None: as long as the rings hold them)
+        self.retention: float | None = None
+
+    @property
+    def max_sessions(self) -> int:
+        return self.limits.max_sessions
+
+    @max_sessions.setter
+    def max_sessions(self, value: int) -> None:
+        self.limits = replace(self.limits, max_sessions=value)
+
+    def reservation(self, advisor: ServiceAdvisor) -> int:
+        """Bytes a session with ``advisor`` reserves: the most its advisor's arrays can take,
+        its history rings (int32 cells, float32 P(M1 | H)) and :data:`SESSION_OVERHEAD`."""
+        return advisor.footprint() + 4 * sum(self.history_sizes) + SESSION_OVERHEAD
+
+    def client_usage(self, client: str) -> tuple[int, int]:
+        """(live sessions, bytes reserved) of ``client``."""
+        with self.lock:
+            n, used = self._clients.get(client, (0, 0))
+        return n, used
 
     def __len__(self) -> int:
         return len(self._sessions)
@@ -179,33 +270,74 @@ class SessionRegistry:
         start: int,
         strategy: str = "paper",
         params: StrategyParams | None = None,
+        client: str | None = None,
     ) -> tuple[LiveSession, Decision]:
         """A new session and the decision for its start state (empty history). A goal_aware
         session needs ``domain.goal_priors`` built (:meth:`DomainCatalog.goal_priors`), a guide
-        session ``domain.guide_map`` too (:meth:`DomainCatalog.guide_map`)."""
+        session ``domain.guide_map`` too (:meth:`DomainCatalog.guide_map`).
+
+        Admitted within the :class:`Limits` (idle sessions are expired first when one is
+        reached): :class:`TooManySessions`, :class:`SessionMemoryFull` or, for ``client``,
+        :class:`ClientQuotaReached` otherwise."""
         view = domain.view
         key = view.resolve(agent_type)
         tables = view.tables[key]
         advisor = new_advisor(
             strategy, tables, kappa, window, params, domain.goal_priors, domain.guide_map
         )
+        need = self.reservation(advisor)
         decision = advisor.start(start)
         now = time.monotonic()
         with self.lock:
-            if len(self._sessions) >= self.max_sessions:
+            if self._refusal(need, client) is not None:
                 self._expire(now)
-            if len(self._sessions) >= self.max_sessions:
-                raise TooManySessions(self.max_sessions)
+            refused = self._refusal(need, client)
+            if refused is not None:
+                raise refused
             sid = secrets.token_hex(8)
             session = LiveSession(
                 sid, secrets.token_urlsafe(24), domain, agent_type, key, advisor, start,
                 decision.p_normal, datetime.now(UTC), now, self.history_sizes,
+                client=client, reserved=need, born=now,
             )  # fmt: skip
             if decision.advise:
                 own = decision.advice if advisor.own_advice else None
                 session._log().add(0, start, tables, own)
             self._sessions[sid] = session
+            self.reserved += need
+            if client is not None:
+                used = self._clients.setdefault(client, [0, 0])
+                used[0] += 1
+                used[1] += need
         return session, decision
+
+    def _refusal(self, need: int, client: str | None) -> RuntimeError | None:
+        """Why a session reserving ``need`` bytes for ``client`` cannot be admitted now."""
+        lim = self.limits
+        if len(self._sessions) >= lim.max_sessions:
+            return TooManySessions(lim.max_sessions)
+        if lim.max_memory is not None and self.reserved + need > lim.max_memory:
+            return SessionMemoryFull(lim.max_memory)
+        if client is None:
+            return None
+        n, used = self._clients.get(client, (0, 0))
+        if lim.client_sessions is not None and n >= lim.client_sessions:
+            return ClientQuotaReached(client, "sessions", lim.client_sessions)
+        if lim.client_memory is not None and used + need > lim.client_memory:
+            return ClientQuotaReached(client, "memory", lim.client_memory)
+        return None
+
+    def _drop(self, session: LiveSession) -> None:
+        """Under the lock: ``session`` leaves (ended, expired or its domain gone)."""
+        session.closed = True
+        del self._sessions[session.id]
+        self.reserved -= session.reserved
+        if session.client is not None:
+            used = self._clients[session.client]
+            used[0] -= 1
+            used[1] -= session.reserved
+            if used[0] == 0:
+                del self._clients[session.client]
 
     def get(self, session_id: str) -> LiveSession:
         session = self._sessions.get(session_id)
@@ -223,8 +355,9 @@ class SessionRegistry:
             adv = session.advisor
             tables = adv.tables
             d = adv.observe(state, action, next_state)
-            session.record_one(d, tables)
-            session.last_seen = time.monotonic()
+            now = time.monotonic()
+            session.record_one(d, tables, now)
+            session.last_seen = now
         return d
 
     def observe_batch(
@@ -237,19 +370,55 @@ class SessionRegistry:
             adv = session.advisor
             tables = adv.tables
             out = adv.observe_batch(*moves)
-            session.record_batch(out, tables)
-            session.last_seen = time.monotonic()
+            now = time.monotonic()
+            session.record_batch(out, tables, now)
+            session.last_seen = now
         return out
+
+    async def observe_sliced(
+        self, session: LiveSession, moves: tuple[IntArray, IntArray, IntArray]
+    ) -> DecisionBatch:
+        """:meth:`observe_batch` on the event loop without holding it long: a batch is run in
+        slices of the advisor's :meth:`batch_slice` events (about 2 ms of work each), with
+        the loop free for other clients between them. The session runs one batch at a time,
+        and a single event sent meanwhile waits for the batch (:meth:`observe_after`), so a
+        batch's decisions stay consecutive steps."""
+        n, step = len(moves[0]), session.advisor.batch_slice()
+        if n <= step and (session.busy is None or not session.busy.locked()):
+            return self.observe_batch(session, moves)
+        if session.busy is None:
+            session.busy = asyncio.Lock()
+        async with session.busy:
+            parts = []
+            for lo in range(0, n, step):
+                if lo:
+                    await asyncio.sleep(0)  # others' turn
+                part = (
+                    moves[0][lo : lo + step],
+                    moves[1][lo : lo + step],
+                    moves[2][lo : lo + step],
+                )
+                parts.append(self.observe_batch(session, part))
+        return joined(parts) if len(parts) != 1 else parts[0]
+
+    async def observe_after(
+        self, session: LiveSession, state: int, action: int, next_state: int
+    ) -> Decision:
+        """:meth:`observe_one`, after the session's batch in progress, if there is one."""
+        if session.busy is not None and session.busy.locked():
+            async with session.busy:
+                return self.observe_one(session, state, action, next_state)
+        return self.observe_one(session, state, action, next_state)
 
     def touch(self, session: LiveSession) -> None:
         session.last_seen = time.monotonic()
 
     def end(self, session_id: str) -> LiveSession:
         with self.lock:
-            session = self._sessions.pop(session_id, None)
+            session = self._sessions.get(session_id)
             if session is None or session.closed:
                 raise SessionNotFound(session_id)
-            session.closed = True
+            self._drop(session)
         return session
 
     def end_domain(self, name: str) -> int:
@@ -257,8 +426,7 @@ class SessionRegistry:
         with self.lock:
             gone = [s for s in self._sessions.values() if s.domain.name == name]
             for s in gone:
-                s.closed = True
-                del self._sessions[s.id]
+                self._drop(s)
         return len(gone)
 
     def retable(self, domain: DomainState) -> None:
@@ -279,8 +447,7 @@ class SessionRegistry:
     def _expire(self, now: float) -> int:
         idle = [s for s in self._sessions.values() if now - s.last_seen > self.idle_seconds]
         for s in idle:
-            s.closed = True
-            del self._sessions[s.id]
+            self._drop(s)
         return len(idle)
 
     def sessions(self) -> list[LiveSession]:
@@ -292,39 +459,126 @@ class SessionRegistry:
             return dict(Counter(s.domain.name for s in self._sessions.values()))
 
     def describe(self, session: LiveSession) -> SessionSnapshot:
+        now = time.monotonic()
         with self.lock:
-            return _snap(session, time.monotonic())
+            raw = self._raw(session, now)
+        return _snap(raw)
 
     def snapshot(
         self, limit: int | None = None, domain: str | None = None
     ) -> list[SessionSnapshot]:
-        """Copies of the most recently active sessions (all if ``limit`` is None)."""
+        """Copies of the most recently active sessions (all if ``limit`` is None). Under the
+        lock only the numbers are copied (every event waits for that lock); they are shaped
+        into plain data after it."""
         now = time.monotonic()
         with self.lock:
             live = [s for s in self._sessions.values() if domain is None or s.domain.name == domain]
             live.sort(key=lambda s: s.last_seen, reverse=True)
-            return [_snap(s, now) for s in live[:limit]]
+            raws = [self._raw(s, now) for s in live[:limit]]
+        return [_snap(r) for r in raws]
+
+    def _raw(self, s: LiveSession, now: float) -> _Raw:
+        if self.retention is not None:
+            s.forget(now, self.retention)
+        adv = s.advisor
+        return _Raw(
+            s, now - s.last_seen, adv.kappa, adv.window, adv.strategy, adv.params(), adv.steps,
+            s.position, s.p_normal, adv.advice_count, adv.total_cost, adv.benefit,
+            adv.advice_per_100, s.path.array() if s.path else None,
+            s.p_history.array() if s.p_history else None,
+            s.advice_log.items() if s.advice_log else [], adv.goal_beliefs(),
+        )  # fmt: skip
+
+    def forget_old(self) -> None:
+        """Apply the retention to every session (the sweeper calls this)."""
+        if self.retention is None:
+            return
+        now = time.monotonic()
+        with self.lock:
+            for s in self._sessions.values():
+                s.forget(now, self.retention)
+
+    def aggregates(self) -> dict[str, Aggregate]:
+        """Per domain, figures over its live sessions (no session's own)."""
+        out: dict[str, Aggregate] = {}
+        with self.lock:
+            for s in self._sessions.values():
+                agg = out.setdefault(s.domain.name, Aggregate())
+                adv = s.advisor
+                agg.sessions += 1
+                agg.steps += adv.steps
+                agg.decisions += adv.decisions
+                agg.advice += adv.advice_count
+                agg.looking_lost += s.p_normal < 0.5
+        return out
 
 
-def _snap(s: LiveSession, now: float) -> SessionSnapshot:
+@dataclass(slots=True)
+class Aggregate:
+    """Figures over a domain's live sessions."""
+
+    sessions: int = 0
+    steps: int = 0
+    decisions: int = 0
+    advice: int = 0
+    looking_lost: int = 0  # P(M1 | H) below 1/2
+
+
+@dataclass(slots=True)
+class _Raw:
+    """What a snapshot copies under the registry's lock."""
+
+    s: LiveSession
+    idle: float
+    kappa: float
+    window: int
+    strategy: str
+    params: dict[str, int | float]
+    steps: int
+    position: int
+    p_normal: float
+    advice_count: int
+    total_cost: float
+    benefit: float
+    advice_per_100: float
+    path: npt.NDArray[np.int32] | None
+    p_history: npt.NDArray[np.float32] | None
+    advice: list[tuple[int, int, AdviceTables | Advice]]
+    beliefs: list[tuple[int, float, bool]] | None
+
+
+def joined(parts: list[DecisionBatch]) -> DecisionBatch:
+    """Consecutive batches of one session as one (advice from the tables of each part: kept
+    as the parts' tables if they all had the same, else as the advice rows themselves)."""
+    first = parts[0]
+    source = first.advised_from
+    same = source is not None and all(p.advised_from is source for p in parts)
+
+    def column(name: str) -> npt.NDArray[Any]:
+        return np.concatenate([getattr(p, name) for p in parts])
+
+    return DecisionBatch(
+        first.first_step, column("state"), column("advise"), column("kl"), column("p_normal"),
+        column("advice_count"), column("benefit"), column("advice"), first.kappa,
+        first.count_before, first.benefit_before, source if same else None,
+    )  # fmt: skip
+
+
+def _snap(r: _Raw) -> SessionSnapshot:
+    s = r.s
     cells = s.domain.domain.cells
-    adv = s.advisor
-    beliefs = adv.goal_beliefs()
 
     def cell(state: int) -> tuple[int, int]:
         return int(cells[state, 0]), int(cells[state, 1])
 
+    path = cells[r.path if r.path is not None else [r.position]].tolist()
     return SessionSnapshot(
-        s.id, s.domain.name, s.agent_type, s.table_key, adv.kappa, adv.window, adv.strategy,
-        adv.params(), adv.steps, cell(s.position), s.p_normal, adv.advice_count,
-        adv.total_cost, adv.benefit, adv.advice_per_100, s.created_at, now - s.last_seen,
-        [(r, c) for r, c in cells[s.path.tolist() if s.path else [s.position]].tolist()],
-        s.p_history.tolist() if s.p_history else [s.p_normal],
-        [
-            (step, cell(st), _advice(tables, st))
-            for step, st, tables in (s.advice_log.items() if s.advice_log else ())
-        ],
-        None if beliefs is None else [(cell(g), p, out) for g, p, out in beliefs],
+        s.id, s.domain.name, s.agent_type, s.table_key, r.kappa, r.window, r.strategy,
+        r.params, r.steps, cell(r.position), r.p_normal, r.advice_count, r.total_cost,
+        r.benefit, r.advice_per_100, s.created_at, r.idle, [(a, b) for a, b in path],
+        r.p_history.tolist() if r.p_history is not None else [r.p_normal],
+        [(step, cell(st), _advice(tables, st)) for step, st, tables in r.advice],
+        None if r.beliefs is None else [(cell(g), p, out) for g, p, out in r.beliefs],
     )  # fmt: skip
 
 

@@ -1,24 +1,32 @@
-"""The paper's advisor for a live session: the core :class:`Advisor`, with batches compiled.
+"""The advisors of live sessions: the core's, with windows of pair keys and batches compiled.
 
-A websocket message may carry hundreds of one explorer's moves. :meth:`StreamAdvisor.observe_batch`
-runs them in one call of :func:`app.kernels.observe_stream`: the core's window update and
-decision (eqs. 4-6, :func:`app.kernels.decide`), in the core's order, with libm's exp and log as
-:mod:`math` uses, and the core's exact re-sums where it makes them. The advisor is left in
-exactly the state the sequential calls leave it in (ring, sums, position, counters), so single
-events (the core's own :meth:`observe`) and batches mix freely, and every decision equals the
-core's bit for bit (``tests/service/live/test_stream.py``).
+Every strategy's session keeps its window as pair keys into tables the domain shares
+(:class:`KeyedWindow`), so a session's memory is bounded by its window, not by the size of the
+map or its number of goals, and its state is plain arrays and numbers.
+
+A websocket message may carry hundreds of one explorer's moves: the paper's rule, goal_aware
+and guide run a batch in one compiled call (:func:`app.kernels.observe_stream`,
+:func:`app.kernels.goal_stream`, :func:`app.kernels.guide_stream`): the core's window update and
+decision, in the core's order, with libm's exp and log as :mod:`math` uses, and the core's exact
+re-sums where it makes them. The advisor is left in exactly the state the sequential calls leave
+it in (window, sums, position, counters), so single events and batches mix freely, and every
+decision equals the core's bit for bit (``tests/service/live/test_stream.py``).
 """
 
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
 
 from app import kernels
-from app.advice.advisor import Advisor, DecisionBatch, resync_period
+from app.advice.advisor import Advisor, Decision, DecisionBatch, resync_period
+from app.advice.goals import GoalAwareAdvisor
 from app.advice.guide import GuideAdvisor, GuideParams, kernel_params
+from app.advice.models import AdviceTables
+from app.advice.strategies import RuleAdvisor
 from app.domain.grid import N_ACTIONS
 
 IntArray = npt.NDArray[np.int64]
@@ -28,8 +36,12 @@ _NO_RING = np.zeros((0, 0))  # no value kept: the window's values are those of t
 _NO_ADVICE = np.zeros((0, N_ACTIONS))
 
 
-class StreamAdvisor(Advisor):
-    """An :class:`Advisor` whose window holds pair keys, with compiled batches.
+#: what a window of pair keys holds, on each class using :class:`KeyedWindow`
+KEYED_SLOTS = ("_kept", "_keys", "_keys_tables", "_n_kept", "_old")
+
+
+class KeyedWindow(Advisor):
+    """The core's window as pair keys (a mixin for the service's advisors).
 
     The core's window keeps, per model, the log-probability each pair added (lists of Python
     floats, about 32 bytes an entry and model). This one keeps each pair's key ``s * 4 + a``
@@ -40,18 +52,35 @@ class StreamAdvisor(Advisor):
     a pair and the exact re-sums use exactly the core's numbers, and a session costs about
     1.5 kB of window instead of 4.8 (W = 300, two models): 100,000 sessions hold one each
     (docs/PERFORMANCE.md, memory). :meth:`append` is the core's, step for step.
+
+    The state is plain: the keys, a flag per pair, the kept values, the sums and counters.
+    A class using it declares :data:`KEYED_SLOTS`.
     """
 
-    __slots__ = ("_kept", "_keys", "_keys_tables", "_n_kept", "_old")
+    if not TYPE_CHECKING:  # slots of its own would clash with the core classes' (each user
+        __slots__ = ()  # declares KEYED_SLOTS); mypy reads the annotations below instead
+    _keys: npt.NDArray[np.int32]
+    _kept: npt.NDArray[np.uint8]
+    _old: FloatArray | None
+    _n_kept: int
+    _keys_tables: AdviceTables
 
-    def reset(self) -> None:
-        super().reset()
+    def _reset_window(self) -> None:
         self._ring = []  # the core's lists are not used: the window lives in ``_keys``
         self._keys = np.full(self.window, -1, dtype=np.int32)  # -1: empty (the core's 0.0)
         self._kept = np.zeros(self.window, dtype=np.uint8)  # 1: value in _old
-        self._old: FloatArray | None = None
+        self._old = None
         self._n_kept = 0
         self._keys_tables = self.tables  # the tables giving the values of the other pairs
+
+    def footprint(self) -> int:
+        """Bytes the window's arrays can take at most (keys, flags, kept values)."""
+        return self.window * (4 + 1 + 8 * self.tables.n_models)
+
+    def batch_slice(self) -> int:
+        """Events of a batch to run at once, about 2 ms of work (the rest waits its turn on the
+        event loop): the rules run one Python call an event, 3-6 us each (measured)."""
+        return 500
 
     def _sync_tables(self) -> None:
         """After a change of tables, keep the values of the pairs added with the old ones.
@@ -119,6 +148,16 @@ class StreamAdvisor(Advisor):
                     loglik[m] = math.fsum(ring[m].tolist())
         self._pos = pos
 
+
+class StreamAdvisor(KeyedWindow):
+    """The paper's :class:`Advisor` with its window as pair keys (:class:`KeyedWindow`) and
+    batches in one compiled call (:func:`app.kernels.observe_stream`)."""
+
+    __slots__ = KEYED_SLOTS
+
+    def batch_slice(self) -> int:
+        return 20_000  # compiled, 0.16 us an event: a whole batch at once
+
     def observe_batch(
         self, states: IntArray, actions: IntArray, next_states: IntArray
     ) -> DecisionBatch:
@@ -149,6 +188,171 @@ class StreamAdvisor(Advisor):
         )  # fmt: skip
 
 
+class StreamRule(KeyedWindow, RuleAdvisor):
+    """A :class:`RuleAdvisor` (early, importance, mistake, random, always) with its window as
+    pair keys: the core's decisions, one Python call per event."""
+
+    __slots__ = KEYED_SLOTS
+
+
+class StreamGoalAware(KeyedWindow, GoalAwareAdvisor):
+    """A :class:`GoalAwareAdvisor` whose windows are pair keys into tables the domain shares.
+
+    The core keeps, per session, W rows of G per-goal log-probabilities (and reads the goal
+    counts as Python lists): memory grows with goals x window. Here both windows are the pair
+    keys of :class:`KeyedWindow`; each goal's log theta^g of a pair is read from the
+    domain's :meth:`GoalPriors.arrays`, built once per change of the counts and shared by
+    every session. A session holds its keys, its sums (per model, per goal), the goals ruled
+    out and, only after the goal counts changed while pairs were in its window, those pairs'
+    per-goal values (G x W float64, until they have left). Every event runs compiled
+    (:func:`app.kernels.goal_stream`), with the core's arithmetic in the core's order: the
+    decisions equal the core's bit for bit (``tests/service/live/test_stream.py``).
+    """
+
+    __slots__ = (
+        *KEYED_SLOTS, "_goal_arrays", "_goal_kept", "_goal_n_kept", "_goal_old", "_theta_w",
+    )  # fmt: skip
+    _goal_ll: FloatArray  # type: ignore[assignment]
+    alive: npt.NDArray[np.bool_]  # type: ignore[assignment]
+
+    def reset(self) -> None:
+        super().reset()
+        g = self.priors.n_goals
+        self.alive = np.ones(g, dtype=np.bool_)
+        self._goal_ll = np.zeros(g)
+        self._theta_w = np.empty(N_ACTIONS)
+
+    def _reset_goal_window(self) -> None:
+        self._goal_ring = []  # the core's rows are not used: the pair keys index the tables
+        self._goal_kept = np.zeros(self.window if self.beta > 0.0 else 0, dtype=np.uint8)
+        self._goal_old: FloatArray | None = None
+        self._goal_n_kept = 0
+        self._goal_arrays = self.priors.arrays()  # the goal tables of the non-kept pairs
+
+    def footprint(self) -> int:
+        """Bytes the session's arrays can take at most: the models' window, per goal a sum
+        and a flag, and with beta > 0 a flag per pair and G x W kept values."""
+        g = self.priors.n_goals
+        per_goal = self.window * (1 + 8 * g) if self.beta > 0.0 else 0
+        return super().footprint() + g * 9 + per_goal + 4 * 8
+
+    def batch_slice(self) -> int:
+        return max(64, 40_000 // (self.priors.n_goals + 1))  # compiled: 0.05 us a goal
+
+    def _sync_goals(self) -> None:
+        """After new goal counts, keep each goal's values of the pairs added with the old."""
+        arrays = self.priors.arrays()
+        if self._goal_arrays is arrays:
+            return
+        if self.beta > 0.0 and self.steps:
+            before = self._goal_arrays[4].T  # (G, S * 4)
+            if self._goal_old is None:
+                self._goal_old = np.zeros((before.shape[0], self.window))
+            self._goal_n_kept += kernels.keep_values(
+                self._keys, self._goal_kept, self._goal_old, before
+            )
+        self._goal_arrays = arrays
+
+    def _goal_left(self, gone: int) -> None:
+        self._goal_n_kept -= gone
+        if self._goal_n_kept == 0:
+            self._goal_old = None
+
+    def _windows(self) -> tuple[tuple[Any, ...], tuple[Any, ...], FloatArray]:
+        """Both windows synced to the current tables, as the kernels take them."""
+        self._sync_tables()
+        self._sync_goals()
+        old = self._old if self._old is not None else _NO_RING
+        goal_old = self._goal_old if self._goal_old is not None else _NO_RING
+        loglik = np.array(self._loglik, dtype=np.float64)
+        return (self._keys, self._kept, old), (self._goal_kept, goal_old), loglik
+
+    @property
+    def _goal_window(self) -> FloatArray:
+        """The per-goal window as the core holds it: (W, G) values, 0.0 where empty."""
+        self._sync_goals()
+        log_theta = self._goal_arrays[4]
+        values = np.zeros((self.window, self.priors.n_goals))
+        filled = self._keys >= 0
+        values[filled] = log_theta[self._keys[filled]]
+        if self._goal_old is not None:
+            kept = self._goal_kept == 1
+            values[kept] = self._goal_old[:, kept].T
+        return values
+
+    def append(self, state: int, action: int) -> None:
+        """Add (s, a) to both windows exactly as :meth:`GoalAwareAdvisor.append` does."""
+        self._check(state, action)
+        window, goal_window, loglik = self._windows()
+        self._pos, gone, goal_gone = kernels.goal_append(
+            window, goal_window, loglik, self._goal_ll, self.alive, self._pos, self.steps + 1,
+            resync_period(self.window), self.beta, self.tables.arrays[0], self._goal_arrays,
+            state, action,
+        )  # fmt: skip
+        self._loglik = loglik.tolist()
+        self.steps += 1
+        if gone:
+            self._left(gone)
+        if goal_gone:
+            self._goal_left(goal_gone)
+
+    def goal_posterior(self) -> list[float]:
+        w = np.empty(self.priors.n_goals)
+        kernels.goal_posterior(self._goal_ll, self.alive, self.beta, w)
+        out: list[float] = w.tolist()
+        return out
+
+    def goal_beliefs(self) -> list[tuple[int, float, bool]]:
+        w = self.goal_posterior()
+        out = zip(self.priors.goals, w, self.alive.tolist(), strict=True)
+        return [(g, p, not a) for g, p, a in out]
+
+    def decide(self, state: int) -> Decision:
+        self._check(state)
+        self._sync_goals()
+        loglik = np.array(self._loglik, dtype=np.float64)
+        tw = self._theta_w
+        kl, p0 = kernels.goal_decision(
+            loglik, self.tables.arrays, self._goal_arrays, self._goal_ll, self.alive, self.beta,
+            state, tw,
+        )  # fmt: skip
+        a0, a1, a2, a3 = tw.tolist()
+        return self.record(state, kl >= self.kappa, (a0, a1, a2, a3), kl, p0)
+
+    def observe_batch(
+        self, states: IntArray, actions: IntArray, next_states: IntArray
+    ) -> DecisionBatch:
+        n = len(states)
+        count_before, benefit_before = self.advice_count, self.benefit
+        window, goal_window, loglik = self._windows()
+        kl, p_normal, benefit = np.empty(n), np.empty(n), np.empty(n)
+        advise, count = np.empty(n, dtype=np.bool_), np.empty(n, dtype=np.int64)
+        rows = np.empty((n, N_ACTIONS))
+        pos, self.advice_count, self.benefit, gone, goal_gone = kernels.goal_stream(
+            window, goal_window, (loglik, self._goal_ll, self.alive), self._pos, self.steps,
+            resync_period(self.window), self.beta, self.tables.arrays, self._goal_arrays,
+            self.kappa, count_before, benefit_before, (states, actions, next_states),
+            (kl, p_normal, advise, count, benefit, rows),
+        )  # fmt: skip
+        self._loglik, self._pos = loglik.tolist(), pos
+        if gone:
+            self._left(gone)
+        if goal_gone:
+            self._goal_left(goal_gone)
+        self.steps += n
+        self.decisions += n
+        return DecisionBatch(
+            self.steps - n + 1, next_states, advise, kl, p_normal, count, benefit, rows[advise],
+            self.kappa, count_before, benefit_before, None,
+        )  # fmt: skip
+
+    def observe(self, state: int, action: int, next_state: int) -> Decision:
+        self._check(state, action)
+        self._check(next_state)
+        s, a, s2 = (np.array([v], dtype=np.int64) for v in (state, action, next_state))
+        return self.observe_batch(s, a, s2).decisions()[0]
+
+
 class StreamGuide(GuideAdvisor):
     """A :class:`GuideAdvisor` whose batches run in one call of
     :func:`app.kernels.guide_stream`: the core's arithmetic in the core's order, leaving the
@@ -156,6 +360,15 @@ class StreamGuide(GuideAdvisor):
     :meth:`observe`) and batches mix freely (``tests/service/live/test_stream.py``)."""
 
     __slots__ = ()
+
+    def footprint(self) -> int:
+        """Bytes the session's state can take at most: no window, but a sum per model (4 + 3G
+        Python floats in a list, 32 bytes each) and a flag per destination (a list)."""
+        g = self.guide.n_goals
+        return (4 + 3 * g) * 32 + g * 8 + 4 * 8
+
+    def batch_slice(self) -> int:
+        return max(64, 5_000 // (self.guide.n_goals + 1))  # compiled: 0.35 us a destination
 
     def observe_batch(
         self, states: IntArray, actions: IntArray, next_states: IntArray

@@ -5,10 +5,9 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Query, Request, Response
 from starlette.concurrency import run_in_threadpool
 
-from app.service import ops
+from app.service import answers, ops
 from app.service.deps import AdminDep, DomainDep, DomainName, StateDep
 from app.service.openapi import body
-from app.service.public import domain_public, prior_public
 from app.service.schemas import (
     AgentType,
     DomainPublic,
@@ -19,39 +18,39 @@ from app.service.schemas import (
 )
 
 router = APIRouter(tags=["domains"])
+JSON = "application/json"
 NOT_FOUND: dict[int | str, dict[str, Any]] = {404: {"model": ErrorPublic}}
 ADMIN: dict[int | str, dict[str, Any]] = {401: {"model": ErrorPublic}, 403: {"model": ErrorPublic}}
 INVALID: dict[int | str, dict[str, Any]] = {422: {"model": ErrorPublic}}
-BODY: dict[int | str, dict[str, Any]] = {  # unreadable or oversize bodies
-    400: {"model": ErrorPublic}, 413: {"model": ErrorPublic},
+BODY: dict[int | str, dict[str, Any]] = {  # unreadable, oversize or not JSON bodies
+    400: {"model": ErrorPublic}, 413: {"model": ErrorPublic}, 415: {"model": ErrorPublic},
 }  # fmt: skip
 
 
-@router.get("/domains")
-async def list_domains(state: StateDep) -> list[DomainPublic]:
-    """Every domain: its map, start, goals and prior size."""
-    return [domain_public(d) for d in state.catalog.states()]
+@router.get("/domains", response_model=list[DomainPublic])
+async def list_domains(state: StateDep) -> Response:
+    """Every domain: its map, start, goals and prior size (each made once per version, in a
+    worker thread)."""
+    return Response(await answers.domains(state.catalog.states()), media_type=JSON)
 
 
-@router.get("/domains/{name}", responses=NOT_FOUND | INVALID)
-async def read_domain(domain: DomainDep) -> DomainPublic:
-    return domain_public(domain)
+@router.get("/domains/{name}", response_model=DomainPublic, responses=NOT_FOUND | INVALID)
+async def read_domain(domain: DomainDep) -> Response:
+    return Response(await answers.domain(domain), media_type=JSON)
 
 
 @router.put(
     "/domains/{name}",
     dependencies=[AdminDep],
+    response_model=DomainPublic,
     responses={201: {"model": DomainPublic, "description": "Created"}} | ADMIN | INVALID | BODY,
 )
-async def put_domain(
-    name: DomainName, body: DomainPut, state: StateDep, response: Response
-) -> DomainPublic:
+async def put_domain(name: DomainName, body: DomainPut, state: StateDep) -> Response:
     """Create (201) or replace (200) a domain. The same map keeps its trajectories and its
     live sessions; a new map starts with an empty prior and ends the old map's sessions."""
     domain, created, kept = await run_in_threadpool(ops.put_domain, state, name, body)
     ops.after_put(state, domain, kept)
-    response.status_code = 201 if created else 200
-    return domain_public(domain)
+    return Response(await answers.domain(domain), 201 if created else 200, media_type=JSON)
 
 
 @router.delete(
@@ -68,10 +67,7 @@ async def delete_domain(name: DomainName, state: StateDep) -> None:
     dependencies=[AdminDep],
     status_code=201,
     openapi_extra=body("TrajectoriesCreate"),
-    responses=NOT_FOUND
-    | ADMIN
-    | INVALID
-    | {409: {"model": ErrorPublic}, 413: {"model": ErrorPublic}},
+    responses=NOT_FOUND | ADMIN | INVALID | BODY | {409: {"model": ErrorPublic}},
 )
 async def add_trajectories(
     request: Request, domain: DomainDep, state: StateDep
@@ -85,11 +81,12 @@ async def add_trajectories(
     return accepted
 
 
-@router.get("/domains/{name}/prior", responses=NOT_FOUND | INVALID)
+@router.get("/domains/{name}/prior", response_model=PriorPublic, responses=NOT_FOUND | INVALID)
 async def read_prior(
     domain: DomainDep,
     agent_type: Annotated[AgentType | None, Query(description="Omit for the pooled prior.")] = None,
-) -> PriorPublic:
+) -> Response:
     """theta_s(a) for every cell (null for walls). An agent type without data of its own is
-    served the pooled prior, as its sessions are; ``table`` says which one answered."""
-    return prior_public(domain, agent_type)
+    served the pooled prior, as its sessions are; ``table`` says which one answered. Made
+    once per prior version, in a worker thread."""
+    return Response(await answers.prior(domain, agent_type), media_type=JSON)

@@ -1,35 +1,41 @@
-"""Public pages: ``/overview`` (figures for dashboards, no tokens), ``/`` and ``/walk``."""
+"""Pages: ``/overview`` (figures for dashboards; live sessions for operators), ``/`` and
+``/walk``."""
 
 from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, HTTPException, Query
+from fastapi import APIRouter, HTTPException, Query, Response
 from fastapi.responses import FileResponse
 
-from app.service.deps import StateDep
-from app.service.public import overview_domain, overview_session
+from app.service import ops
+from app.service.deps import OperatorView, StateDep
 from app.service.schemas import NAME_PATTERN, ErrorPublic, Overview
 
 router = APIRouter(tags=["pages"])
 PAGES = {"/": "index.html", "/walk": "walk.html"}
 
 
-@router.get("/overview")
+@router.get(
+    "/overview",
+    response_model=Overview,
+    responses={403: {"model": ErrorPublic}},
+    openapi_extra={"security": [{}, {"APIKeyHeader": []}]},  # a key is optional: it shows more
+)
 async def overview(
     state: StateDep,
+    detail: OperatorView,
     limit: Annotated[int, Query(ge=0, le=1000, description="Sessions listed at most.")] = 100,
     domain: Annotated[str | None, Query(pattern=NAME_PATTERN)] = None,
-) -> Overview:
-    """Domains and live sessions with their figures, most recently active first. Public:
-    session ids are shown, tokens never."""
-    counts = state.registry.count_by_domain()
-    snaps = state.registry.snapshot(limit, domain)
-    return Overview(
-        domains=[overview_domain(d, counts.get(d.name, 0)) for d in state.catalog.states()],
-        total_sessions=sum(counts.values()),
-        sessions=[overview_session(s) for s in snaps],
-    )
+) -> Response:
+    """Domains with figures over their live sessions. With the admin key or the read-only
+    operator key (X-API-Key) also the live sessions, most recently active first, with where
+    each explorer is and was: personal data in a building that tracks people. Made at most
+    once a second (ADVISOR_OVERVIEW_SECONDS), in a worker thread."""
+    key = ("overview", detail, limit, domain)
+    age = state.settings.overview_seconds
+    text = await state.fresh.get(key, age, lambda: ops.overview(state, detail, limit, domain))
+    return Response(text, media_type="application/json")
 
 
 def _page(path: str, file: str) -> None:

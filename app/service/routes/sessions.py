@@ -9,12 +9,14 @@ from app.advice.guide import GuideError
 from app.service import ops
 from app.service.deps import (
     BEARER,
-    AdminDep,
     DomainDep,
+    OperatorDep,
     SessionDep,
     SessionId,
     SessionOrAdminDep,
+    SessionOrOperatorDep,
     StateDep,
+    client_of,
     service_of,
     session_for,
 )
@@ -40,9 +42,10 @@ ERRORS: dict[int | str, dict[str, Any]] = {
 @router.post(
     "/domains/{name}/sessions",
     status_code=201,
-    responses={code: {"model": ErrorPublic} for code in (400, 404, 413, 422, 503)},
+    responses={code: {"model": ErrorPublic} for code in (400, 404, 413, 415, 422, 429, 503)},
 )
 async def create_session(
+    request: Request,
     domain: DomainDep,
     state: StateDep,
     body: Annotated[SessionCreate | None, Body()] = None,
@@ -50,6 +53,7 @@ async def create_session(
     """Start watching an explorer: returns its id, its token (keep it: every session route
     needs it) and the decision for its start cell."""
     body = body or SessionCreate()
+    params = ops.session_params(state, domain, body)
     if body.strategy == "goal_aware" and domain.goal_priors is None:
         await run_in_threadpool(state.catalog.goal_priors, domain)  # first one: reads the store
     if body.strategy == "guide" and domain.guide_map is None:
@@ -57,7 +61,8 @@ async def create_session(
             await run_in_threadpool(state.catalog.guide_map, domain)
         except GuideError as exc:
             raise BadInput(f"strategy guide: {exc}") from None
-    session, decision = ops.create_session(state, domain, body)
+    client = client_of(request, state)
+    session, decision = ops.create_session(state, domain, body, params, client)
     return session_created(session, decision)
 
 
@@ -66,7 +71,7 @@ async def post_events(request: Request, session_id: SessionId) -> Response:
     batch with a bad event is refused whole and changes nothing."""
     state = service_of(request)
     session = session_for(request, session_id, state)  # not a dependency: see session_for
-    text = ops.apply_events(state, session, await request.body())
+    text = await ops.answer_events(state, session, await request.body())
     return Response(text, media_type="application/json")
 
 
@@ -81,7 +86,7 @@ def add_event_route(app: FastAPI) -> None:
         tags=["sessions"],
         response_model=DecisionPublic | list[DecisionPublic],
         openapi_extra=body("Events") | BEARER,
-        responses=ERRORS | {413: {"model": ErrorPublic}},
+        responses=ERRORS | {413: {"model": ErrorPublic}, 415: {"model": ErrorPublic}},
     )
 
 
@@ -89,20 +94,20 @@ def add_event_route(app: FastAPI) -> None:
     "/sessions/{session_id}/positions",
     response_model=list[DecisionPublic],
     openapi_extra=BEARER,
-    responses=ERRORS | {413: {"model": ErrorPublic}},
+    responses=ERRORS | {413: {"model": ErrorPublic}, 415: {"model": ErrorPublic}},
 )
 async def post_positions(session: SessionDep, body: PositionsIn, state: StateDep) -> Response:
     """Positions in metres (domains with a resolution): each reading is snapped to its cell; a
     reading in the same cell as the one before adds no move, one up to ``max_jump`` moves away
     (ADVISOR_MAX_JUMP, default 8) is walked along a shortest path, one decision per cell; a
     farther jump, a wall or a point off the map refuses the batch whole (422)."""
-    text = ops.apply_positions(state, session, body)
+    text = await ops.apply_positions(state, session, body)
     return Response(text, media_type="application/json")
 
 
 @router.get("/sessions/{session_id}", responses=ERRORS)
-async def read_session(session: SessionOrAdminDep, state: StateDep) -> SessionPublic:
-    """The session's figures (its token, or the admin key)."""
+async def read_session(session: SessionOrOperatorDep, state: StateDep) -> SessionPublic:
+    """The session's figures (its token, or the admin or operator key)."""
     return session_public(state.registry.describe(session))
 
 
@@ -114,13 +119,13 @@ async def end_session(session: SessionOrAdminDep, state: StateDep) -> SessionPub
     return session_public(final)
 
 
-@router.get("/sessions", dependencies=[AdminDep], responses=ERRORS)
+@router.get("/sessions", dependencies=[OperatorDep], responses=ERRORS)
 async def list_sessions(
     state: StateDep,
     limit: Annotated[int, Query(ge=1, le=10_000)] = 100,
     domain: Annotated[str | None, Query(max_length=64)] = None,
 ) -> SessionList:
-    """Live sessions, most recently active first (admin)."""
+    """Live sessions, most recently active first (the admin or the operator key)."""
     reg = state.registry
     total = len(reg) if domain is None else reg.count_by_domain().get(domain, 0)
     return SessionList(

@@ -1,9 +1,11 @@
 """``WS /sessions/{id}/stream``: events in (one or a list per text frame), decisions out.
 
-Credentials: ``?token=<session token>`` (browsers cannot set headers on a websocket) or an
-``Authorization: Bearer`` header. The connection is accepted first, so that a refusal can say
-why: it is closed with code 4401 (no token), 4403 (another session's token) or 4404 (no such
-session), and the reason in the close frame.
+Credentials: an ``Authorization: Bearer`` header, or, from a browser (which can set no header on
+a websocket), the subprotocols ``advisor`` and ``token.<session token>`` (the server answers
+``advisor``); ``?token=<session token>`` is still accepted, but a URL is what logs and proxies
+keep (the service's own log writes ``token=***``). The connection is accepted first, so that a
+refusal can say why: it is closed with code 4401 (no token), 4403 (another session's token) or
+4404 (no such session), and the reason in the close frame.
 
 Each text frame gets exactly one answer frame, in order: the decisions (an object for one event,
 a list for a list), or for a bad frame an error ``{"detail": "...", "status": 422}`` (413 for
@@ -20,7 +22,7 @@ from __future__ import annotations
 
 import json
 
-from fastapi import APIRouter, WebSocket
+from fastapi import APIRouter, WebSocket, WebSocketDisconnect
 from starlette.websockets import WebSocketState
 
 from app.service import ops
@@ -31,8 +33,9 @@ from app.service.security import AuthError, check_session_token
 from app.service.state import ServiceState
 
 router = APIRouter(tags=["sessions"])
+SUBPROTOCOL, TOKEN_PREFIX = "advisor", "token."
 CLOSE_REASONS = {  # a close reason holds at most 123 bytes
-    4401: "no token: connect with ?token=<session token>",
+    4401: "no token: send Authorization: Bearer <token>, or subprotocols advisor, token.<token>",
     4403: "this token does not belong to this session",
     4404: "no live session with this id (never created, ended or expired)",
     4422: "format must be json (the default) or binary",
@@ -40,11 +43,24 @@ CLOSE_REASONS = {  # a close reason holds at most 123 bytes
 FORMATS = ("json", "binary")
 
 
+def offered_token(ws: WebSocket) -> str | None:
+    """The token offered as the subprotocol ``token.<token>`` (browsers can set no header on
+    a websocket; a subprotocol stays out of URLs and access logs)."""
+    for value in ws.headers.getlist("sec-websocket-protocol"):
+        for offered in value.split(","):
+            name = offered.strip()
+            if name.startswith(TOKEN_PREFIX):
+                return name[len(TOKEN_PREFIX) :] or None
+    return None
+
+
 def _authorize(state: ServiceState, session_id: str, ws: WebSocket) -> LiveSession:
-    token = ws.query_params.get("token")
+    token = offered_token(ws)
     header = ws.headers.get("authorization", "")
     if not token and header.lower().startswith("bearer "):
         token = header[7:].strip()
+    if not token:
+        token = ws.query_params.get("token")
     if not token:
         check_session_token(None, "", session_id)
     session = state.registry.get(session_id)
@@ -58,8 +74,18 @@ def _error(status: int, detail: str) -> str:
 
 @router.websocket("/sessions/{session_id}/stream")
 async def stream(websocket: WebSocket, session_id: str) -> None:
+    try:
+        await _serve(websocket, session_id)
+    except WebSocketDisconnect:  # the client went away before its answer: nothing to say
+        return
+
+
+async def _serve(websocket: WebSocket, session_id: str) -> None:
     state = service_of(websocket)
-    await websocket.accept()
+    # a browser offering subprotocols needs one of them back (never the token's)
+    offered = {p.strip() for v in websocket.headers.getlist("sec-websocket-protocol")
+               for p in v.split(",")}  # fmt: skip
+    await websocket.accept(SUBPROTOCOL if SUBPROTOCOL in offered else None)
     try:
         session = _authorize(state, session_id, websocket)
     except (AuthError, SessionNotFound) as exc:
@@ -84,10 +110,11 @@ async def stream(websocket: WebSocket, session_id: str) -> None:
             await websocket.send_text(_error(413, f"the message is larger than {limit} bytes"))
             continue
         try:
+            answer = await ops.answer_events(state, session, text, binary)
             if binary:
-                await websocket.send_bytes(ops.apply_events_binary(state, session, text))
+                await websocket.send_bytes(answer)
             else:  # JSON is ASCII: decoding it is a copy
-                await websocket.send_text(ops.apply_events(state, session, text).decode())
+                await websocket.send_text(answer.decode())
         except BadInput as exc:
             await websocket.send_text(_error(exc.status, exc.detail))
         except SessionNotFound:

@@ -9,15 +9,18 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from app.advice.advisor import Advisor, DecisionBatch, resync_period
+from app.advice.goals import GoalAwareAdvisor
 from app.advice.guide import GuideAdvisor, GuideMap, GuideParams
 from app.advice.models import AdviceTables
+from app.advice.strategies import RULES, RuleAdvisor, StrategyParams
 from app.agents.experts import train_goal_priors
 from app.domain.generate import generate_building_domain, generate_domain
-from app.service.live.stream import StreamAdvisor, StreamGuide
+from app.domain.grid import GridDomain
+from app.service.live.stream import StreamAdvisor, StreamGoalAware, StreamGuide, StreamRule
 from tests.tables import random_tables, split_weight_tables
 
 
-def _same_state(fast: StreamAdvisor, core: Advisor) -> None:
+def _same_state(fast: StreamAdvisor | StreamRule, core: Advisor) -> None:
     assert fast.log_likelihoods == core.log_likelihoods
     np.testing.assert_array_equal(fast._window, np.array(core._ring))
     assert (fast.steps, fast.decisions, fast.advice_count, fast.benefit) == (
@@ -167,3 +170,93 @@ def test_guide_batches_equal_the_core_guide(
         s2 = int(d.next_state[s, a])
         assert fast.observe(s, a, s2) == core.observe(s, a, s2)
         s = s2
+
+
+def _moves(
+    rng: np.random.Generator, d: GridDomain, s: int, n: int, follow: bool
+) -> tuple[list[int], list[int], list[int], int]:
+    """``n`` moves from ``s``: along the map, or (``follow`` off) jumping anywhere at times."""
+    states, actions, nexts = [], [], []
+    for _ in range(n):
+        a = int(rng.integers(4))
+        if follow or rng.random() < 0.8:
+            s2 = int(d.next_state[s, a])
+        else:
+            s, s2 = int(rng.integers(d.n_states)), int(rng.integers(d.n_states))
+        states.append(s)
+        actions.append(a)
+        nexts.append(s2)
+        s = s2
+    return states, actions, nexts, s
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    window=st.one_of(st.integers(1, 40), st.sampled_from([300, 1024, 1100])),
+    kappa=st.sampled_from([0.0, 0.3, 0.5, 1.5]),
+    beta=st.sampled_from([0.0, 0.5, 1.0]),
+    follow=st.booleans(),
+    batches=st.lists(st.one_of(st.integers(0, 10), st.integers(0, 900)), min_size=1, max_size=6),
+)
+def test_goal_aware_batches_equal_the_core_goal_aware_advisor(
+    seed: int, window: int, kappa: float, beta: float, follow: bool, batches: list[int]
+) -> None:
+    """StreamGoalAware (both windows as pair keys into shared tables, every event compiled)
+    against GoalAwareAdvisor.observe, with new tables and new goal counts mid-session (the
+    values of the pairs added before kept exactly), single events between batches."""
+    rng = np.random.default_rng(seed)
+    d = generate_domain(7, 7, seed % 1000, braid=0.3, n_goals=1 + seed % 4)
+    prior, goals = train_goal_priors(d, rng, "start", 2, 1.0)
+    tables = AdviceTables.paper(prior.theta())
+    core = GoalAwareAdvisor(tables, goals, kappa, window, beta)
+    fast = StreamGoalAware(tables, goals, kappa, window, beta)
+    s = int(rng.integers(d.n_states))
+    assert fast.start(s) == core.start(s)
+    for n in batches:
+        if rng.random() < 0.3:  # more expert data: new counts, and new tables or not
+            _, more = train_goal_priors(d, rng, "anywhere", 1, 1.0)
+            new = random_tables(rng, d.n_states) if rng.random() < 0.5 else tables
+            core.use_tables(new, more)
+            fast.use_tables(new, more)
+        states, actions, nexts, s = _moves(rng, d, s, n, follow)
+        decided = [core.observe(*m) for m in zip(states, actions, nexts, strict=True)]
+        got = fast.observe_batch(*(np.array(v, dtype=np.int64) for v in (states, actions, nexts)))
+        assert got.decisions() == decided
+        assert fast._loglik == core._loglik and fast._goal_ll.tolist() == core._goal_ll
+        assert fast.alive.tolist() == core.alive and fast.goal_beliefs() == core.goal_beliefs()
+        np.testing.assert_array_equal(fast._window, np.array(core._ring))
+        if beta > 0.0:
+            np.testing.assert_array_equal(fast._goal_window, np.array(core._goal_ring))
+        a = int(rng.integers(4))  # a single event between batches
+        s2 = int(d.next_state[s, a])
+        assert fast.observe(s, a, s2) == core.observe(s, a, s2)
+        s = s2
+    assert fast.goal_posterior() == core.goal_posterior()
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    rule=st.sampled_from(RULES),
+    window=st.one_of(st.integers(1, 30), st.sampled_from([300, 1100])),
+    batches=st.lists(st.integers(0, 400), min_size=1, max_size=5),
+)
+def test_rule_advisors_with_pair_keys_equal_the_core_rules(
+    seed: int, rule: str, window: int, batches: list[int]
+) -> None:
+    rng = np.random.default_rng(seed)
+    n_states = 15
+    tables = random_tables(rng, n_states)
+    params = StrategyParams(n_steps=30, threshold=0.4, rate=0.3, seed=seed % 100)
+    core = RuleAdvisor(tables, rule, 0.5, window, params)
+    fast = StreamRule(tables, rule, 0.5, window, params)
+    assert fast.start(0) == core.start(0)
+    for n in batches:
+        if rng.random() < 0.3:
+            core.tables = fast.tables = random_tables(rng, n_states)
+        s, a, s2 = (rng.integers(0, n_states, n), rng.integers(0, 4, n),
+                    rng.integers(0, n_states, n))  # fmt: skip
+        expected = [core.observe(int(x), int(y), int(z)) for x, y, z in zip(s, a, s2, strict=True)]
+        assert fast.observe_batch(s, a, s2).decisions() == expected
+        _same_state(fast, core)

@@ -1,0 +1,69 @@
+"""``python -m app viewer``: the 3D viewer, a process of its own reading a running service.
+
+``serve`` starts it (unless ``--no-viewer``); it can also run by itself, beside a service
+started elsewhere. It reads the service as a client (``app.viewer.remote``) with the operator
+key, from ``ADVISOR_OPERATOR_KEY`` or a key file (never the command line, which others can
+read), and serves the scene to browsers on loopback unless told otherwise: it shows where
+explorers are and were, and asks no key of a browser.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import signal
+import threading
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+LOOPBACK = ("127.0.0.1", "localhost", "::1")
+KEY_ENV = "ADVISOR_OPERATOR_KEY"
+
+
+def viewer(
+    api: Annotated[str, typer.Option(help="The service's URL.")] = "http://127.0.0.1:8000",
+    host: Annotated[str, typer.Option(help="Interface for browsers.")] = "127.0.0.1",
+    port: Annotated[int, typer.Option(help="Port for browsers.")] = 8080,
+    key_file: Annotated[
+        Path | None,
+        typer.Option(help=f"File holding the operator key (default: ${KEY_ENV})."),
+    ] = None,
+    parent: Annotated[
+        int | None, typer.Option(help="Exit when this process (the service) is gone.")
+    ] = None,
+) -> None:
+    """Serve the live 3D viewer of a running service (read with the operator key)."""
+    import httpx
+
+    from app.viewer.remote import RemoteFeed
+    from app.viewer.viewer import Viewer
+
+    key = key_file.read_text(encoding="utf-8").strip() if key_file else os.environ.get(KEY_ENV)
+    if not key:
+        typer.echo(f"error: no operator key: set {KEY_ENV} or give --key-file", err=True)
+        raise typer.Exit(code=2)
+    logging.basicConfig(level=logging.INFO, format="viewer: %(message)s")
+    http = httpx.Client(base_url=api, timeout=30.0)
+    feed = RemoteFeed(http, key)
+    view = Viewer(feed, host=host, port=port, on_tick=feed.report_tick)
+    view.start()
+    if view.port != port:
+        view.stop()
+        typer.echo(f"error: the viewer's port {port} is busy", err=True)
+        raise typer.Exit(code=1)
+    where = (
+        "loopback only: it shows where explorers are and asks no key of a browser"
+        if host in LOOPBACK
+        else "NOT loopback: anyone who reaches this port sees where explorers are"
+    )
+    typer.echo(f"viewer on http://{host}:{view.port}/ ({where})", err=True)
+    done = threading.Event()
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, lambda *_: done.set())
+    while not done.wait(1.0):
+        if parent is not None and os.getppid() != parent:
+            break  # the service is gone (killed): so is its viewer
+    view.stop()
+    http.close()

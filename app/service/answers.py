@@ -1,0 +1,112 @@
+"""Large read answers, built off the event loop once per version and kept as bytes.
+
+A 500 x 500 domain's prior is 5.5 MB of JSON; built on the event loop (Python lists, then
+pydantic) it held every other client for 2 s. Here each big answer is built in a worker thread
+once per version of what it shows, kept as bytes while that version lives (weakly keyed on the
+objects that a change replaces), and every reader is served the same bytes; readers arriving
+while it is being built wait for that one build (:func:`once`):
+
+* a prior's ``theta``: per :class:`AdviceTables` (a new prior makes new tables);
+* a domain's public description: per domain state and prior view (a PUT makes a new state, new
+  trajectories a new view);
+* the overview: made at most once per ``max_age`` seconds for each kind of reader
+  (:class:`Fresh`), since it changes with every event.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import time
+import weakref
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+import orjson
+from starlette.concurrency import run_in_threadpool
+
+from app.advice.models import AdviceTables
+from app.domain.grid import ACTIONS, GridDomain
+from app.service.data.domains import DomainState, PriorView
+from app.service.public import domain_public
+
+NUMPY = orjson.OPT_SERIALIZE_NUMPY
+WALL = b"[null,null,null,null]"  # orjson writes NaN as null: a wall's row, never a free cell's
+
+_building: dict[object, asyncio.Future[bytes]] = {}
+_theta: weakref.WeakKeyDictionary[AdviceTables, bytes] = weakref.WeakKeyDictionary()
+_domains: weakref.WeakKeyDictionary[DomainState, tuple[PriorView, bytes]] = (
+    weakref.WeakKeyDictionary()
+)
+
+
+async def once(key: object, build: Callable[[], bytes]) -> bytes:
+    """``build()`` in a worker thread, once for all who ask for ``key`` while it runs (a
+    reader that goes away does not cancel it for the others)."""
+    running = _building.get(key)
+    if running is None:
+        running = asyncio.ensure_future(run_in_threadpool(build))
+        _building[key] = running
+        running.add_done_callback(lambda _: _building.pop(key, None))
+    return await asyncio.shield(running)
+
+
+def theta_json(grid: GridDomain, tables: AdviceTables) -> bytes:
+    """*Worker thread.* theta as rows x cols x 4, ``null`` for walls."""
+    rows, cols = grid.shape
+    full = np.full((rows, cols, 4), np.nan)
+    full[grid.cells[:, 0], grid.cells[:, 1]] = tables.theta
+    return orjson.dumps(full, option=NUMPY).replace(WALL, b"null")
+
+
+async def prior(d: DomainState, agent_type: str | None) -> bytes:
+    """``GET /domains/{name}/prior`` (``PriorPublic``)."""
+    view = d.view
+    key = view.resolve(agent_type)
+    tables = view.tables[key]
+    theta = _theta.get(tables)
+    if theta is None:
+        theta = await once(("theta", id(tables)), lambda: theta_json(d.domain, tables))
+        _theta[tables] = theta
+    head = orjson.dumps({
+        "domain": d.name, "agent_type": agent_type, "table": key, "actions": list(ACTIONS),
+        "alpha0": view.alpha0, "trajectories": view.trajectories.get(key, 0),
+    })  # fmt: skip
+    return b"".join((head[:-1], b',"theta":', theta, b"}"))
+
+
+async def domain(d: DomainState) -> bytes:
+    """``GET /domains/{name}`` (``DomainPublic``): the map, its goals and the prior's size."""
+    view = d.view
+    made = _domains.get(d)
+    if made is not None and made[0] is view:
+        return made[1]
+    text = await once(
+        ("domain", id(d), id(view)), lambda: domain_public(d).model_dump_json().encode()
+    )
+    _domains[d] = (view, text)
+    return text
+
+
+async def domains(states: list[DomainState]) -> bytes:
+    """``GET /domains``: every domain's answer, as a list."""
+    return b"[" + b",".join([await domain(d) for d in states]) + b"]"
+
+
+class Fresh:
+    """Answers made at most once per ``max_age`` seconds for each key (one per service)."""
+
+    def __init__(self) -> None:
+        self._made: dict[Any, tuple[float, bytes]] = {}
+
+    async def get(self, key: Any, max_age: float, build: Callable[[], bytes]) -> bytes:
+        """``build()`` in a worker thread, or its answer if made less than ``max_age`` ago."""
+        made = self._made.get(key)
+        if made is not None and time.monotonic() - made[0] < max_age:
+            return made[1]
+        text = await once(("fresh", id(self), key), build)
+        self._made[key] = (time.monotonic(), text)
+        if len(self._made) > 64:  # keys are few (limits and domains asked for): the newest
+            for old in sorted(self._made, key=lambda k: self._made[k][0])[:32]:
+                del self._made[old]
+        return text

@@ -1,0 +1,519 @@
+"""Hostile and careless clients against the real service, measured (docs/RELIABILITY.md).
+
+Each section starts ``python -m app serve`` from a source tree (``--root``: this one by default,
+or an older checkout to measure "before") on a free loopback port, makes one bounded load, and
+prints markdown rows ``| measurement | value unit |`` (``benchmarks/compare_trees.py`` reads
+them). Loads run in processes of their own, so the process that measures latencies waits for
+nothing but the service.
+
+    python benchmarks/bench_hostile.py                      # every section, this tree
+    python benchmarks/bench_hostile.py --only reads batches  # some sections
+    python benchmarks/bench_hostile.py --root /tmp/before --only reads batches attacks memory
+    python benchmarks/bench_hostile.py --only combined --write docs/RELIABILITY.md
+
+Sections: ``reads`` (``/health`` latency while two clients read a 400 x 400 prior, and while
+clients read ``/overview?limit=1000`` and ``/domains``), ``batches`` (one client's single-event
+latency while another session streams 5,000-event batches), ``attacks`` (a 48 MB header, a 64
+KiB one, 300 slow sockets), ``throughput`` (wrk: ``/health`` and one-event requests),
+``memory`` (150 goal_aware sessions at window 10,000), ``combined`` (90 s of warm-up, then 60 s:
+200 explorers at 10 events a second each, 5 ingesting writers, a watched viewer, two readers of
+the largest prior, a 400 x 400 domain's).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing as mp
+import os
+import socket
+import sys
+import tempfile
+import threading
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager, suppress
+from pathlib import Path
+from typing import Any
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import httpx
+import numpy as np
+from websockets.sync.client import connect
+
+from benchmarks._load import (
+    EVENTS_LUA,
+    ROOT,
+    Server,
+    _start,
+    free_port,
+    run_wrk,
+    write_sessions,
+)
+from benchmarks._report import command_line, machine, write_section
+
+ADMIN = {"X-API-Key": "bench"}
+MiB = 1024 * 1024
+Rows = list[tuple[str, float, str]]
+
+
+# ---- the service ---------------------------------------------------------------------------------
+@contextmanager
+def service(root: Path, workdir: Path, viewer: bool = False, **env: str) -> Iterator[Server]:
+    """``python -m app serve`` from ``root``, one client measuring: quotas as the service's."""
+    port = free_port()
+    cmd = [sys.executable, "-m", "app", "serve", "--port", str(port), "--data-dir",
+           str(workdir / f"data-{port}"), "--log-level", "warning"]  # fmt: skip
+    settings = {
+        "ADVISOR_ADMIN_KEY": "bench", "ADVISOR_BOOTSTRAP_PER_GOAL": "2",
+        "ADVISOR_CLIENT_MAX_SESSIONS": "20000", "ADVISOR_CLIENT_MAX_SESSION_MEMORY": str(1 << 30),
+        "ADVISOR_OVERVIEW_SECONDS": "0",  # every overview built: the worst case
+    }  # fmt: skip
+    if viewer:
+        settings["ADVISOR_VIEWER_PORT"] = str(free_port())
+    else:
+        cmd.append("--no-viewer")
+    server = _start(
+        cmd, root, os.environ | settings | env, workdir / f"advisor-{port}.log", "/health"
+    )
+    try:
+        yield server
+    finally:
+        server.stop()
+
+
+def percentiles(values: list[float]) -> tuple[float, float, float]:
+    """(p50, p99, max) of ``values`` (milliseconds)."""
+    arr = np.asarray(values)
+    return float(np.percentile(arr, 50)), float(np.percentile(arr, 99)), float(arr.max())
+
+
+def poll_latency(url: str, seconds: float, every: float = 0.02) -> list[float]:
+    """``GET url`` every ``every`` seconds for ``seconds``: each answer's time (ms)."""
+    out = []
+    with httpx.Client(timeout=60) as http:
+        deadline = time.monotonic() + seconds
+        while time.monotonic() < deadline:
+            t = time.perf_counter()
+            r = http.get(url)
+            out.append(1000 * (time.perf_counter() - t))
+            assert r.status_code == 200, r.text
+            time.sleep(every)
+    return out
+
+
+def reader(url: str, headers: dict[str, str], seconds: float, counts: Any) -> None:
+    """A process reading ``url`` over and over (bytes, never parsed) for ``seconds``."""
+    with httpx.Client(timeout=120, headers=headers) as http:
+        deadline = time.monotonic() + seconds
+        while time.monotonic() < deadline:
+            r = http.get(url)
+            if r.status_code == 200:
+                counts.value += 1
+
+
+@contextmanager
+def processes(target: Callable[..., None], args: list[tuple[Any, ...]]) -> Iterator[None]:
+    procs = [mp.Process(target=target, args=a, daemon=True) for a in args]
+    for p in procs:
+        p.start()
+    try:
+        yield
+    finally:
+        for p in procs:
+            p.join(timeout=300)
+            if p.is_alive():
+                p.terminate()
+
+
+def open_map(rows: int, cols: int) -> list[str]:
+    """An open rows x cols floor, walled round, start and one goal in opposite corners."""
+    inner = ["#" + "." * (cols - 2) + "#" for _ in range(rows - 2)]
+    inner[0] = "#S" + inner[0][2:]
+    inner[-1] = inner[-1][:-2] + "G#"
+    return ["#" * cols, *inner, "#" * cols]
+
+
+# ---- reads ---------------------------------------------------------------------------------------
+def bench_reads(root: Path, workdir: Path, seconds: float) -> Rows:
+    rows: Rows = []
+    with service(root, workdir) as srv, httpx.Client(base_url=srv.url, timeout=120) as http:
+        r = http.put("/domains/big", json={"map": open_map(400, 400)}, headers=ADMIN)
+        assert r.status_code in (200, 201), r.text
+        t = time.perf_counter()
+        size = len(http.get("/domains/big/prior").content)
+        rows.append(("first read of a 400 x 400 prior", 1000 * (time.perf_counter() - t), "ms"))
+        rows.append(("its size", size / 1e6, "MB"))
+        baseline = percentiles(poll_latency(srv.url + "/health", 3))
+        rows.append(("/health p99, idle", baseline[1], "ms"))
+        count = mp.Value("i", 0)
+        prior = [(srv.url + "/domains/big/prior", {}, seconds, count) for _ in range(2)]
+        with processes(reader, prior):
+            time.sleep(1)
+            lat = percentiles(poll_latency(srv.url + "/health", seconds - 2))
+        rows += [("/health p50, two clients reading the prior", lat[0], "ms"),
+                 ("/health p99, two clients reading the prior", lat[1], "ms"),
+                 ("/health max, two clients reading the prior", lat[2], "ms"),
+                 ("prior reads answered meanwhile", count.value, "reads")]  # fmt: skip
+        # 1,000 sessions with 100 moves each, read whole by an operator
+        events = json.dumps([{"state": [398, 1 + i % 2], "action": "E" if i % 2 == 0 else "W"}
+                             for i in range(100)])  # fmt: skip
+        for _ in range(1000):
+            c = http.post("/domains/big/sessions", json={"start": [398, 1]}).json()
+            http.post(f"/sessions/{c['session_id']}/events", content=events,
+                      headers={"Authorization": f"Bearer {c['token']}"})  # fmt: skip
+        t = time.perf_counter()
+        http.get("/overview", params={"limit": 1000}, headers=ADMIN)
+        rows.append(
+            ("GET /overview?limit=1000 (1,000 sessions)", 1000 * (time.perf_counter() - t), "ms")
+        )
+        count = mp.Value("i", 0)
+        view = [(srv.url + "/overview?limit=1000", ADMIN, seconds, count) for _ in range(2)]
+        with processes(reader, view):
+            time.sleep(1)
+            lat = percentiles(poll_latency(srv.url + "/health", seconds - 2))
+        rows.append(("/health p99, two clients reading /overview?limit=1000", lat[1], "ms"))
+    return rows
+
+
+# ---- batches -------------------------------------------------------------------------------------
+def streamer(ws_url: str, token: str, start: list[int], seconds: float, count: Any) -> None:
+    """A process streaming 5,000-event batches back to back on one session (binary answers)."""
+    walk = [{"state": start, "action": "E"}, {"state": [start[0], start[1] + 1], "action": "W"}]
+    frame = json.dumps(walk * 2500)
+    with connect(f"{ws_url}?format=binary", additional_headers={"Authorization": f"Bearer {token}"},
+                 max_size=None) as ws:  # fmt: skip
+        deadline = time.monotonic() + seconds
+        while time.monotonic() < deadline:
+            ws.send(frame)
+            ws.recv()
+            count.value += 1
+
+
+def single_events(srv: Server, seconds: float) -> list[float]:
+    """One event at a time on a paper session's websocket: each round trip (ms)."""
+    c = httpx.post(srv.url + "/domains/default/sessions", json={}).json()
+    url = srv.ws_url + f"/sessions/{c['session_id']}/stream"
+    out = []
+    with connect(url, additional_headers={"Authorization": f"Bearer {c['token']}"}) as ws:
+        deadline = time.monotonic() + seconds
+        i = 0
+        while time.monotonic() < deadline:
+            e = {"state": [28, i % 2], "action": "E" if i % 2 == 0 else "W"}
+            t = time.perf_counter()
+            ws.send(json.dumps(e))
+            ws.recv()
+            out.append(1000 * (time.perf_counter() - t))
+            i += 1
+            time.sleep(0.01)
+    return out
+
+
+def bench_batches(root: Path, workdir: Path, seconds: float) -> Rows:
+    rows: Rows = []
+    with service(root, workdir) as srv:
+        idle = percentiles(single_events(srv, 3))
+        rows.append(("single-event p99, alone", idle[1], "ms"))
+        for strategy, body in [("goal_aware", {"strategy": "goal_aware", "params": {"beta": 0.5}}),
+                               ("mistake", {"strategy": "mistake"})]:  # fmt: skip
+            c = httpx.post(srv.url + "/domains/default/sessions", json=body).json()
+            url = srv.ws_url + f"/sessions/{c['session_id']}/stream"
+            count = mp.Value("i", 0)
+            args = [(url, c["token"], c["decision"]["state"], seconds, count)]
+            with processes(streamer, args):
+                time.sleep(1)
+                lat = percentiles(single_events(srv, seconds - 2))
+            rows += [(f"single-event p50, a {strategy} session streaming 5,000-event batches",
+                      lat[0], "ms"),
+                     (f"single-event p99, a {strategy} session streaming 5,000-event batches",
+                      lat[1], "ms"),
+                     (f"{strategy} batches answered", count.value, "batches")]  # fmt: skip
+    return rows
+
+
+# ---- attacks -------------------------------------------------------------------------------------
+def bench_attacks(root: Path, workdir: Path, seconds: float) -> Rows:
+    rows: Rows = []
+    with service(root, workdir) as srv:
+        # a 48 MB header, while another client asks /health
+        sock = socket.create_connection(("127.0.0.1", srv.port))
+        waits: list[float] = []
+        other = threading.Thread(target=lambda: waits.extend(poll_latency(srv.url + "/health", 8)))
+        t = time.perf_counter()
+        other.start()
+        sent = 0
+        try:
+            sock.sendall(b"GET /health HTTP/1.1\r\nHost: x\r\nX-Big: ")
+            while sent < 48 * MiB:
+                sock.sendall(b"a" * 65536)
+                sent += 65536
+            sock.sendall(b"\r\n\r\n")
+        except OSError:
+            pass
+        sock.settimeout(60)
+        try:
+            status = sock.recv(64).split(b" ")[1].decode()
+        except (OSError, IndexError):
+            status = "closed"
+        answered = time.perf_counter() - t
+        sock.close()
+        other.join()
+        rows += [
+            (f"48 MB header: answered {status} after", answered, "s"),
+            ("48 MB header: bytes the server took before answering", sent / MiB, "MiB"),
+            ("48 MB header: another client's /health max meanwhile", max(waits), "ms"),
+        ]
+        sock = socket.create_connection(("127.0.0.1", srv.port))
+        sock.sendall(b"GET /health HTTP/1.1\r\nHost: x\r\nX-Pad: " + b"a" * 65536 + b"\r\n\r\n")
+        sock.settimeout(30)
+        rows.append(("64 KiB header: status", float(sock.recv(64).split(b" ")[1]), ""))
+        sock.close()
+        # 300 sockets trickling a header byte a second
+        slow = [socket.create_connection(("127.0.0.1", srv.port)) for _ in range(300)]
+        began = time.monotonic()
+        for k in range(int(seconds)):
+            for s in slow:
+                with suppress(OSError):
+                    s.send(b"GET /health HTTP/1.1\r\nX: "[k : k + 1] or b"a")
+            time.sleep(1.0)
+        open_now = 0
+        for s in slow:
+            s.setblocking(False)
+            try:
+                s.recv(1)  # an answer (408) or the end: the server let it go
+            except BlockingIOError:
+                open_now += 1  # nothing back, not closed: the server still holds it
+            except OSError:
+                pass
+            s.close()
+        rows.append((f"300 slow sockets: still open after {time.monotonic() - began:.0f} s",
+                     open_now, "sockets"))  # fmt: skip
+    return rows
+
+
+# ---- throughput ----------------------------------------------------------------------------------
+def bench_throughput(root: Path, workdir: Path, seconds: float) -> Rows:
+    rows: Rows = []
+    with service(root, workdir) as srv:
+        health = run_wrk(srv.url + "/health", "", [], seconds, 32, workdir)
+        rows.append(("GET /health, wrk 32 connections", health.rate, "req/s"))
+        made = []
+        for _ in range(64):
+            c = httpx.post(srv.url + "/domains/default/sessions", json={}).json()
+            made.append((c["session_id"], c["token"]))
+        sessions = write_sessions(made, workdir / "sessions.txt")
+        bodies = workdir / "bodies.txt"
+        # events from [28, 0] east: every session goes back and forth along the bottom row
+        lines = [json.dumps({"state": [28, c], "action": a}) for c, a in ((0, "E"), (1, "W"))]
+        bodies.write_text("\n".join(lines) + "\n")
+        events = run_wrk(srv.url, EVENTS_LUA, [str(sessions), str(bodies), "0"], seconds, 32,
+                         workdir)  # fmt: skip
+        rows.append(("POST one event, wrk 32 connections", events.rate, "req/s"))
+    return rows
+
+
+# ---- memory --------------------------------------------------------------------------------------
+def bench_memory(root: Path, workdir: Path, seconds: float) -> Rows:
+    with service(root, workdir) as srv, httpx.Client(base_url=srv.url, timeout=120) as http:
+        # back and forth along the bottom corridor: valid moves, 10,000 of them
+        walk = [{"state": [28, 0], "action": "E"}, {"state": [28, 1], "action": "W"}] * 5000
+        frames = [json.dumps(walk[i : i + 5000]) for i in range(0, 10_000, 5000)]
+        body = {"strategy": "goal_aware", "window": 10_000, "params": {"beta": 0.5}}
+
+        def fill(c: dict[str, Any]) -> None:
+            url = srv.ws_url + f"/sessions/{c['session_id']}/stream?format=binary"
+            with connect(url, additional_headers={"Authorization": f"Bearer {c['token']}"},
+                         max_size=None) as ws:  # fmt: skip
+                for f in frames:
+                    ws.send(f)
+                    ws.recv()
+
+        warm = http.post("/domains/default/sessions", json=body).json()
+        fill(warm)
+        before = srv.rss_bytes()
+        made = [http.post("/domains/default/sessions", json=body).json() for _ in range(150)]
+        created = srv.rss_bytes()
+        for c in made:
+            fill(c)
+        after = srv.rss_bytes()
+    label = "RSS of 150 goal_aware sessions, window 10,000"
+    return [
+        (f"{label}, just created", (created - before) / MiB, "MiB"),
+        (f"{label}, windows full", (after - before) / MiB, "MiB"),
+    ]
+
+
+# ---- combined ------------------------------------------------------------------------------------
+def explorers(ws_url: str, created: list[tuple[str, str, list[int]]], seconds: float,
+              out: Any, errors: Any) -> None:  # fmt: skip
+    """A process of explorers, each sending one event every 100 ms on its websocket; the
+    round trips (ms) into ``out`` (a shared array, one slot per answer up to its size)."""
+    import asyncio
+
+    from websockets.asyncio.client import connect as aconnect
+
+    async def one(sid: str, token: str, start: list[int]) -> None:
+        url = f"{ws_url}/sessions/{sid}/stream"
+        async with aconnect(url, additional_headers={"Authorization": f"Bearer {token}"}) as ws:
+            deadline = time.monotonic() + seconds
+            i = 0
+            while time.monotonic() < deadline:
+                e = {"state": [start[0], start[1] + i % 2], "action": "E" if i % 2 == 0 else "W"}
+                t = time.perf_counter()
+                await ws.send(json.dumps(e))
+                answer = json.loads(await ws.recv())
+                if "detail" in answer:
+                    errors.value += 1
+                with out.get_lock():
+                    k = int(out[0])
+                    if k + 1 < len(out):
+                        out[k + 1] = 1000 * (time.perf_counter() - t)
+                        out[0] = k + 1
+                i += 1
+                await asyncio.sleep(max(0.0, 0.1 - (time.perf_counter() - t)))
+
+    async def run() -> None:
+        await asyncio.gather(*(one(*c) for c in created))
+
+    asyncio.run(run())
+
+
+def writer(url: str, seconds: float, count: Any, errors: Any) -> None:
+    """A process ingesting one expert trajectory per request, back to back."""
+    steps = [{"state": [28, c], "action": "E"} for c in range(6)]
+    body = {"trajectories": [{"steps": steps}]}
+    with httpx.Client(base_url=url, timeout=60, headers=ADMIN) as http:
+        deadline = time.monotonic() + seconds
+        while time.monotonic() < deadline:
+            r = http.post("/domains/default/trajectories", json=body)
+            count.value += 1
+            if r.status_code != 201:
+                errors.value += 1
+            time.sleep(0.05)
+
+
+def watcher(port: int, seconds: float) -> None:
+    """A browser on the viewer, as viser's web client connects (reads all it is sent)."""
+    import msgspec
+    import viser
+    from viser import _messages
+    from websockets.typing import Subprotocol
+
+    protocol = Subprotocol(f"viser-v{viser.__version__}")
+    with connect(f"ws://127.0.0.1:{port}", subprotocols=[protocol], max_size=None) as ws:
+        camera = _messages.ViewerCameraMessage(
+            wxyz=(1.0, 0.0, 0.0, 0.0), position=(0.0, 0.0, 10.0), fov=1.0, near=0.01, far=1e3,
+            image_height=480, image_width=640, look_at=(0.0, 0.0, 0.0),
+            up_direction=(0.0, 1.0, 0.0),
+        )  # fmt: skip
+        ws.send(msgspec.msgpack.encode(camera.as_serializable_dict()))
+        deadline = time.monotonic() + seconds
+        while time.monotonic() < deadline:
+            with suppress(TimeoutError):
+                ws.recv(timeout=1)
+
+
+def bench_combined(root: Path, workdir: Path, seconds: float) -> Rows:
+    with (
+        service(root, workdir, viewer=True) as srv,
+        httpx.Client(base_url=srv.url, timeout=120) as http,
+    ):
+        r = http.put("/domains/big", json={"map": open_map(400, 400)}, headers=ADMIN)
+        assert r.status_code in (200, 201), r.text
+        viewer_port = http.get("/viewer").json()["port"]
+        created = []
+        for _ in range(200):
+            c = http.post("/domains/default/sessions", json={}).json()
+            created.append((c["session_id"], c["token"], [28, 0]))
+        errors = mp.Value("i", 0)
+        writes = mp.Value("i", 0)
+        reads = mp.Value("i", 0)
+        rtts = mp.Array("d", 200 * int(seconds) * 11)
+        groups = [created[i::4] for i in range(4)]
+        procs = [mp.Process(target=explorers, args=(srv.ws_url, g, seconds, rtts, errors))
+                 for g in groups]  # fmt: skip
+        procs += [mp.Process(target=writer, args=(srv.url, seconds, writes, errors))
+                  for _ in range(5)]  # fmt: skip
+        prior = srv.url + "/domains/big/prior"
+        procs += [mp.Process(target=reader, args=(prior, {}, seconds, reads))
+                  for _ in range(2)]  # fmt: skip
+        procs.append(mp.Process(target=watcher, args=(viewer_port, seconds)))
+        for p in procs:
+            p.start()
+        rss = []
+        began = time.monotonic()
+        while any(p.is_alive() for p in procs) and time.monotonic() - began < seconds + 120:
+            rss.append((time.monotonic() - began, srv.rss_bytes() / MiB))
+            time.sleep(5)
+        for p in procs:
+            p.join(timeout=60)
+        health = http.get("/health").json()
+        print("RSS (s, MiB):", ", ".join(f"{t:.0f}: {m:.0f}" for t, m in rss), file=sys.stderr)
+    count = int(rtts[0])
+    lat = percentiles(list(rtts[1 : count + 1]))
+    warm = [m for t, m in rss if t >= WARM_UP]
+    return [
+        ("combined: events answered", count, "events"),
+        ("combined: errors (error answers and failed ingests)", errors.value, ""),
+        ("combined: trajectories ingested", writes.value, ""),
+        ("combined: prior reads answered", reads.value, ""),
+        ("combined: single-event p50", lat[0], "ms"),
+        ("combined: single-event p99", lat[1], "ms"),
+        ("combined: single-event max", lat[2], "ms"),
+        (
+            f"combined: RSS at {WARM_UP:.0f} s (after warm-up)",
+            warm[0] if warm else float("nan"),
+            "MiB",
+        ),
+        ("combined: RSS at the end", warm[-1] if warm else float("nan"), "MiB"),
+        (
+            f"combined: RSS growth over the last {seconds - WARM_UP:.0f} s",
+            (warm[-1] - warm[0]) if warm else float("nan"),
+            "MiB",
+        ),
+        ("combined: live sessions at the end", health["sessions"], ""),
+    ]
+
+
+SECTIONS: dict[str, tuple[Callable[[Path, Path, float], Rows], float]] = {
+    "reads": (bench_reads, 15.0),
+    "batches": (bench_batches, 15.0),
+    "attacks": (bench_attacks, 20.0),
+    "throughput": (bench_throughput, 10.0),
+    "memory": (bench_memory, 0.0),
+    "combined": (bench_combined, 150.0),
+}
+#: The combined load's first seconds, while caches fill and the allocator grows its arenas
+#: (measured: RSS rises for 60 to 80 s, then stays within a few MiB)
+WARM_UP = 90.0
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--root", type=Path, default=ROOT, help="source tree of the service")
+    parser.add_argument("--only", nargs="*", choices=sorted(SECTIONS), default=list(SECTIONS))
+    parser.add_argument("--write", type=Path, help="rewrite this document's section")
+    parser.add_argument("--seconds", type=float, help="each section's load this long instead")
+    args = parser.parse_args()
+    rows: Rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for name in args.only:
+            fn, seconds = SECTIONS[name]
+            got = fn(args.root, Path(tmp), args.seconds or seconds)
+            rows += got
+            for label, value, unit in got:
+                print(f"| {label} | {value:,.2f} {unit} |", flush=True)
+    if args.write:
+        table = "\n".join(f"| {label} | {value:,.2f} {unit} |" for label, value, unit in rows)
+        body = (
+            f"Measured with `{command_line()}` ({machine()}):\n\n"
+            f"| measurement | value |\n|---|---|\n{table}\n"
+        )
+        key = "hostile_" + "_".join(args.only)
+        write_section(args.write, key, body)
+
+
+if __name__ == "__main__":
+    mp.set_start_method("fork")
+    main()
