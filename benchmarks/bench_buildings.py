@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import multiprocessing as mp
 import statistics
 import subprocess
 import sys
@@ -28,6 +29,7 @@ from typing import Any
 
 import httpx
 import numpy as np
+from fastapi.testclient import TestClient
 from websockets.sync.client import connect
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -35,11 +37,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from app.domain.generate import generate_building_domain
 from app.domain.grid import ACTIONS, GridDomain
 from app.service.config import Settings
-from app.service.state import open_state
-from app.service.viewer_feed import ServiceFeed
+from app.service.main import create_app
+from app.service.state import ServiceState
+from app.viewer.remote import RemoteFeed
 from app.viewer.viewer import Viewer
 from benchmarks._report import command_line, machine, write_section
-from benchmarks.bench_viewer import advance, free_port, serve
+from benchmarks.bench_viewer import advance, free_port, serve, watch
 
 ROOT = Path(__file__).resolve().parents[1]
 FRAME = 500
@@ -55,9 +58,12 @@ def walk(grid: GridDomain, rng: np.random.Generator, s: int, n: int) -> tuple[li
 
 
 def bench_viewer(grid: GridDomain, n_sessions: int, ticks: int) -> dict[str, float]:
+    """The viewer as ``serve`` runs it (its feed reading the API with the operator key), one
+    browser watching (a websocket client in its own process) with the building picked."""
     with tempfile.TemporaryDirectory() as tmp:
-        state, _ = open_state(Settings(data_dir=Path(tmp), admin_key="bench", viewer_enabled=False))
-        try:
+        settings = Settings(data_dir=Path(tmp), admin_key="bench", viewer_enabled=False)
+        with TestClient(create_app(settings)) as client:
+            state: ServiceState = client.app.state.service  # type: ignore[attr-defined]
             domain, _, _ = state.catalog.put("hall", grid, 1.0)
             t0 = time.perf_counter()
             state.catalog.guide_map(domain)
@@ -66,12 +72,17 @@ def bench_viewer(grid: GridDomain, n_sessions: int, ticks: int) -> dict[str, flo
                 state.registry.create(domain, 0.5, 300, None, grid.start, "guide")
             rng = np.random.default_rng(0)
             advance(state, rng, 300)
-            viewer = Viewer(ServiceFeed(state), port=free_port())
+            viewer = Viewer(RemoteFeed(client, state.operator_key), port=free_port())
             viewer.start(pump=False)
+            stop, received = mp.Event(), mp.Value("q", 0)
+            browser = mp.Process(target=watch, args=(viewer.port, stop, received))
+            browser.start()
             try:
-                assert viewer.controls is not None
+                while not viewer.views:
+                    time.sleep(0.05)
                 viewer.tick()
-                viewer.controls.domain.value = "hall"  # type: ignore[misc]  # viser types no setter
+                for view in list(viewer.views.values()):
+                    view.controls.domain.value = "hall"  # type: ignore[misc]  # no setter typed
                 t0 = time.perf_counter()
                 viewer.tick()  # builds the 256 x 256 scene
                 first = (time.perf_counter() - t0) * 1e3
@@ -85,9 +96,9 @@ def bench_viewer(grid: GridDomain, n_sessions: int, ticks: int) -> dict[str, flo
                     viewer.tick()
                     busy.append((time.perf_counter() - t0) * 1e3)
             finally:
+                stop.set()
+                browser.join()
                 viewer.stop()
-        finally:
-            state.close()
     return {
         "guide_map_ms": guide_ms, "first_tick_ms": first,
         "idle_tick_ms": statistics.median(idle), "busy_tick_ms": statistics.median(busy),

@@ -17,11 +17,10 @@ the pump for one tick at once, so a choice never waits for the pacing.
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
 import logging
 import threading
 import time
+from collections.abc import Callable
 
 import viser
 

@@ -167,7 +167,8 @@ def test_bridge_opens_sessions_with_the_retained_config(tmp_path: Path, prefix: 
             peer.publish("default/walker-1/events", walk(5, seed=1))
             got = peer.wait("default/walker-1/decisions", 6)
             assert all(d["advise"] for d in got)
-            listed = client.get("/overview").json()["sessions"]
+            operator = {"X-API-Key": client.app.state.service.operator_key}  # type: ignore[attr-defined]
+            listed = client.get("/overview", headers=operator).json()["sessions"]
             assert [(s["strategy"], s["kappa"]) for s in listed] == [("always", 0.0)]
         peer.publish("default/walker-1/config", b"", retain=True)  # clears the retained one
     finally:

@@ -149,7 +149,9 @@ def test_the_viewers_tick_time_reaches_the_metrics(client: TestClient) -> None:
     ignored, not an error."""
 
     def ticks() -> float:
-        m = re.search(r"^advisor_viewer_tick_seconds_count (\S+)$", client.get("/metrics").text, re.M)
+        m = re.search(
+            r"^advisor_viewer_tick_seconds_count (\S+)$", client.get("/metrics").text, re.M
+        )
         return float(m.group(1)) if m else 0.0
 
     before = ticks()
