@@ -104,9 +104,9 @@ def session_for(
     state = state or service_of(conn)
     token = bearer_token(conn)
     if not token:
-        check_session_token(None, "", session_id)  # raises 401
+        check_session_token(None, b"", session_id)  # raises 401
     session = state.registry.get(session_id)
-    check_session_token(token, session.token, session_id)
+    check_session_token(token, session.token_digest, session_id)
     state.registry.touch(session)
     return session
 

@@ -28,6 +28,7 @@ from app.service.live.registry import (
     SessionMemoryFull,
     TooManySessions,
 )
+from app.service.live.replay import StepConflict
 from app.service.live.stream import StreamAdvisor, StreamGoalAware, StreamGuide
 from app.service.metrics import METRICS, ingested
 from app.service.problems import BadInput
@@ -142,17 +143,24 @@ def _count_batch(state: ServiceState, session: LiveSession, out: DecisionBatch) 
         _count(state, session, len(out), int(np.count_nonzero(out.advise)))
 
 
+def conflict(exc: StepConflict) -> BadInput:
+    return BadInput(str(exc), 409)
+
+
 def apply_events(state: ServiceState, session: LiveSession, raw: bytes | str) -> bytes:
     """Events (JSON text: one or a list) -> decisions (JSON: one or a list, in order), in one
     go (the routes run :func:`answer_events`, the same work with long batches in slices)."""
     grid = session.domain.domain
-    move = read_move(grid, raw)
-    if move is not None:  # one event object: plain ints and one decision
-        d = state.registry.observe_one(session, *move)
-        _count(state, session, 1, int(d.advise))
-        return decision_json(d, grid)
-    moves, _ = read_moves(grid, raw, state.settings.max_batch_events)  # a list (or not JSON)
-    out = state.registry.observe_batch(session, moves)
+    try:
+        move = read_move(grid, raw)
+        if move is not None:  # one event object: plain ints and one decision
+            d = state.registry.observe_one(session, *move)
+            _count(state, session, 1, int(d.advise))
+            return decision_json(d, grid)
+        moves, _, first = read_moves(grid, raw, state.settings.max_batch_events)  # a list
+        out = state.registry.observe_batch(session, moves, first)
+    except StepConflict as exc:
+        raise conflict(exc) from None
     _count_batch(state, session, out)
     return batch_json(out, grid)
 
@@ -164,14 +172,17 @@ async def answer_events(
     a long batch in slices, the event loop free for others between them
     (:meth:`SessionRegistry.observe_sliced`)."""
     grid, registry = session.domain.domain, state.registry
-    if not binary:
-        move = read_move(grid, raw)
-        if move is not None:
-            d = await registry.observe_after(session, *move)
-            _count(state, session, 1, int(d.advise))
-            return decision_json(d, grid)
-    moves, _ = read_moves(grid, raw, state.settings.max_batch_events)
-    out = await registry.observe_sliced(session, moves)
+    try:
+        if not binary:
+            move = read_move(grid, raw)
+            if move is not None:
+                d = await registry.observe_after(session, *move)
+                _count(state, session, 1, int(d.advise))
+                return decision_json(d, grid)
+        moves, _, first = read_moves(grid, raw, state.settings.max_batch_events)
+        out = await registry.observe_sliced(session, moves, first)
+    except StepConflict as exc:
+        raise conflict(exc) from None
     _count_batch(state, session, out)
     return batch_binary(out, grid) if binary else batch_json(out, grid)
 
@@ -239,8 +250,11 @@ def apply_events_binary(state: ServiceState, session: LiveSession, raw: bytes | 
     """Events (JSON text: one or a list) -> decisions as one binary frame
     (:mod:`advisor_client.protocol`), the same decisions as :func:`apply_events` gives."""
     grid = session.domain.domain
-    moves, _ = read_moves(grid, raw, state.settings.max_batch_events)
-    out = state.registry.observe_batch(session, moves)
+    moves, _, first = read_moves(grid, raw, state.settings.max_batch_events)
+    try:
+        out = state.registry.observe_batch(session, moves, first)
+    except StepConflict as exc:
+        raise conflict(exc) from None
     _count_batch(state, session, out)
     return batch_binary(out, grid)
 
@@ -364,7 +378,7 @@ def warm_up() -> None:
     grid = GridDomain.from_strings(["#####", "#S.G#", "#####"])
     tables = AdviceTables.paper(np.full((grid.n_states, 4), 0.25))
     event = {"state": list(grid.cell(grid.start)), "action": ACTIONS[1]}
-    moves, _ = read_moves(grid, json.dumps([event] * 3), 3)
+    moves, _, _ = read_moves(grid, json.dumps([event] * 3), 3)
     advisor = StreamAdvisor(tables, kappa=0.0, window=2)
     advisor.start(grid.start)
     out = advisor.observe_batch(*moves)

@@ -308,6 +308,17 @@ class DecisionPublic(BaseModel):
     cost: CostPublic
 
 
+EventStep = Annotated[
+    int,
+    Field(
+        strict=True, ge=1, lt=2**53,
+        description="The session step this event is meant to be (the first event of a session "
+        "is step 1): a step already applied is answered again with its decision and not "
+        "applied twice; a step that is not the next one is refused (409). Retries send it.",
+    ),
+]  # fmt: skip
+
+
 @with_config(ConfigDict(extra="forbid"))
 class EventIn(TypedDict):
     """The explorer at ``state`` took ``action`` and reached ``next_state``."""
@@ -315,6 +326,7 @@ class EventIn(TypedDict):
     state: Cell
     action: NotRequired[ActionIn | None]
     next_state: NotRequired[Cell | None]
+    step: NotRequired[EventStep]
 
 
 Point = Annotated[

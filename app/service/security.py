@@ -7,6 +7,7 @@ exists one is generated, written with mode 0600 and shown once. Comparisons are 
 
 from __future__ import annotations
 
+import hashlib
 import hmac
 import logging
 import os
@@ -97,14 +98,21 @@ def is_operator(given: str | None, admin: str, operator: str) -> bool:
     raise AuthError(403, "the X-API-Key is neither the admin key nor the operator key")
 
 
-def check_session_token(given: str | None, expected: str, session_id: str) -> None:
+def token_digest(token: str) -> bytes:
+    """What a session keeps of its token: the SHA-256 of it (a session written to Redis or
+    the database holds no token a reader could use)."""
+    return hashlib.sha256(token.encode()).digest()
+
+
+def check_session_token(given: str | None, expected: bytes, session_id: str) -> None:
+    """``given`` is the token whose digest is ``expected`` (401 without one, 403 otherwise)."""
     if not given:
         raise AuthError(
             401,
             "session route: send the session's token as 'Authorization: Bearer <token>' "
             "(or ?token=<token> on the websocket)",
         )
-    if not same_secret(given, expected):
+    if not hmac.compare_digest(token_digest(given), expected):
         raise AuthError(403, f"this token does not belong to session {session_id}")
 
 

@@ -19,7 +19,7 @@ import secrets
 import threading
 import time
 from collections import Counter
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
 from typing import Any
 
@@ -33,9 +33,12 @@ from app.advice.priors import GoalPriors
 from app.advice.strategies import StrategyParams, guide_params
 from app.service.data.domains import DomainState
 from app.service.live.history import Advice, AdviceLog, Recent
+from app.service.live.replay import DEFAULT_STEPS, Replay, StepConflict
 from app.service.live.stream import StreamAdvisor, StreamGoalAware, StreamGuide, StreamRule
+from app.service.security import token_digest
 
 IntArray = npt.NDArray[np.int64]
+Moves = tuple[IntArray, IntArray, IntArray]
 RECENT_ADVICE = 50
 
 
@@ -126,6 +129,8 @@ class LiveSession:
     busy: asyncio.Lock | None = None  # held while a batch runs in slices (made at the first)
     born: float = 0.0  # time.monotonic() at creation
     path_times: Recent | None = None  # seconds into the session of each cell of ``path``
+    token_digest: bytes = b""  # SHA-256 of the token (``token`` is empty once it was loaded)
+    replay: Replay = field(default_factory=lambda: Replay(0))  # its last decisions, for retries
 
     def _rings(self) -> tuple[Recent, Recent]:
         """The recent path and P(M1 | H) rings, made at the first event (until then the
@@ -171,6 +176,7 @@ class LiveSession:
         at = now - self.born
         self.path_times.push(at)  # type: ignore[union-attr]  # made with the rings
         p_history.push(d.p_normal)
+        self.replay.add_one(d)
         if d.advise:
             own = d.advice if self.advisor.own_advice else None
             self._log().add(d.step, d.state, tables, own, int(at * 1000))
@@ -187,6 +193,7 @@ class LiveSession:
         at = now - self.born
         self.path_times.extend(np.full(n, at, dtype=np.float32))  # type: ignore[union-attr]
         p_history.extend(out.p_normal)
+        self.replay.add(out)
         advised = np.flatnonzero(out.advise)[-RECENT_ADVICE:]
         if len(advised):
             own = out.advice[-len(advised) :] if self.advisor.own_advice else None
@@ -227,11 +234,12 @@ class SessionRegistry:
 
     def __init__(
         self, limits: Limits | int, idle_seconds: float, recent_path: int = 100,
-        recent_p: int = 200,
+        recent_p: int = 200, replay_steps: int = DEFAULT_STEPS,
     ):  # fmt: skip
         self.limits = limits if isinstance(limits, Limits) else Limits(limits)
         self.idle_seconds = idle_seconds
         self.history_sizes = (recent_path, recent_p)
+        self.replay_steps = replay_steps  # decisions each session keeps for retries
         self.lock = threading.Lock()
         self._sessions: dict[str, LiveSession] = {}
         self.reserved = 0  # bytes reserved by the live sessions
@@ -249,8 +257,10 @@ class SessionRegistry:
 
     def reservation(self, advisor: ServiceAdvisor) -> int:
         """Bytes a session with ``advisor`` reserves: the most its advisor's arrays can take,
-        its history rings (int32 cells, float32 P(M1 | H)) and :data:`SESSION_OVERHEAD`."""
-        return advisor.footprint() + 4 * sum(self.history_sizes) + SESSION_OVERHEAD
+        its history rings (int32 cells, float32 P(M1 | H)), the decisions it keeps for retries
+        and :data:`SESSION_OVERHEAD`."""
+        rings = 4 * sum(self.history_sizes) + Replay.footprint(self.replay_steps)
+        return advisor.footprint() + rings + SESSION_OVERHEAD
 
     def client_usage(self, client: str) -> tuple[int, int]:
         """(live sessions, bytes reserved) of ``client``."""
@@ -295,11 +305,13 @@ class SessionRegistry:
             if refused is not None:
                 raise refused
             sid = secrets.token_hex(8)
+            token = secrets.token_urlsafe(24)
             session = LiveSession(
-                sid, secrets.token_urlsafe(24), domain, agent_type, key, advisor, start,
-                decision.p_normal, datetime.now(UTC), now, self.history_sizes,
-                client=client, reserved=need, born=now,
+                sid, token, domain, agent_type, key, advisor, start, decision.p_normal,
+                datetime.now(UTC), now, self.history_sizes, client=client, reserved=need,
+                born=now, token_digest=token_digest(token), replay=Replay(self.replay_steps),
             )  # fmt: skip
+            session.replay.restart(decision.advice_count, decision.benefit)
             if decision.advise:
                 own = decision.advice if advisor.own_advice else None
                 session._log().add(0, start, tables, own)
@@ -346,13 +358,17 @@ class SessionRegistry:
         return session
 
     def observe_one(
-        self, session: LiveSession, state: int, action: int, next_state: int
+        self, session: LiveSession, state: int, action: int, next_state: int, step: int = -1
     ) -> Decision:
-        """Advance ``session`` by one checked (s, a, s')."""
+        """Advance ``session`` by one checked (s, a, s'); ``step`` (-1: none) as
+        :meth:`observe_batch` takes it."""
         with self.lock:
             if session.closed:
                 raise SessionNotFound(session.id)
             adv = session.advisor
+            if step >= 0 and step != adv.steps + 1:  # a retry (or a step out of turn)
+                moves = tuple(np.array([v], dtype=np.int64) for v in (state, action, next_state))
+                return self._observe(session, moves, step).decisions()[0]  # type: ignore[arg-type]
             tables = adv.tables
             d = adv.observe(state, action, next_state)
             now = time.monotonic()
@@ -361,22 +377,69 @@ class SessionRegistry:
         return d
 
     def observe_batch(
-        self, session: LiveSession, moves: tuple[IntArray, IntArray, IntArray]
+        self, session: LiveSession, moves: Moves, first_step: int | None = None
     ) -> DecisionBatch:
-        """Advance ``session`` by checked (s, a, s') arrays; its decisions as columns."""
+        """Advance ``session`` by checked (s, a, s') arrays; its decisions as columns.
+        ``first_step``: the step the first move is meant to be (None: the next one); steps
+        already applied are answered with their decisions (:meth:`replayed`)."""
         with self.lock:
             if session.closed:
                 raise SessionNotFound(session.id)
-            adv = session.advisor
-            tables = adv.tables
-            out = adv.observe_batch(*moves)
-            now = time.monotonic()
-            session.record_batch(out, tables, now)
-            session.last_seen = now
-        return out
+            return self._observe(session, moves, first_step)
+
+    def _observe(self, session: LiveSession, moves: Moves, first_step: int | None) -> DecisionBatch:
+        done, rest = self.replayed(session, moves, first_step)
+        if rest is None:
+            assert done is not None
+            return done
+        adv = session.advisor
+        tables = adv.tables
+        out = adv.observe_batch(*rest)
+        now = time.monotonic()
+        session.record_batch(out, tables, now)
+        session.last_seen = now
+        return out if done is None else joined([done, out])
+
+    @staticmethod
+    def replayed(
+        session: LiveSession, moves: Moves, first_step: int | None
+    ) -> tuple[DecisionBatch | None, Moves | None]:
+        """(the decisions of the moves whose steps ``session`` applied already, the moves still
+        to apply): a retry is answered what it was answered, and nothing is applied twice.
+        StepConflict when the first step is beyond the next one, was applied with another
+        move, or was applied and its decision is no longer kept."""
+        adv = session.advisor
+        nxt = adv.steps + 1
+        if first_step is None or first_step == nxt:
+            return None, moves
+        if first_step > nxt:
+            raise StepConflict(
+                f"step {first_step} is not the next step of session {session.id}: it has "
+                f"applied {adv.steps} (the next is {nxt}); send the events in between first"
+            )
+        n = len(moves[0])
+        k = min(n, nxt - first_step)
+        got = session.replay.answer(first_step, k, adv.steps, adv.kappa)
+        if got is None:
+            kept = session.replay.kept
+            kept_text = f"steps {nxt - kept} to {adv.steps}" if kept else "none"
+            raise StepConflict(
+                f"step {first_step} was applied already (session {session.id} is at step "
+                f"{adv.steps}) and its decision is no longer kept for a retry (kept: "
+                f"{kept_text}); nothing was applied"
+            )
+        same = got.state == moves[2][:k]
+        if not same.all():
+            bad = first_step + int(np.argmin(same))
+            raise StepConflict(
+                f"step {bad} was applied already with another move; nothing was applied"
+            )
+        if k == n:
+            return got, None
+        return got, (moves[0][k:], moves[1][k:], moves[2][k:])
 
     async def observe_sliced(
-        self, session: LiveSession, moves: tuple[IntArray, IntArray, IntArray]
+        self, session: LiveSession, moves: Moves, first_step: int | None = None
     ) -> DecisionBatch:
         """:meth:`observe_batch` on the event loop without holding it long: a batch is run in
         slices of the advisor's :meth:`batch_slice` events (about 2 ms of work each), with
@@ -385,30 +448,32 @@ class SessionRegistry:
         batch's decisions stay consecutive steps."""
         n, step = len(moves[0]), session.advisor.batch_slice()
         if n <= step and (session.busy is None or not session.busy.locked()):
-            return self.observe_batch(session, moves)
+            return self.observe_batch(session, moves, first_step)
         if session.busy is None:
             session.busy = asyncio.Lock()
         async with session.busy:
-            parts = []
-            for lo in range(0, n, step):
-                if lo:
-                    await asyncio.sleep(0)  # others' turn
-                part = (
-                    moves[0][lo : lo + step],
-                    moves[1][lo : lo + step],
-                    moves[2][lo : lo + step],
-                )
-                parts.append(self.observe_batch(session, part))
+            with self.lock:
+                if session.closed:
+                    raise SessionNotFound(session.id)
+                done, rest = self.replayed(session, moves, first_step)
+            parts = [] if done is None else [done]
+            if rest is not None:
+                for lo in range(0, len(rest[0]), step):
+                    if lo:
+                        await asyncio.sleep(0)  # others' turn
+                    part = (rest[0][lo : lo + step], rest[1][lo : lo + step],
+                            rest[2][lo : lo + step])  # fmt: skip
+                    parts.append(self.observe_batch(session, part))
         return joined(parts) if len(parts) != 1 else parts[0]
 
     async def observe_after(
-        self, session: LiveSession, state: int, action: int, next_state: int
+        self, session: LiveSession, state: int, action: int, next_state: int, step: int = -1
     ) -> Decision:
         """:meth:`observe_one`, after the session's batch in progress, if there is one."""
         if session.busy is not None and session.busy.locked():
             async with session.busy:
-                return self.observe_one(session, state, action, next_state)
-        return self.observe_one(session, state, action, next_state)
+                return self.observe_one(session, state, action, next_state, step)
+        return self.observe_one(session, state, action, next_state, step)
 
     def touch(self, session: LiveSession) -> None:
         session.last_seen = time.monotonic()

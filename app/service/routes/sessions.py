@@ -68,7 +68,10 @@ async def create_session(
 
 async def post_events(request: Request, session_id: SessionId) -> Response:
     """One event, or a list: the decision for each, in order (one object for one event). A
-    batch with a bad event is refused whole and changes nothing."""
+    batch with a bad event is refused whole and changes nothing. Events may carry ``step``
+    (the first event of a session is step 1): a retry of steps already applied is answered
+    with their decisions and applies nothing; a step beyond the next one, or one applied with
+    another move, is 409."""
     state = service_of(request)
     session = session_for(request, session_id, state)  # not a dependency: see session_for
     text = await ops.answer_events(state, session, await request.body())
@@ -86,7 +89,7 @@ def add_event_route(app: FastAPI) -> None:
         tags=["sessions"],
         response_model=DecisionPublic | list[DecisionPublic],
         openapi_extra=body("Events") | BEARER,
-        responses=ERRORS | {413: {"model": ErrorPublic}, 415: {"model": ErrorPublic}},
+        responses=ERRORS | {code: {"model": ErrorPublic} for code in (409, 413, 415)},
     )
 
 

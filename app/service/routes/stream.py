@@ -9,7 +9,10 @@ refusal can say why: it is closed with code 4401 (no token), 4403 (another sessi
 
 Each text frame gets exactly one answer frame, in order: the decisions (an object for one event,
 a list for a list), or for a bad frame an error ``{"detail": "...", "status": 422}`` (413 for
-too many events or bytes); a refused frame changes nothing and the connection stays usable. If
+too many events or bytes, 409 for a step out of turn); a refused frame changes nothing and the
+connection stays usable. Events carrying ``step`` are answered as on the REST route: a client
+that reconnects resends its unanswered frames with their steps, and those already applied are
+answered again, not applied twice. If
 the session ends or expires while connected, the next frame closes the connection with 4404.
 
 With ``?format=binary`` the decisions come as one binary frame per text frame instead (the
@@ -62,9 +65,9 @@ def _authorize(state: ServiceState, session_id: str, ws: WebSocket) -> LiveSessi
     if not token:
         token = ws.query_params.get("token")
     if not token:
-        check_session_token(None, "", session_id)
+        check_session_token(None, b"", session_id)
     session = state.registry.get(session_id)
-    check_session_token(token, session.token, session_id)
+    check_session_token(token, session.token_digest, session_id)
     return session
 
 

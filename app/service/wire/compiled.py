@@ -6,11 +6,11 @@ events written plainly (``[{"state": [28, 0], "action": "E"}, {"state": [28, 1],
 about 4,000 Python objects for 500 events. It accepts a strict subset of what the schema
 (``list[EventIn]``) accepts, with the same meaning:
 
-* keys ``"state"`` (required), ``"action"`` and ``"next_state"``, each at most once, without
-  escapes; JSON whitespace anywhere between tokens;
+* keys ``"state"`` (required), ``"action"``, ``"next_state"`` and ``"step"``, each at most
+  once, without escapes; JSON whitespace anywhere between tokens;
 * a cell is ``[row, col]``: two non-negative integers below 2**31 in plain digits;
 * an action is ``"N"``, ``"E"``, ``"S"``, ``"W"``, a digit 0-3, or ``null``; a next state a cell
-  or ``null``.
+  or ``null``; a step a positive integer below 2**31 in plain digits.
 
 Anything else (a float, a sign, an escape, an unknown or repeated key, a non-ASCII byte, ...)
 makes it answer ``None``, and the caller reads the text with pydantic, which accepts it or
@@ -110,7 +110,8 @@ def _null(buf: ByteArray, i: int) -> bool:  # pragma: no cover - compiled
 
 @njit(cache=True, inline="always")
 def _key(buf: ByteArray, i: int) -> tuple[int, int]:  # pragma: no cover - compiled
-    """(0 state, 1 action, 2 next_state or -1, index after the closing quote) at ``i``."""
+    """(0 state, 1 action, 2 next_state, 3 step or -1, index after the closing quote) at
+    ``i``."""
     n = buf.shape[0]
     if i >= n or buf[i] != _QUOTE:
         return _BAD, i
@@ -131,6 +132,9 @@ def _key(buf: ByteArray, i: int) -> tuple[int, int]:  # pragma: no cover - compi
         ok = buf[j] == 97 and buf[j + 1] == 99 and buf[j + 2] == 116 and buf[j + 3] == 105
         if ok and buf[j + 4] == 111 and buf[j + 5] == 110:
             return 1, k + 1
+    elif length == 4:  # step
+        if buf[j] == 115 and buf[j + 1] == 116 and buf[j + 2] == 101 and buf[j + 3] == 112:
+            return 3, k + 1
     elif length == 10:  # next_state
         ok = buf[j] == 110 and buf[j + 1] == 101 and buf[j + 2] == 120 and buf[j + 3] == 116
         ok = ok and buf[j + 4] == 95 and buf[j + 5] == 115 and buf[j + 6] == 116
@@ -189,12 +193,14 @@ def _after_item(buf: ByteArray, i: int, close: int) -> tuple[int, int]:  # pragm
 
 _STATE_KEY = np.frombuffer(b'{"state":', dtype=np.uint8)
 _ACTION_KEY = np.frombuffer(b'"action":', dtype=np.uint8)
+_STEP_KEY = np.frombuffer(b'"step":', dtype=np.uint8)
 
 
 @njit(cache=True, inline="always")
 def _common(buf: ByteArray, i: int, out: IntArray, count: int) -> int:  # pragma: no cover
     """The most common event, ``{"state":[r,c],"action":"E"}`` (or with ``json.dumps``'s
-    default single spaces), read at ``i`` into ``out[count]``: the index after its ``}``, or
+    default single spaces), with or without a ``"step"`` after the action, read at ``i`` into
+    ``out[count]``: the index after its ``}``, or
     -1 when the event is written any other way (the general reader then reads it).
 
     Written out flat, without the helpers above: each helper call costs a few nanoseconds
@@ -240,7 +246,7 @@ def _common(buf: ByteArray, i: int, out: IntArray, count: int) -> int:  # pragma
             return _BAD
     i += word.shape[0]
     i += buf[i] == _SPACE
-    if i + 3 >= n or buf[i] != _QUOTE or buf[i + 2] != _QUOTE or buf[i + 3] != _RBRACE:
+    if i + 3 >= n or buf[i] != _QUOTE or buf[i + 2] != _QUOTE:
         return _BAD
     letter = buf[i + 1]
     if letter == _N:
@@ -253,12 +259,36 @@ def _common(buf: ByteArray, i: int, out: IntArray, count: int) -> int:  # pragma
         a = 3
     else:
         return _BAD
+    i += 3
+    step = -1
+    if buf[i] == _COMMA:  # ``, "step": n`` (a client that retries numbers its events)
+        i += 1
+        i += i < n and buf[i] == _SPACE
+        word = _STEP_KEY
+        if i + word.shape[0] + 2 > n:
+            return _BAD
+        for k in range(word.shape[0]):
+            if buf[i + k] != word[k]:
+                return _BAD
+        i += word.shape[0]
+        i += buf[i] == _SPACE
+        start = i
+        v = 0
+        while i < n and _ZERO <= buf[i] <= _NINE and i - start < 9:
+            v = v * 10 + (buf[i] - _ZERO)
+            i += 1
+        if i == start or i >= n or buf[start] == _ZERO:
+            return _BAD
+        step = v
+    if buf[i] != _RBRACE:
+        return _BAD
     out[count, 0] = r
     out[count, 1] = c
     out[count, 2] = a
     out[count, 3] = -1
     out[count, 4] = -1
-    return i + 4
+    out[count, 5] = step
+    return i + 1
 
 
 @njit(cache=True)
@@ -288,8 +318,8 @@ def _common_run(
 
 @njit(cache=True)
 def _scan(buf: ByteArray, out: IntArray) -> int:  # pragma: no cover - compiled
-    """Fill ``out`` rows with (row, col, action, next row, next col) per event (-1 for an
-    absent action or next state); the number of events, or -1 if the text is not of the
+    """Fill ``out`` rows with (row, col, action, next row, next col, step) per event (-1 for
+    an absent action, next state or step); the number of events, or -1 if the text is not of the
     plain form (see the module)."""
     n = buf.shape[0]
     i = _skip(buf, 0)
@@ -304,7 +334,7 @@ def _scan(buf: ByteArray, out: IntArray) -> int:  # pragma: no cover - compiled
         if after < 0:  # an event written another way: the general reader
             i = _skip(buf, i + 1)
             seen = 0
-            r = c = nr = nc = a = -1
+            r = c = nr = nc = a = step = -1
             while True:
                 key, i = _key(buf, i)
                 if key < 0 or seen & (1 << key):
@@ -321,6 +351,10 @@ def _scan(buf: ByteArray, out: IntArray) -> int:  # pragma: no cover - compiled
                 elif key == 1:
                     a, i = _action(buf, i)
                     if a == -2:
+                        return _BAD
+                elif key == 3:
+                    step, i = _int(buf, i)
+                    if step < 1:
                         return _BAD
                 elif _null(buf, i):
                     i += 4
@@ -340,6 +374,7 @@ def _scan(buf: ByteArray, out: IntArray) -> int:  # pragma: no cover - compiled
             out[count, 2] = a
             out[count, 3] = nr
             out[count, 4] = nc
+            out[count, 5] = step
             count += 1
             after = i + 1
         i, more = _after_item(buf, after, _RBRACKET)
@@ -354,21 +389,21 @@ def _scan(buf: ByteArray, out: IntArray) -> int:  # pragma: no cover - compiled
 
 def scan_events(
     raw: bytes | str, min_events: int = 1
-) -> tuple[IntArray, IntArray, IntArray] | None:
-    """(cells (n, 2), action codes (n,) with -1 for none, next cells (n, 2) with -1 for none)
-    of a plain JSON list of at least ``min_events`` events, or ``None`` when ``raw`` is
-    anything else (then the full parser decides)."""
+) -> tuple[IntArray, IntArray, IntArray, IntArray] | None:
+    """(cells (n, 2), action codes (n,) with -1 for none, next cells (n, 2) with -1 for none,
+    steps (n,) with -1 for none) of a plain JSON list of at least ``min_events`` events, or
+    ``None`` when ``raw`` is anything else (then the full parser decides)."""
     data = raw.encode() if isinstance(raw, str) else raw
     # an event takes 16 bytes at least (``{"state":[0,0]}`` and a comma)
     most = len(data) // 16 + 1
     if most < max(min_events, 1):
         return None
-    out = np.empty((most, 5), dtype=np.int64)
+    out = np.empty((most, 6), dtype=np.int64)
     n = _scan(np.frombuffer(data, dtype=np.uint8), out)
     if n < max(min_events, 1):
         return None
     rows = out[:n]
-    return rows[:, 0:2], rows[:, 2], rows[:, 3:5]
+    return rows[:, 0:2], rows[:, 2], rows[:, 3:5], rows[:, 5]
 
 
 #: Why :func:`check_moves` refused an event, in the order an event is checked.

@@ -40,6 +40,7 @@ from app.service.wire.compiled import check_moves, scan_events
 
 IntArray = npt.NDArray[np.int64]
 Moves = tuple[IntArray, IntArray, IntArray]
+Scanned = tuple[IntArray, IntArray, IntArray, IntArray]
 
 EVENT = TypeAdapter(EventIn)
 EVENT_LIST = TypeAdapter(list[EventIn])
@@ -81,15 +82,34 @@ def _validate(adapter: TypeAdapter[Any], raw: bytes | str) -> Any:
         raise BadInput(describe_errors(errors)) from None
 
 
-def _arrays(events: list[EventIn]) -> tuple[IntArray, IntArray, IntArray]:
+def _arrays(events: list[EventIn]) -> Scanned:
     """Parsed events as the compiled reader gives them: cells (n, 2), action codes (n,; -1
-    none), next cells (n, 2; -1 none)."""
+    none), next cells (n, 2; -1 none), steps (n,; -1 none)."""
     n = len(events)
     flat = chain.from_iterable
     cells = np.fromiter(flat(e["state"] for e in events), np.int64, 2 * n).reshape(n, 2)
     actions = np.fromiter((ACTION_CODE[e.get("action")] for e in events), np.int64, n)
     nexts = np.fromiter(flat(e.get("next_state") or (-1, -1) for e in events), np.int64, 2 * n)
-    return cells, actions, nexts.reshape(n, 2)
+    steps = np.fromiter((e.get("step", -1) for e in events), np.int64, n)
+    return cells, actions, nexts.reshape(n, 2), steps
+
+
+def first_step(steps: IntArray) -> int | None:
+    """The step of a batch's first event, from the steps its events carry (-1: none): None
+    when none carries one; BadInput (422) when they do not number one after another."""
+    given = np.flatnonzero(steps >= 0)
+    if not len(given):
+        return None
+    base = steps[given] - given
+    first = int(base[0])
+    wrong = (base != first) | (base < 1)
+    if wrong.any():
+        bad = int(given[np.argmax(wrong)])
+        raise BadInput(
+            f"event {bad}: step {int(steps[bad])} does not follow the batch's numbering: the "
+            "events of one batch are consecutive steps, the first of a session step 1"
+        )
+    return first
 
 
 def _checked(domain: GridDomain, cells: IntArray, actions: IntArray, nexts: IntArray) -> Moves:
@@ -100,10 +120,13 @@ def _checked(domain: GridDomain, cells: IntArray, actions: IntArray, nexts: IntA
     return moves
 
 
-def read_moves(domain: GridDomain, raw: bytes | str, max_events: int) -> tuple[Moves, bool]:
-    """JSON text (one event or a list) -> (checked (s, a, s') arrays, single): single when it
-    was one event object, not a list. BadInput (422, or 413 for too many events) names the
-    first problem."""
+def read_moves(
+    domain: GridDomain, raw: bytes | str, max_events: int
+) -> tuple[Moves, bool, int | None]:
+    """JSON text (one event or a list) -> (checked (s, a, s') arrays, single, the first
+    event's step): single when it was one event object, not a list; the step None when no
+    event carries one (:func:`first_step`). BadInput (422, or 413 for too many events) names
+    the first problem."""
     head = raw.lstrip()[:1]
     if head in (b"[", "["):
         scanned = scan_events(raw)
@@ -118,22 +141,24 @@ def read_moves(domain: GridDomain, raw: bytes | str, max_events: int) -> tuple[M
         raise BadInput(
             f"too many events: {len(scanned[0])} in one batch, at most {max_events}", 413
         )
-    return _checked(domain, *scanned), single
+    cells, actions, nexts, steps = scanned
+    return _checked(domain, cells, actions, nexts), single, first_step(steps)
 
 
-def read_move(domain: GridDomain, raw: bytes | str) -> tuple[int, int, int] | None:
-    """One event object (JSON text) -> its checked (s, a, s') as plain ints, or None when
-    ``raw`` does not start as an object (then :func:`read_moves` reads it). The same checks
-    and errors as :func:`read_moves` gives for it; the common form costs no parser and no
-    arrays: one event per request is the REST route's common case."""
+def read_move(domain: GridDomain, raw: bytes | str) -> tuple[int, int, int, int] | None:
+    """One event object (JSON text) -> its checked (s, a, s') as plain ints and its step (-1:
+    none), or None when ``raw`` does not start as an object (then :func:`read_moves` reads
+    it). The same checks and errors as :func:`read_moves` gives for it; the common form costs
+    no parser and no arrays: one event per request is the REST route's common case."""
     head = raw.lstrip()[:1]
     if head not in (b"{", "{"):
         return None
     plain = _PLAIN_BYTES.fullmatch(raw) if isinstance(raw, bytes) else _PLAIN_TEXT.fullmatch(raw)
     if plain is None:
-        (s,), (a,), (s2,) = _checked(domain, *_arrays([_validate(EVENT, raw)]))
-        return int(s), int(a), int(s2)
-    r, c, letter = plain.groups()
+        cells, actions, nexts, steps = _arrays([_validate(EVENT, raw)])
+        (s,), (a,), (s2,) = _checked(domain, cells, actions, nexts)
+        return int(s), int(a), int(s2), int(steps[0])
+    r, c, letter, step = plain.groups()
     t = _tables(domain)
     row, col = int(r), int(c)
     s = t.state_of[row][col] if row < t.rows and col < t.cols else -1
@@ -141,16 +166,17 @@ def read_move(domain: GridDomain, raw: bytes | str) -> tuple[int, int, int] | No
         reason = compiled.STATE_OFF if row >= t.rows or col >= t.cols else compiled.STATE_WALL
         raise BadInput(f"event 0: {reason_text(domain, reason, [row, col], [-1, -1])}")
     a = _CODE[letter]
-    return s, a, t.next_state[s][a]
+    return s, a, t.next_state[s][a], int(step) if step else -1
 
 
-# ``{"state": [r, c], "action": "E"}`` as json.dumps writes it, with or without its spaces,
-# and JSON whitespace around it: what the parser reads as that event (1-9 plain digits with
-# no leading zero make a valid coordinate, below 2**31). tests/service/wire/test_events.py checks
-# read_move against the parser on such texts, mutated ones and edge cases.
+# ``{"state": [r, c], "action": "E"}``, with an optional ``"step": n`` after the action, as
+# json.dumps writes it, with or without its spaces, and JSON whitespace around it: what the
+# parser reads as that event (1-9 plain digits with no leading zero make a valid coordinate,
+# below 2**31, or a step). tests/service/wire/test_events.py checks read_move against the
+# parser on such texts, mutated ones and edge cases.
 _PLAIN = (
     r'[ \t\n\r]*\{"state": ?\[(0|[1-9][0-9]{0,8}), ?(0|[1-9][0-9]{0,8})\], ?'
-    r'"action": ?"([NESW])"\}[ \t\n\r]*'
+    r'"action": ?"([NESW])"(?:, ?"step": ?([1-9][0-9]{0,8}))?\}[ \t\n\r]*'
 )
 _PLAIN_TEXT = re.compile(_PLAIN)
 _PLAIN_BYTES = re.compile(_PLAIN.encode())

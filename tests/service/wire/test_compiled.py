@@ -28,6 +28,7 @@ events = st.fixed_dictionaries(
     optional={
         "action": st.one_of(st.none(), st.sampled_from([*ACTIONS, 0, 1, 2, 3])),
         "next_state": st.one_of(st.none(), cells),
+        "step": st.one_of(st.integers(-2, 3), st.integers(1, 2**33)),  # mostly out of turn
     },
 )
 layouts = st.sampled_from([(None, (",", ":")), (None, (", ", ": ")), (1, None), (" \t", None)])
@@ -35,10 +36,10 @@ layouts = st.sampled_from([(None, (",", ":")), (None, (", ", ": ")), (1, None), 
 
 def outcome(fn: Any, raw: str | bytes) -> Any:
     try:
-        moves, single = fn(raw)
+        moves, single, first = fn(raw)
     except BadInput as exc:
         return ("refused", exc.status, exc.detail)
-    return ([a.tolist() for a in moves], single)
+    return ([a.tolist() for a in moves], single, first)
 
 
 def slow(raw: str | bytes, limit: int = 100) -> Any:
@@ -69,7 +70,8 @@ def test_mutated_texts_get_the_same_answer(batch: list[dict[str, Any]], data: An
     text = json.dumps(batch)
     edits = data.draw(st.lists(st.tuples(st.integers(0, len(text)), st.sampled_from(
         ['"', ",", ":", "[", "]", "{", "}", " ", "-", ".", "e", "0", "7", "null", "true",
-         '"x"', '"state"', '"action"', "\\u0041", "\u00e9", "1e3", "00", "99999999999", ""]
+         '"x"', '"state"', '"action"', '"step"', "\\u0041", "\u00e9", "1e3", "00",
+         "99999999999", ""]
     )), max_size=3))  # fmt: skip
     for at, piece in edits:
         cut = data.draw(st.integers(0, 2))
@@ -147,3 +149,48 @@ def test_walks_are_read_as_the_full_parser_reads_them(
     assert scan_events(text) is not None
     got = outcome(lambda raw: fast(raw, 300), text)
     assert got == outcome(lambda raw: slow(raw, 300), text)
+
+
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    n=st.integers(1, 200),
+    first=st.integers(1, 2**31 - 300),
+    numbered=st.floats(0, 1),
+    layout=st.sampled_from([(None, (",", ":")), (None, None), (1, None)]),
+)
+def test_numbered_walks_are_read_by_the_compiled_reader(
+    seed: int, n: int, first: int, numbered: float, layout: tuple[Any, Any]
+) -> None:
+    """A client that retries numbers its events (``"step"``): the compiled reader reads such
+    batches itself, some events numbered and some not, and finds their first step as the
+    full parser does."""
+    rng = np.random.default_rng(seed)
+    s, batch = DOMAIN.start, []
+    for i, a in enumerate(rng.integers(0, 4, n).tolist()):
+        event: dict[str, Any] = {"state": list(DOMAIN.cell(s)), "action": ACTIONS[a]}
+        if rng.random() < numbered:
+            event["step"] = first + i
+        batch.append(event)
+        s = DOMAIN.step(s, a)
+    indent, separators = layout
+    text = json.dumps(batch, indent=indent, separators=separators)
+    assert scan_events(text) is not None
+    got = outcome(lambda raw: fast(raw, 200), text)
+    assert got == outcome(lambda raw: slow(raw, 200), text)
+    numbered_any = any("step" in e for e in batch)
+    assert got[2] == (first if numbered_any else None)
+
+
+def test_steps_out_of_their_batch_numbering_are_refused_naming_the_event() -> None:
+    text = json.dumps([
+        {"state": [5, 1], "action": "E", "step": 4},
+        {"state": [5, 2], "action": "W"},
+        {"state": [5, 1], "action": "E", "step": 7},
+    ])  # fmt: skip
+    assert outcome(fast, text) == outcome(slow, text)
+    status, detail = outcome(fast, text)[1:]
+    assert status == 422 and detail.startswith("event 2: step 7 does not follow"), detail
+    zero_base = json.dumps(
+        [{"state": [5, 1], "action": "E"}, {"state": [5, 2], "action": "W", "step": 1}]
+    )
+    assert outcome(fast, zero_base)[2].startswith("event 1: step 1 does not follow")

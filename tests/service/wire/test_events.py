@@ -164,22 +164,28 @@ def _single(raw: str | bytes) -> Any:
 def _parsed(raw: str | bytes) -> Any:
     """The full parser's answer for one event object, through the batch path."""
     try:
-        checked, single = read_moves(DOMAIN, raw, 1)
+        checked, single, first = read_moves(DOMAIN, raw, 1)
         assert single
-        return tuple(int(x[0]) for x in checked)
+        return (*(int(x[0]) for x in checked), -1 if first is None else first)
     except BadInput as exc:
         return ("refused", exc.status, exc.detail)
 
 
 single_texts = st.builds(
-    lambda r, c, a, sep, pad, as_bytes: (lambda t: t.encode() if as_bytes else t)(
-        pad + json.dumps({"state": [r, c], "action": a}, separators=sep) + pad
+    lambda r, c, a, step, sep, pad, as_bytes: (lambda t: t.encode() if as_bytes else t)(
+        pad
+        + json.dumps(
+            {"state": [r, c], "action": a} | ({} if step is None else {"step": step}),
+            separators=sep,
+        )
+        + pad
     ),
     st.integers(0, ROWS + 1)
     | st.sampled_from([999_999_999, 1_000_000_000, 2**31 - 1, 2**31, 10**12])
     | st.integers(0, 2**31 + 5),
     st.integers(0, COLS + 1),
     st.sampled_from(ACTIONS),
+    st.none() | st.integers(-1, 12) | st.sampled_from([999_999_999, 10**9, 2**31, 2**53]),
     st.sampled_from([(",", ":"), (", ", ": "), (",", ": "), (", ", ":")]),
     st.sampled_from(["", " ", "\n", "\t ", "\r\n"]),
     st.booleans(),
@@ -194,7 +200,7 @@ def test_one_event_is_read_as_the_parser_reads_it(raw: str | bytes, data: Any) -
     text = raw.decode() if isinstance(raw, bytes) else raw
     for at, piece in data.draw(st.lists(st.tuples(st.integers(0, len(text)), st.sampled_from(
         ['"', ",", ":", "[", "]", "{", "}", " ", "\f", "-", ".", "e", "0", "00", "7", "x",
-         "null", '"N"', "\u00e9", "1e3", "99999999999", ""]
+         "null", '"N"', '"step"', "\u00e9", "1e3", "99999999999", ""]
     )), max_size=2)):  # fmt: skip
         text = text[:at] + piece + text[at + data.draw(st.integers(0, 2)) :]
     mutated = text.encode() if isinstance(raw, bytes) else text
@@ -221,6 +227,15 @@ def test_one_event_is_read_as_the_parser_reads_it(raw: str | bytes, data: Any) -
         '{"state":[5,1],"action":"E"} {}',
         '{"state":[1,0],"action":"E"}',
         '{"state":[30,1],"action":"E"}',
+        '{"state":[5,1],"action":"E","step":1}',
+        '{"state":[5,1],"action":"E", "step": 999999999}',
+        '{"state":[5,1],"action":"E","step":0}',
+        '{"state":[5,1],"action":"E","step":01}',
+        '{"state":[5,1],"action":"E","step":-3}',
+        '{"state":[5,1],"action":"E","step":1.0}',
+        '{"state":[5,1],"action":"E","step":"1"}',
+        '{"state":[5,1],"action":"E","step":1,"step":2}',
+        '{"step":3,"state":[5,1],"action":"E"}',
     ],
 )
 def test_one_event_edge_cases_are_read_as_the_parser_reads_them(raw: str) -> None:

@@ -1,0 +1,272 @@
+"""A live session as bytes and back, exactly: what another worker (through Redis) or the same
+service after a restart (through the database) needs to go on with it.
+
+The advisor's state is every slot of its class (the core's numbers: sums, counters, position,
+goals ruled out, a random rule's generator) except what the domain shares (the tables, the
+per-goal counts, the guide map), which the loading side attaches from its own catalog. A
+window of pair keys (:class:`~app.service.live.stream.KeyedWindow`) is written as its keys
+with the value each pair added (the numbers the core's ring holds), so the loaded advisor
+removes exactly what the saved one would have removed, whatever tables the loading side has
+by then. Everything is written with msgspec's MessagePack: float64 stays float64, so the
+decisions after a load equal those of the session that never left memory, bit for bit
+(``tests/service/live/test_codec.py``).
+
+Nothing of the token is kept but its SHA-256 digest; a loaded session has no plaintext token.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from array import array
+from datetime import datetime
+from typing import Any
+
+import msgspec
+import numpy as np
+import numpy.typing as npt
+
+from app.advice.advisor import DecisionBatch
+from app.advice.strategies import StrategyParams, strategy_params
+from app.service.data.domains import DomainState
+from app.service.live.history import AdviceLog, Recent
+from app.service.live.registry import RECENT_ADVICE, LiveSession, ServiceAdvisor, new_advisor
+from app.service.live.replay import Replay
+from app.service.live.stream import KeyedWindow, StreamGoalAware
+
+FORMAT = 1
+#: slots the loading side attaches or derives, or a window written in its own form
+_SHARED = frozenset({
+    "tables", "priors", "guide", "_lam", "_theta_w", "_params", "_rng", "_rule",
+    "_ring", "_goal_ring", "_keys", "_kept", "_old", "_n_kept", "_keys_tables",
+    "_goal_arrays", "_goal_kept", "_goal_old", "_goal_n_kept",
+})  # fmt: skip
+
+_encoder = msgspec.msgpack.Encoder()
+_decoder = msgspec.msgpack.Decoder()
+
+
+class CodecError(ValueError):
+    """Bytes that are not a session this service can load (another format or domain)."""
+
+
+def _slots(obj: object) -> list[str]:
+    names: list[str] = []
+    for cls in type(obj).__mro__:
+        for name in getattr(cls, "__slots__", ()):
+            if name not in names and name not in _SHARED:
+                names.append(name)
+    return names
+
+
+def _value(v: Any) -> Any:
+    """A slot's value in MessagePack's types; tuples and arrays tagged to come back as such."""
+    if isinstance(v, np.ndarray):
+        return {"nd": v.dtype.str, "shape": list(v.shape), "data": v.tobytes()}
+    if isinstance(v, tuple):
+        return {"tuple": [_value(x) for x in v]}
+    if isinstance(v, list):
+        return [_value(x) for x in v]
+    if v is None or isinstance(v, bool | int | float | str):
+        return v
+    raise TypeError(f"cannot write a {type(v).__name__} slot")
+
+
+def _unvalue(v: Any) -> Any:
+    if isinstance(v, dict):
+        if "nd" in v:
+            return np.frombuffer(v["data"], dtype=v["nd"]).reshape(v["shape"]).copy()
+        return tuple(_unvalue(x) for x in v["tuple"])
+    if isinstance(v, list):
+        return [_unvalue(x) for x in v]
+    return v
+
+
+def advisor_state(adv: ServiceAdvisor) -> dict[str, Any]:
+    """The advisor's own state (no shared table) in MessagePack's types."""
+    out: dict[str, Any] = {
+        "strategy": adv.strategy,
+        "params": adv.params(),
+        "slots": {name: _value(getattr(adv, name)) for name in _slots(adv)},
+    }
+    if isinstance(adv, KeyedWindow):
+        keys = adv._keys.copy()
+        out["keys"] = keys.tobytes()
+        out["values"] = np.ascontiguousarray(adv._window).tobytes()  # (models, W) float64
+        if isinstance(adv, StreamGoalAware) and adv.beta > 0.0:
+            out["goal_values"] = np.ascontiguousarray(adv._goal_window.T).tobytes()  # (G, W)
+    rng = getattr(adv, "_rng", None)
+    if rng is not None:  # a random rule's draws go on where they were
+        out["rng"] = json.dumps(rng.bit_generator.state)
+    return out
+
+
+def restore_advisor(state: dict[str, Any], domain: DomainState, table_key: str) -> ServiceAdvisor:
+    """An advisor in the state :func:`advisor_state` wrote, on ``domain``'s current tables."""
+    strategy, slots = state["strategy"], state["slots"]
+    params: StrategyParams = strategy_params(strategy, state["params"])
+    tables = domain.view.tables.get(table_key)
+    if tables is None:
+        raise CodecError(f"domain {domain.name!r} has no prior table {table_key!r}")
+    adv = new_advisor(
+        strategy, tables, slots["kappa"], slots["window"], params, domain.goal_priors,
+        domain.guide_map,
+    )  # fmt: skip
+    for name, v in slots.items():
+        setattr(adv, name, _unvalue(v))
+    if isinstance(adv, KeyedWindow):
+        w, models = adv.window, tables.n_models
+        keys = np.frombuffer(state["keys"], dtype=np.int32).copy()
+        values = np.frombuffer(state["values"], dtype=np.float64).reshape(models, w).copy()
+        if keys.shape != (w,):
+            raise CodecError("the window does not have the session's length")
+        filled = keys >= 0
+        adv._keys = keys
+        adv._kept = filled.astype(np.uint8)
+        adv._n_kept = int(np.count_nonzero(filled))
+        adv._old = values if adv._n_kept else None
+        adv._keys_tables = tables
+        if isinstance(adv, StreamGoalAware) and adv.beta > 0.0:
+            g = adv.priors.n_goals
+            goal = np.frombuffer(state["goal_values"], dtype=np.float64).reshape(g, w).copy()
+            adv._goal_kept = filled.astype(np.uint8)
+            adv._goal_n_kept = adv._n_kept
+            adv._goal_old = goal if adv._goal_n_kept else None
+            adv._goal_arrays = adv.priors.arrays()
+    if "rng" in state:
+        rng = np.random.default_rng()
+        rng.bit_generator.state = json.loads(state["rng"])
+        adv._rng = rng  # type: ignore[union-attr]  # the rules' generator
+    return adv
+
+
+def _ring(r: Recent | None) -> dict[str, Any] | None:
+    if r is None:
+        return None
+    return {"code": r._buf.typecode, "buf": r._buf.tobytes(), "count": r._count}
+
+
+def _unring(v: dict[str, Any] | None) -> Recent | None:
+    if v is None:
+        return None
+    r = Recent.__new__(Recent)
+    buf: array[Any] = array(v["code"])
+    buf.frombytes(v["buf"])
+    r._buf, r._count = buf, v["count"]
+    return r
+
+
+def _advice_log(log: AdviceLog | None) -> dict[str, Any] | None:
+    """The log's entries with their advice written out (theta_s read now: the loading side
+    may have other tables)."""
+    if log is None:
+        return None
+    order = log._order()
+    rows = log._rows()[:, order]
+    advice = np.array([_advice_row(src, st) for _, st, src in log.items()], dtype=np.float64)
+    return {
+        "steps": rows[0].tobytes(), "states": rows[1].tobytes(), "when": rows[3].tobytes(),
+        "advice": advice.reshape(-1, 4).tobytes(),
+    }  # fmt: skip
+
+
+def _advice_row(src: Any, state: int) -> tuple[float, float, float, float]:
+    if isinstance(src, tuple):
+        return src  # the advisor's own advice
+    n, e, s, w = src.theta[state].tolist()
+    return (n, e, s, w)
+
+
+def _unadvice_log(v: dict[str, Any] | None, tables: Any) -> AdviceLog | None:
+    if v is None:
+        return None
+    log = AdviceLog(RECENT_ADVICE)
+    steps = np.frombuffer(v["steps"], dtype=np.int64)
+    states = np.frombuffer(v["states"], dtype=np.int64)
+    when = np.frombuffer(v["when"], dtype=np.int64)
+    advice = np.frombuffer(v["advice"], dtype=np.float64).reshape(-1, 4)
+    for k in range(len(steps)):
+        row = advice[k].tolist()
+        log.add(int(steps[k]), int(states[k]), tables, (row[0], row[1], row[2], row[3]),
+                int(when[k]))  # fmt: skip
+    return log
+
+
+def _batch(b: DecisionBatch) -> dict[str, Any]:
+    return {
+        "first": b.first_step, "state": b.state.astype(np.int32).tobytes(),
+        "advise": b.advise.tobytes(), "kl": b.kl.tobytes(), "p": b.p_normal.tobytes(),
+        "count": b.advice_count.tobytes(), "benefit": b.benefit.tobytes(),
+        "advice": b.advice.tobytes(), "kappa": b.kappa, "count_before": b.count_before,
+        "benefit_before": b.benefit_before,
+    }  # fmt: skip
+
+
+def replay_record(b: DecisionBatch) -> bytes:
+    """One batch of decisions as bytes (what a retry of its steps is answered)."""
+    return _encoder.encode(_batch(b))
+
+
+def read_replay_record(raw: bytes) -> DecisionBatch:
+    return _unbatch(_decoder.decode(raw))
+
+
+def _unbatch(v: dict[str, Any]) -> DecisionBatch:
+    def arr(key: str, dtype: type[np.generic]) -> npt.NDArray[Any]:
+        return np.frombuffer(v[key], dtype=dtype).copy()
+
+    return DecisionBatch(
+        v["first"], arr("state", np.int32).astype(np.int64), arr("advise", np.bool_),
+        arr("kl", np.float64), arr("p", np.float64), arr("count", np.int64),
+        arr("benefit", np.float64), arr("advice", np.float64).reshape(-1, 4), v["kappa"],
+        v["count_before"], v["benefit_before"], None,
+    )  # fmt: skip
+
+
+def dump(session: LiveSession, replay: bool = True) -> bytes:
+    """``session`` as bytes (its token as a digest only). ``replay``: with the decisions kept
+    for retries (the Redis form keeps those apart)."""
+    mono, wall = time.monotonic(), time.time()
+    s = session
+    out = {
+        "format": FORMAT, "id": s.id, "token_digest": s.token_digest, "domain": s.domain.name,
+        "map": "\n".join(s.domain.domain.rows_text), "agent_type": s.agent_type,
+        "table_key": s.table_key,
+        "position": s.position, "p_normal": s.p_normal, "created_at": s.created_at.isoformat(),
+        "last_seen": wall - (mono - s.last_seen), "born": wall - (mono - s.born),
+        "sizes": list(s.sizes), "client": s.client, "reserved": s.reserved,
+        "path": _ring(s.path), "p_history": _ring(s.p_history), "path_times": _ring(s.path_times),
+        "advice_log": _advice_log(s.advice_log), "advisor": advisor_state(s.advisor),
+        "replay": s.replay.state() if replay else None,
+    }  # fmt: skip
+    return _encoder.encode(out)
+
+
+def peek(raw: bytes) -> dict[str, Any]:
+    """The decoded fields of a dumped session (for its id, domain and times, without loading
+    its advisor)."""
+    v: dict[str, Any] = _decoder.decode(raw)
+    if not isinstance(v, dict) or v.get("format") != FORMAT:
+        raise CodecError("not a session of this format")
+    return v
+
+
+def load(raw: bytes | dict[str, Any], domain: DomainState, replay_steps: int) -> LiveSession:
+    """The session ``raw`` holds, on ``domain`` (the domain of its name now: CodecError if
+    its map is another); its idle time goes on from when it was written."""
+    v = raw if isinstance(raw, dict) else peek(raw)
+    if v["domain"] != domain.name or v["map"] != "\n".join(domain.domain.rows_text):
+        raise CodecError(f"session {v['id']} belongs to another map of domain {v['domain']!r}")
+    table_key = v["table_key"] if v["table_key"] in domain.view.tables else "*"
+    advisor = restore_advisor(v["advisor"], domain, table_key)
+    mono, wall = time.monotonic(), time.time()
+    session = LiveSession(
+        v["id"], "", domain, v["agent_type"], table_key, advisor, v["position"], v["p_normal"],
+        datetime.fromisoformat(v["created_at"]), mono - (wall - v["last_seen"]),
+        (v["sizes"][0], v["sizes"][1]), _unring(v["path"]), _unring(v["p_history"]),
+        _unadvice_log(v["advice_log"], advisor.tables), client=v["client"],
+        reserved=v["reserved"], born=mono - (wall - v["born"]),
+        path_times=_unring(v["path_times"]), token_digest=v["token_digest"],
+        replay=Replay.of(replay_steps, v["replay"]),
+    )  # fmt: skip
+    return session

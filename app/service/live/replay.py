@@ -1,0 +1,176 @@
+"""The decisions of a session's last steps, kept so that a retried event is answered again
+instead of being applied twice.
+
+An event may carry ``"step": n``, the session step it is meant to be (the first event of a
+session is step 1). A step the session has already applied is answered from here with the
+decision it got, and nothing is applied; a step that is neither applied nor the next one is
+refused (409). :class:`Replay` keeps the last ``limit`` decisions in one ring of 53-byte rows
+(state, advised, KL, P(M1 | H), the advice), grown as the session goes up to ``limit``; the
+running advice count and benefit of each row follow exactly from the figures before the
+oldest row (the advisor adds them up one decision at a time, as ``np.add.accumulate`` does).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+
+from app.advice.advisor import Decision, DecisionBatch
+
+ROW = np.dtype(
+    [("state", "<i4"), ("advise", "u1"), ("kl", "<f8"), ("p", "<f8"), ("advice", "<f8", (4,))]
+)
+DEFAULT_STEPS = 500
+
+
+class StepConflict(ValueError):
+    """An event's ``step`` is not the session's next one, nor one it can answer again."""
+
+
+class Replay:
+    """The last ``limit`` decisions of one session (0: none kept)."""
+
+    __slots__ = ("_benefit_base", "_count", "_count_base", "_rows", "limit")
+
+    def __init__(self, limit: int):
+        self.limit = limit
+        self._rows: npt.NDArray[np.void] | None = None  # made at the first decision, then grown
+        self._count = 0  # rows written since the ring was made (or grown, or restarted)
+        self._count_base = 0  # advice count and benefit before the oldest row kept
+        self._benefit_base = 0.0
+
+    @staticmethod
+    def footprint(limit: int) -> int:
+        """Bytes a ring of ``limit`` rows takes at most."""
+        return ROW.itemsize * limit
+
+    @property
+    def kept(self) -> int:
+        return 0 if self._rows is None else min(self._count, len(self._rows))
+
+    def _ordered(self) -> npt.NDArray[np.void]:
+        rows, m = self._rows, self.kept
+        if rows is None or not m:
+            return np.zeros(0, dtype=ROW)
+        return rows[np.arange(self._count - m, self._count) % len(rows)]
+
+    def _room(self, k: int) -> npt.NDArray[np.void]:
+        """The ring, grown (up to ``limit`` rows) to keep ``k`` more; the figures of the rows
+        that ``k`` more will overwrite moved into the base."""
+        rows, kept = self._rows, self.kept
+        need = min(self.limit, kept + k)
+        if rows is None or len(rows) < need:
+            size = min(self.limit, max(need, 2 * (0 if rows is None else len(rows)), 8))
+            grown = np.zeros(size, dtype=ROW)
+            grown[:kept] = self._ordered()
+            self._rows = rows = grown
+            self._count = kept
+        gone = kept + k - len(rows)
+        if gone > 0:
+            old = rows[np.arange(self._count - kept, self._count - kept + gone) % len(rows)]
+            on = old["advise"].astype(bool)
+            self._count_base += int(np.count_nonzero(on))
+            b = self._benefit_base
+            for kl in old["kl"][on].tolist():  # one at a time, as the advisor added them
+                b += kl
+            self._benefit_base = b
+        return rows
+
+    def add_one(self, d: Decision) -> None:
+        """Keep one decision (the newest)."""
+        if not self.limit:
+            return
+        rows = self._room(1)
+        row = rows[self._count % len(rows)]
+        row["state"], row["advise"], row["kl"], row["p"] = d.state, d.advise, d.kl, d.p_normal
+        row["advice"] = d.advice if d.advise and d.advice is not None else np.nan
+        self._count += 1
+
+    def add(self, b: DecisionBatch) -> None:
+        """Keep a batch of decisions (the newest)."""
+        n = len(b)
+        if not self.limit or not n:
+            return
+        if n >= self.limit:  # only its last ``limit`` fit: everything before is the base
+            cut = n - self.limit
+            self.restart(
+                int(b.advice_count[cut - 1]) if cut else b.count_before,
+                float(b.benefit[cut - 1]) if cut else b.benefit_before,
+            )
+            b, n = part(b, cut, n), self.limit
+        rows = self._room(n)
+        new = np.zeros(n, dtype=ROW)
+        new["state"], new["advise"], new["kl"], new["p"] = b.state, b.advise, b.kl, b.p_normal
+        new["advice"] = np.nan
+        new["advice"][b.advise] = b.advice
+        rows[np.arange(self._count, self._count + n) % len(rows)] = new
+        self._count += n
+
+    def restart(self, count_before: int, benefit_before: float) -> None:
+        """Forget every row: the next decision kept follows these figures."""
+        self._rows, self._count = None, 0
+        self._count_base, self._benefit_base = count_before, benefit_before
+
+    def answer(self, first: int, n: int, last_step: int, kappa: float) -> DecisionBatch | None:
+        """The decisions of steps ``first`` .. ``first + n - 1`` (the session's newest
+        decision is step ``last_step``), or None when they are not all kept."""
+        kept = self.kept
+        oldest = last_step - kept + 1
+        if not kept or n < 1 or first < oldest or first + n - 1 > last_step:
+            return None
+        rows = self._ordered()
+        on = rows["advise"].astype(bool)
+        count = self._count_base + np.cumsum(on, dtype=np.int64)
+        gains = np.where(on, rows["kl"], 0.0)
+        benefit = np.add.accumulate(np.concatenate([[self._benefit_base], gains]))[1:]
+        lo, hi = first - oldest, first - oldest + n
+        sl = rows[lo:hi]
+        adv = sl["advise"].astype(bool)
+        return DecisionBatch(
+            first, sl["state"].astype(np.int64), adv, sl["kl"].copy(), sl["p"].copy(),
+            count[lo:hi].copy(), benefit[lo:hi].copy(), sl["advice"][adv].copy(), kappa,
+            int(count[lo - 1]) if lo else self._count_base,
+            float(benefit[lo - 1]) if lo else self._benefit_base, None,
+        )  # fmt: skip
+
+    def state(self) -> dict[str, object]:
+        """What :meth:`of` takes back (the rows oldest first, and the base)."""
+        return {
+            "rows": self._ordered().tobytes(), "count_base": self._count_base,
+            "benefit_base": self._benefit_base,
+        }  # fmt: skip
+
+    @classmethod
+    def of(cls, limit: int, state: dict[str, object] | None) -> Replay:
+        """A ring of ``limit`` rows holding what :meth:`state` wrote (its newest rows, if
+        ``limit`` is smaller now)."""
+        r = cls(limit)
+        if not state or not limit:
+            return r
+        rows = np.frombuffer(state["rows"], dtype=ROW)  # type: ignore[call-overload]
+        r._count_base = int(state["count_base"])  # type: ignore[call-overload]
+        r._benefit_base = float(state["benefit_base"])  # type: ignore[arg-type]
+        if len(rows) > limit:  # the oldest go into the base
+            old = rows[: len(rows) - limit]
+            on = old["advise"].astype(bool)
+            r._count_base += int(np.count_nonzero(on))
+            for kl in old["kl"][on].tolist():
+                r._benefit_base += kl
+            rows = rows[len(rows) - limit :]
+        if len(rows):
+            r._rows = np.zeros(min(limit, max(len(rows), 8)), dtype=ROW)
+            r._rows[: len(rows)] = rows
+            r._count = len(rows)
+        return r
+
+
+def part(b: DecisionBatch, lo: int, hi: int) -> DecisionBatch:
+    """Decisions ``lo`` .. ``hi - 1`` of ``b`` as a batch of their own."""
+    first = int(np.count_nonzero(b.advise[:lo]))
+    last = first + int(np.count_nonzero(b.advise[lo:hi]))
+    return DecisionBatch(
+        b.first_step + lo, b.state[lo:hi], b.advise[lo:hi], b.kl[lo:hi], b.p_normal[lo:hi],
+        b.advice_count[lo:hi], b.benefit[lo:hi], b.advice[first:last], b.kappa,
+        int(b.advice_count[lo - 1]) if lo else b.count_before,
+        float(b.benefit[lo - 1]) if lo else b.benefit_before, b.advised_from,
+    )  # fmt: skip

@@ -1,0 +1,153 @@
+"""A session written out and loaded back (another worker, a restart) goes on exactly as the one
+that stayed in memory: the same decisions, bit for bit, for every strategy, whether the prior
+changed before the write, between the write and the load, or after."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from app.advice.advisor import DecisionBatch
+from app.advice.strategies import STRATEGIES, StrategyParams
+from app.service.data.domains import DomainState
+from app.service.data.store import Trajectory
+from app.service.live.codec import CodecError, dump, load, peek
+from app.service.live.registry import Limits, LiveSession, SessionRegistry
+from app.service.security import token_digest
+from app.service.state import ServiceState
+
+Moves = tuple[np.ndarray, np.ndarray, np.ndarray]
+
+
+def walk(domain: DomainState, start: int, n: int, rng: np.random.Generator) -> Moves:
+    grid = domain.domain
+    s, states, actions, nexts = start, [], [], []
+    for a in rng.integers(0, 4, n).tolist():
+        s2 = int(grid.next_state[s, a])
+        states.append(s)
+        actions.append(a)
+        nexts.append(s2)
+        s = s2
+    return (np.array(states), np.array(actions), np.array(nexts))
+
+
+def columns(b: DecisionBatch) -> list[Any]:
+    """Everything a batch answers, as exact numbers (floats by their bits)."""
+    return [
+        b.first_step, b.state.tolist(), b.advise.tolist(), b.kl.view(np.int64).tolist(),
+        b.p_normal.view(np.int64).tolist(), b.advice_count.tolist(),
+        b.benefit.view(np.int64).tolist(), np.ascontiguousarray(b.advice).view(np.int64).tolist(),
+    ]  # fmt: skip
+
+
+def figures(reg: SessionRegistry, s: LiveSession) -> list[Any]:
+    snap = reg.describe(s)
+    return [
+        snap.steps, snap.position, snap.p_normal, snap.advice_count, snap.total_cost,
+        snap.benefit, snap.path, snap.p_history, [(a, c, v) for a, c, v in snap.advice],
+        snap.goals, snap.params, snap.kappa, snap.window, snap.strategy, snap.table_key,
+    ]  # fmt: skip
+
+
+def params_for(strategy: str) -> StrategyParams:
+    if strategy == "goal_aware":
+        return StrategyParams(beta=0.5)
+    if strategy == "random":
+        return StrategyParams(rate=0.3, seed=11)
+    return StrategyParams()
+
+
+@pytest.fixture
+def domain(service: ServiceState) -> DomainState:
+    d = service.catalog.get("default")
+    service.catalog.guide_map(d)  # goal priors and the guide map, for goal_aware and guide
+    return d
+
+
+@pytest.mark.parametrize("strategy", STRATEGIES)
+@settings(
+    max_examples=8, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    window=st.sampled_from([1, 7, 40]),
+    kappa=st.sampled_from([0.0, 0.3, 0.8]),
+    chunks=st.lists(st.integers(1, 60), min_size=2, max_size=6),
+    update_at=st.integers(0, 5),
+    when=st.sampled_from(["before", "between", "after"]),
+)
+def test_a_loaded_session_decides_as_the_one_that_stayed(
+    service: ServiceState, domain: DomainState, strategy: str, seed: int, window: int,
+    kappa: float, chunks: list[int], update_at: int, when: str,
+) -> None:  # fmt: skip
+    rng = np.random.default_rng(seed)
+    reg = SessionRegistry(Limits(100), 3600.0, replay_steps=32)
+    start = domain.domain.start
+    params = params_for(strategy)
+    stayed, d0 = reg.create(domain, kappa, window, None, start, strategy, params)
+    moved, d1 = reg.create(domain, kappa, window, None, start, strategy, params)
+    assert d0 == d1
+    here = start
+    for i, n in enumerate(chunks):
+        moves = walk(domain, here, n, rng)
+        here = int(moves[2][-1])
+        update = i == update_at
+        if update and when == "before":
+            domain = _update(service, reg, domain, rng)
+        raw = dump(moved)
+        if update and when == "between":
+            domain = _update(service, reg, domain, rng)
+        moved = load(raw, service.catalog.get(domain.name), 32)
+        if update and when == "after":
+            domain = _update(service, reg, domain, rng)
+            moved.advisor.use_tables(domain.view.tables["*"], domain.goal_priors)
+        if n == 1:
+            one = [int(m[0]) for m in moves]
+            a, b = reg.observe_one(stayed, *one), reg.observe_one(moved, *one)
+            assert a == b
+        else:
+            a_batch, b_batch = reg.observe_batch(stayed, moves), reg.observe_batch(moved, moves)
+            assert columns(a_batch) == columns(b_batch)
+        assert figures(reg, stayed) == figures(reg, moved)
+
+
+def _update(
+    service: ServiceState, reg: SessionRegistry, domain: DomainState, rng: np.random.Generator
+) -> DomainState:
+    """A new expert trajectory: a prior update, which the registry's sessions follow."""
+    grid = domain.domain
+    goal = grid.goals[int(rng.integers(len(grid.goals)))]
+    pairs = np.array([[grid.start, int(rng.integers(4))], [goal, 0]])
+    updated = service.catalog.add_trajectories(domain, [Trajectory(None, pairs, goal)])
+    reg.retable(updated)
+    return updated
+
+
+def test_a_dump_holds_the_token_as_a_digest_only(
+    service: ServiceState, domain: DomainState
+) -> None:
+    reg = SessionRegistry(Limits(10), 3600.0)
+    session, _ = reg.create(domain, 0.5, 300, None, domain.domain.start)
+    raw = dump(session)
+    assert session.token.encode() not in raw
+    assert peek(raw)["token_digest"] == token_digest(session.token)
+    loaded = load(raw, domain, 500)
+    assert loaded.token == "" and loaded.token_digest == session.token_digest
+
+
+def test_a_session_of_another_map_is_refused(service: ServiceState, domain: DomainState) -> None:
+    reg = SessionRegistry(Limits(10), 3600.0)
+    session, _ = reg.create(domain, 0.5, 300, None, domain.domain.start)
+    raw = dump(session)
+    with pytest.raises(CodecError, match="another map"):
+        load(_renamed(raw), domain, 500)
+
+
+def _renamed(raw: bytes) -> dict[str, Any]:
+    v = peek(raw)
+    v["map"] = v["map"] + "x"
+    return v
