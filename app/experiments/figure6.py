@@ -112,8 +112,14 @@ def plot(batches: dict[bool, LearningBatch], args: Args) -> Figure:
         episodes = np.arange(1, b.success.shape[1] + 1)
         label = "advised" if advised else "no advice"
         reward = 1000.0 * b.success.mean(axis=0)
-        ax_r.plot(episodes, reward, color=colour, alpha=0.15, lw=0.6)
-        ax_r.plot(episodes, moving_average(reward, args.smooth), style, color=colour, label=label)
+        ax_r.plot(episodes, reward, color=colour, alpha=0.25, lw=0.6, label=f"{label}, per episode")
+        ax_r.plot(
+            episodes,
+            moving_average(reward, args.smooth),
+            style,
+            color=colour,
+            label=f"{label}, {args.smooth}-episode mean",
+        )
         ax_a.plot(
             episodes,
             moving_average(b.p_normal_mean.mean(axis=0), args.smooth),
@@ -128,7 +134,7 @@ def plot(batches: dict[bool, LearningBatch], args: Args) -> Figure:
                 moving_average(advice, args.smooth),
                 "--",
                 color="tab:green",
-                label="advice per step, advised",
+                label="advice per decision, advised",
             )
     ax_r.set(
         xlabel="episode",
@@ -136,9 +142,15 @@ def plot(batches: dict[bool, LearningBatch], args: Args) -> Figure:
         ylim=(0, 1020),
         title=f"Q-learning, {len(batches[True].goals)} tasks, kappa={args.kappa}",
     )
-    ax_a.set(xlabel="episode", ylim=(0, 1.02), title="advisor's view (mean over tasks)")
-    ax_r.legend(loc="center right")
-    ax_a.legend(loc="center right")
+    ax_a.set(
+        xlabel="episode",
+        ylabel="probability; advice per decision",
+        ylim=(0, 1.02),
+        title="advisor's view (mean over tasks)",
+    )
+    # below the axes: the curves fill any corner a legend inside could take
+    for ax in (ax_r, ax_a):
+        ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=2, frameon=False)
     return fig
 
 

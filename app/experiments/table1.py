@@ -19,12 +19,13 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from matplotlib.cm import ScalarMappable
 from matplotlib.figure import Figure
 from tqdm import tqdm
 
 from app.agents.explorers import FIXED_EXPLORERS
 from app.experiments.common import CommonArgs, LearningArgs, Setup, prepare, wilson
-from app.experiments.mazeplot import draw_cells
+from app.experiments.mazeplot import HEAT_CMAP, draw_cells, shared_log_norm
 from app.experiments.output import RunDir, header, markdown_table
 from app.experiments.runs import FixedBatch, LearningBatch, run_fixed_tasks, run_learning_tasks
 
@@ -259,21 +260,28 @@ def markdown(rows: list[dict[str, Any]], args: Args) -> str:
 
 
 def plot_failures(setup: Setup, batches: dict[tuple[str, bool], FixedBatch], args: Args) -> Figure:
-    """Where failed explorers spent their final ``last_n`` steps, without and with advice."""
+    """Where failed explorers spent their final ``last_n`` steps, without and with advice: in
+    each panel the share of those steps spent in each cell, on one logarithmic scale for all
+    panels (the colour bar)."""
     without_data = setup.prior.pooled_increments_.sum(axis=1) == 0
     names = [n for n in FIXED_EXPLORERS if n != "optimal"]
-    fig = Figure(figsize=(2.6 * len(names), 5.6), layout="constrained")
+    shares = {
+        key: b.failed_final_visits / max(1.0, b.failed_final_visits.sum())
+        for key, b in batches.items()
+    }
+    norm = shared_log_norm([shares[name, advised] for name in names for advised in (False, True)])
+    fig = Figure(figsize=(2.6 * len(names) + 1.0, 5.6), layout="constrained")
     axes = fig.subplots(2, len(names))
     for j, name in enumerate(names):
         for i, advised in enumerate((False, True)):
-            b = batches[name, advised]
-            failed = int((~b.success).sum())
-            visits = b.failed_final_visits / max(1.0, b.failed_final_visits.sum())
+            failed = int((~batches[name, advised].success).sum())
             label = "advised" if advised else "no advice"
-            draw_cells(axes[i, j], setup.domain, visits, without_data=without_data,
-                       title=f"{name}, {label}: {failed} failed")  # fmt: skip
+            draw_cells(axes[i, j], setup.domain, shares[name, advised], without_data=without_data,
+                       title=f"{name}, {label}: {failed} failed", norm=norm)  # fmt: skip
+    bar = fig.colorbar(ScalarMappable(norm=norm, cmap=HEAT_CMAP), ax=axes, shrink=0.85, pad=0.02)
+    bar.set_label(f"share of the failed explorers' last {args.last_n} steps spent in the cell")
     fig.suptitle(
-        f"Where failed explorers spent their last {args.last_n} steps (yellow few, dark red "
-        f"most); grey cells: no expert data; blue numbers: goals"
+        f"Where failed explorers spent their last {args.last_n} steps; grey cells: no expert "
+        "data; blue numbers: goals, S: the start"
     )
     return fig
