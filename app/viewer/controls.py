@@ -14,11 +14,21 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 import viser
 import viser.uplot
 
 from app.advice.advisor import DEFAULT_KAPPA
-from app.viewer.scene import LAYERS
+from app.viewer.scene import (
+    GOAL_COLOUR,
+    LAYERS,
+    PRIOR_COLOUR,
+    SHADE_COLOUR,
+    SHADE_OPACITY,
+    START_COLOUR,
+    WALL_COLOUR,
+)
+from app.viewer.sessions import ADVICE_MIN_P, FLOOR_COLOUR, PALETTE
 from app.viewer.state import SessionView
 
 NONE = "(none)"
@@ -26,6 +36,8 @@ NONE = "(none)"
 LOST_CERTAIN = "P(M1|H) = 0: certainly lost"
 LOST_PICKED = "P(M1|H) of the picked session"
 KAPPA_MAX = 1.4  # just above log 4, the largest KL[theta_s || uniform]
+#: The picked session's plot; P(M1|H) is this quantity's one name on every page.
+PLOT_TITLE = "P(M1|H) over time"
 LAYER_LABELS = {
     "prior": "Prior arrows",
     "shading": "Kappa shading",
@@ -37,13 +49,19 @@ LAYER_LABELS = {
 
 class Controls:
     """The GUI handles of one browser (``client.gui``: each browser has its own) and what the
-    person chose with them. Every value is read as a browser may have sent it, anything: a
-    value a control would never give is put back (the control shows what is used)."""
+    person chose with them; a legend of the scene below them. Every value is read as a
+    browser may have sent it, anything: a value a control would never give is put back (the
+    control shows what is used)."""
 
     def __init__(self, gui: viser.GuiApi):
         self._shown: tuple[object, ...] | None = None
         self.domain = gui.add_dropdown("Domain", (NONE,))
-        self.session = gui.add_dropdown("Session", (NONE,), hint="Sessions on this domain")
+        self.session = gui.add_dropdown(
+            "Session", (NONE,), hint="Sessions on this domain, most recently active first"
+        )
+        self.fit = gui.add_button("Fit the maze to the window", hint="Look at it from above")
+        self._fit_asked = False
+        self.fit.on_click(lambda _event: self._ask_fit())
         with gui.add_folder("Advice threshold"):
             self.kappa = gui.add_slider(
                 "kappa", 0.0, KAPPA_MAX, 0.01, DEFAULT_KAPPA, hint="Cost of one piece of advice"
@@ -62,11 +80,13 @@ class Controls:
                     viser.uplot.Series(label="step"),
                     viser.uplot.Series(label="P(M1|H)", stroke="#326edc", width=2),
                 ),
-                title="p_normal over time",
+                title=PLOT_TITLE,
                 scales={"x": viser.uplot.Scale(time=False), "y": viser.uplot.Scale(range=(0, 1))},
                 aspect=1.6,
                 visible=False,
             )
+        with gui.add_folder("Legend"):
+            self.legend = gui.add_markdown(legend_markdown())
 
     def on_change(self, callback: Callable[[], None]) -> None:
         """Call ``callback`` (it must be quick: it runs in the changing thread) whenever a
@@ -80,6 +100,15 @@ class Controls:
         )
         for handle in inputs:
             handle.on_update(lambda _event: callback())
+        self.fit.on_click(lambda _event: callback())
+
+    def _ask_fit(self) -> None:
+        self._fit_asked = True
+
+    def take_fit(self) -> bool:
+        """Whether the person asked for the maze to be fitted since the last call."""
+        asked, self._fit_asked = self._fit_asked, False
+        return asked
 
     # ---- reading the choices -------------------------------------------------------------
     @property
@@ -160,6 +189,38 @@ class Controls:
         steps = np.arange(s.steps - history.size + 1, s.steps + 1, dtype=np.float64)
         self.plot.data = (steps, history)
         self.plot.visible = True
+
+
+def swatch(rgb: npt.ArrayLike, shape: str = "■") -> str:
+    """A coloured symbol for the legend (viser's markdown takes inline HTML)."""
+    r, g, b = (int(v) for v in np.asarray(rgb).ravel()[:3])
+    return f'<span style="color: #{r:02x}{g:02x}{b:02x}">{shape}</span>'
+
+
+def legend_markdown() -> str:
+    """What each thing in the scene is, in the scene's own colours."""
+    sessions = "".join(swatch(c, "●") for c in PALETTE[:5])
+    # the shading is drawn translucent on the floor: its swatch is the colour that results
+    shade = SHADE_OPACITY * np.array(SHADE_COLOUR) + (1 - SHADE_OPACITY) * np.array(FLOOR_COLOUR)
+    return "\n\n".join(
+        [
+            f"{swatch(WALL_COLOUR)} walls, {swatch(START_COLOUR)} start, "
+            f"{swatch(GOAL_COLOUR)} goals G0, G1, ... (the explorer's hidden goal is one of them)",
+            f"{swatch(PRIOR_COLOUR, '➤')} **Prior arrows**: the experts' action prior "
+            "theta_s, four flat arrows a cell; the longer and more solid, the more often "
+            "experts moved that way there",
+            f"{swatch(shade)} **Kappa shading**: cells where an explorer with the "
+            "P(M1|H) of *Lost means* would be advised at the slider's kappa "
+            "(KL[theta_s || P(A|s,H)] >= kappa)",
+            f"{sessions} **Session markers**: where each live explorer is now, one colour "
+            "each; ▶ labels the picked one",
+            f"{swatch(PALETTE[0], '━')} **Session paths**: each explorer's recent cells as a "
+            "line in its colour, older parts fading into the floor",
+            f"{swatch(PALETTE[0], '↑')} **Advice given**: arrows in the explorer's colour "
+            "from each cell where it was advised, one per move, as long as the advice's "
+            f"probability of that move (under {ADVICE_MIN_P:.0%} not drawn)",
+        ]
+    )
 
 
 def goal_lines(s: SessionView) -> str:

@@ -7,6 +7,7 @@ The map lies in the z = 0 plane with z up; cell ``(row, col)`` has its centre at
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from itertools import chain
 
@@ -36,6 +37,24 @@ def cell_centres(domain: GridDomain, cells: npt.ArrayLike, z: float = 0.0) -> Fl
     out[:, 1] = rows - rc[:, 0] - 0.5
     out[:, 2] = z
     return out
+
+
+def fit_height(
+    rows: int, cols: int, fov: float, aspect: float, top: float = 0.0, margin: float = 1.04
+) -> float:
+    """Height above the floor of a camera looking straight down at the middle of a
+    ``rows`` x ``cols`` map, so that the map fills its view: the map's longer side (for the
+    view's ``aspect``, width / height) spans ``1 / margin`` of the view, its parts ``top``
+    above the floor (the tops of the walls, nearer the camera) included. ``fov`` is the
+    vertical field of view in radians.
+
+    At height h the view covers 2 (h - z) tan(fov / 2) vertically at height z, ``aspect``
+    times that across; both must hold the map's extent times ``margin``.
+    """
+    if not 0.0 < fov < math.pi or not aspect > 0.0:
+        raise ValueError(f"fov must be in (0, pi) and aspect positive, got {fov}, {aspect}")
+    half_extent = margin * max(rows / 2, cols / (2 * aspect))
+    return top + half_extent / math.tan(fov / 2)
 
 
 def z_rotations(angles: npt.ArrayLike) -> FloatArray:

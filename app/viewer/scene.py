@@ -14,6 +14,7 @@ update their arrays in place.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -38,11 +39,19 @@ SHADE_COLOUR = (235, 87, 87)
 SHADE_OPACITY = 0.45
 
 
-def top_down_camera(domain: GridDomain) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """(position, look_at, up) for a camera above the middle of the map, north up."""
+#: viser's default vertical field of view (75 degrees), until a browser says its own.
+DEFAULT_FOV = math.radians(75.0)
+
+
+def top_down_camera(
+    domain: GridDomain, fov: float = DEFAULT_FOV, aspect: float = 1.0
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """(position, look_at, up) for a camera above the middle of the map, north up, at the
+    height where the map fills a view of vertical field of view ``fov`` (radians) and
+    ``aspect`` (width / height), walls included (:func:`geometry.fit_height`)."""
     rows, cols = domain.shape
     centre = np.array([cols / 2, rows / 2, 0.0])
-    height = 0.95 * max(rows, cols) + 2.0
+    height = geo.fit_height(rows, cols, fov, aspect, top=WALL_HEIGHT)
     return centre + np.array([0.0, 0.0, height]), centre, np.array([0.0, 1.0, 0.0])
 
 

@@ -79,7 +79,8 @@ class SessionView:
 
 @dataclass(frozen=True)
 class Snapshot:
-    """Everything the viewer shows, at one instant."""
+    """Everything the viewer shows, at one instant. ``sessions`` come most recently active
+    first (the service's snapshot gives them so); the viewer's picker keeps that order."""
 
     domains: dict[str, DomainView] = field(default_factory=dict)
     sessions: Sequence[SessionView] = ()

@@ -18,6 +18,7 @@ the pump for one tick at once, so a choice never waits for the pacing.
 from __future__ import annotations
 
 import logging
+import math
 import threading
 import time
 from collections.abc import Callable
@@ -26,7 +27,7 @@ import viser
 
 from app.viewer.controls import LOST_PICKED, Controls
 from app.viewer.guard import MAX_CLIENTS, bounded_server, client_without_uploads
-from app.viewer.scene import LAYERS, MazeScene, top_down_camera
+from app.viewer.scene import DEFAULT_FOV, LAYERS, MazeScene, top_down_camera
 from app.viewer.state import DomainView, Feed, Snapshot
 
 log = logging.getLogger(__name__)
@@ -48,6 +49,7 @@ class ClientView:
         self.controls = Controls(client.gui)
         self.scene: MazeScene | None = None
         self._drawn: tuple[str, int] | None = None  # (domain name, prior version)
+        self._aimed: tuple[int, int] | None = None  # the canvas size the camera was fitted to
 
     def apply(self, snap: Snapshot) -> None:
         """Bring this browser's scene and panel up to date with ``snap``."""
@@ -60,7 +62,9 @@ class ClientView:
         self._draw_domain(view)
         scene = self.scene
         assert scene is not None
-        sessions = sorted(snap.sessions_of(view.name), key=lambda s: s.session_id)
+        if controls.take_fit() or self._aimed != canvas_of(self.client):
+            self.aim()  # asked for, or the window changed size: the maze fills it again
+        sessions = snap.sessions_of(view.name)  # most recently active first, as the feed has them
         controls.set_sessions([s.session_id for s in sessions])
         picked = next((s for s in sessions if s.session_id == controls.picked_session), None)
         drawn = sorted(sessions, key=lambda s: -s.steps)[:MAX_DRAWN_SESSIONS]
@@ -87,9 +91,11 @@ class ClientView:
         self.aim()
 
     def aim(self) -> None:
-        """Look at this browser's map from above, north up."""
+        """Look at this browser's map from above, north up, the map filling its canvas."""
         if self.scene is not None:
-            position, look_at, up = top_down_camera(self.scene.domain)
+            fov, aspect = view_of(self.client)
+            position, look_at, up = top_down_camera(self.scene.domain, fov, aspect)
+            self._aimed = canvas_of(self.client)
             camera = self.client.camera
             camera.up_direction = tuple(up)
             camera.position = tuple(position)
@@ -102,6 +108,29 @@ class ClientView:
             self._drawn = None
         self.controls.set_sessions([])
         self.controls.show_session(None)
+
+
+def canvas_of(client: viser.ClientHandle) -> tuple[int, int]:
+    """The size in pixels of the browser's canvas, as it last said ((0, 0) for what is not a
+    size: a browser may send anything)."""
+    camera = client.camera
+    try:
+        return (int(camera.image_width), int(camera.image_height))
+    except (TypeError, ValueError, OverflowError):
+        return (0, 0)
+
+
+def view_of(client: viser.ClientHandle) -> tuple[float, float]:
+    """(vertical field of view in radians, aspect) of the browser's camera; what is not a
+    usable value is replaced by viser's default field of view (75 degrees) or a square view."""
+    try:
+        fov = float(client.camera.fov)
+    except (TypeError, ValueError):
+        fov = DEFAULT_FOV
+    fov = fov if math.radians(5.0) <= fov <= math.radians(170.0) else DEFAULT_FOV
+    width, height = canvas_of(client)
+    aspect = width / height if width > 0 and height > 0 else 1.0
+    return fov, aspect if 0.05 <= aspect <= 20.0 else 1.0
 
 
 class Viewer:
@@ -150,6 +179,9 @@ class Viewer:
         server.gui.configure_theme(
             titlebar_content=None, control_width="medium", show_share_button=False
         )
+        # docked, the panel takes its width from the canvas (not floating over it), so the
+        # canvas size a browser reports is the part the maze can fill
+        server.gui.main_panel.dock_right()
         # a flat, evenly lit map: no environment reflections, no shadows (cheap in software GL)
         server.scene.configure_environment_map(hdri=None)
         server.scene.configure_default_lights(enabled=True, cast_shadow=False)

@@ -11,6 +11,8 @@ import numpy as np
 import pytest
 from playwright.sync_api import Page, expect
 
+from app.viewer.scene import top_down_camera
+from app.viewer.viewer import ClientView
 from tests.browser.conftest import Service, screenshot, wait_until
 from tests.viewer.conftest import choose
 
@@ -78,12 +80,44 @@ def test_viewer_page_connects_and_shows_maze_prior_and_sessions(
         lambda: controls.plot.visible and f"**{sessions[2]}**" in controls.stats.content,
         what="the pump to show the picked session",
     )
-    expect(page.get_by_text("p_normal over time")).to_be_visible()
+    expect(page.get_by_text("P(M1|H) over time")).to_be_visible()
+    expect(page.get_by_text("p_normal")).to_have_count(0)  # one name for P(M1|H)
     expect(page.get_by_text("steps 9", exact=False)).to_be_visible()
+    # the legend says what each thing drawn is
+    for entry in ("Prior arrows", "Kappa shading", "Session markers", "Advice given"):
+        expect(page.get_by_text(entry, exact=False).first).to_be_attached()
+    # the picker lists the sessions most recently active first (the feed's order)
+    with viewer._lock:
+        view = next(iter(viewer.views.values()))
+        options = view.controls.session.options[1:]
+        assert scene is not None
+    latest = service.http.get("/overview", headers=operator).json()["sessions"]
+    assert list(options) == [s["session_id"] for s in latest if s["session_id"] in options]
 
     # the browser really renders the scene: walls, floor and arrows make a varied image
     client = next(iter(server.get_clients().values()))
     image = client.get_render(240, 320, timeout=60.0)
     assert image.shape[:2] == (240, 320)
     assert np.asarray(image, dtype=np.float64).std() > 10.0
+    # the maze fills the canvas the panel leaves (docked at the right, not over the maze)
+    canvas = page.locator("canvas").last.bounding_box()
+    assert canvas is not None and canvas["width"] < 1280 - 250
+    wait_until(lambda: fitted(view), what="the camera to fit the maze to the canvas")
+    # the software-rendering notice (swiftshader here) hides a corner of the maze: closed
+    notice = page.get_by_role("alert").filter(has_text="Software WebGL")
+    notice.get_by_role("button").click()
+    expect(notice).to_have_count(0)
     screenshot(page, "viewer")
+    page.get_by_text("not drawn)", exact=False).scroll_into_view_if_needed()
+    expect(page.get_by_text("the more often experts moved that way", exact=False)).to_be_visible()
+    screenshot(page, "viewer-legend")
+
+
+def fitted(view: ClientView) -> bool:
+    """Whether the browser's camera looks down on the maze from where it fills its canvas."""
+    camera = view.client.camera
+    scene = view.scene
+    if scene is None:
+        return False
+    position, look_at, _ = top_down_camera(scene.domain, camera.fov, camera.aspect)
+    return bool(np.allclose(camera.position, position) and np.allclose(camera.look_at, look_at))

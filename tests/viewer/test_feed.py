@@ -86,6 +86,18 @@ def test_feed_snapshot_holds_each_session_as_the_service_sees_it(client: TestCli
     assert [step for step, _, _ in mine.advice] == list(range(6))
 
 
+def test_feed_gives_the_sessions_most_recently_active_first(client: TestClient) -> None:
+    first, first_auth = walk(client, "E")
+    second, _ = walk(client, "E")
+    order = [s.session_id for s in remote(client)().sessions]
+    assert order.index(second) < order.index(first)
+    event = {"state": [28, 1], "action": "E"}
+    answer = client.post(f"/sessions/{first}/events", json=event, headers=first_auth)
+    assert answer.status_code == 200
+    order = [s.session_id for s in remote(client)().sessions]
+    assert order.index(first) < order.index(second)
+
+
 def test_feed_prior_version_goes_up_when_trajectories_arrive(client: TestClient) -> None:
     feed = remote(client)
     before = feed().domains["default"]

@@ -168,3 +168,28 @@ def test_advice_arrows_point_along_each_likely_action(seed: int, min_p: float) -
         np.testing.assert_allclose(start, geo.cell_centres(d, [cells[k]], 0.3)[0])
         step = end[:2] - start[:2]
         np.testing.assert_allclose(step, 0.8 * probs[k, a] * geo.ACTION_VECTORS[a], atol=1e-12)
+
+
+@given(
+    st.integers(2, 600), st.integers(2, 600), st.floats(0.1, 2.8), st.floats(0.1, 10.0),
+    st.floats(0.0, 2.0),
+)  # fmt: skip
+def test_fit_height_shows_the_whole_map_and_fills_the_view(
+    rows: int, cols: int, fov: float, aspect: float, top: float
+) -> None:
+    """A pinhole camera at the fitted height sees every corner of the map at the height
+    ``top`` (the nearest to it, so the largest on screen), and the map's longer side (for
+    the view's shape) spans the view but for the margin."""
+    margin = 1.04
+    height = geo.fit_height(rows, cols, fov, aspect, top=top, margin=margin)
+    corners = np.array([[x, y] for x in (-cols / 2, cols / 2) for y in (-rows / 2, rows / 2)])
+    # normalised device coordinates of the corners: x across, y up, both in [-1, 1] if seen
+    depth = height - top
+    ndc = corners / (depth * np.tan(fov / 2) * np.array([aspect, 1.0]))
+    assert np.abs(ndc).max() == pytest.approx(1 / margin)
+
+
+def test_fit_height_refuses_a_view_that_is_not_one() -> None:
+    for fov, aspect in [(0.0, 1.0), (np.pi, 1.0), (1.0, 0.0), (1.0, float("nan"))]:
+        with pytest.raises(ValueError, match="fov must be in"):
+            geo.fit_height(10, 10, fov, aspect)

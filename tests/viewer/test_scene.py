@@ -12,7 +12,7 @@ from viser import BatchedMeshHandle
 
 from app.domain.grid import N_ACTIONS, GridDomain
 from app.viewer import geometry as geo
-from app.viewer.scene import LAYERS, MazeScene, top_down_camera
+from app.viewer.scene import LAYERS, WALL_HEIGHT, MazeScene, top_down_camera
 from tests.viewer.conftest import walk
 
 
@@ -109,8 +109,9 @@ def test_scene_layers_toggle_their_frames(scene: MazeScene) -> None:
 
 
 def test_top_down_camera_looks_straight_down_with_north_up(domain: GridDomain) -> None:
-    position, look_at, up = top_down_camera(domain)
+    position, look_at, up = top_down_camera(domain, fov=1.2, aspect=1.5)
     rows, cols = domain.shape
     assert look_at.tolist() == [cols / 2, rows / 2, 0.0]
-    assert position[:2].tolist() == look_at[:2].tolist() and position[2] > max(rows, cols) / 2
+    assert position[:2].tolist() == look_at[:2].tolist()
+    assert position[2] == geo.fit_height(rows, cols, 1.2, 1.5, top=WALL_HEIGHT)
     assert up.tolist() == [0.0, 1.0, 0.0]

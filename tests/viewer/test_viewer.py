@@ -11,11 +11,13 @@ import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
+from viser import _messages
 
 from app.domain.generate import generate_domain
 from app.domain.grid import GridDomain
 from app.viewer import geometry as geo
-from app.viewer.controls import KAPPA_MAX, LOST_PICKED, NONE
+from app.viewer.controls import KAPPA_MAX, LOST_PICKED, NONE, PLOT_TITLE
+from app.viewer.scene import DEFAULT_FOV, WALL_HEIGHT
 from app.viewer.state import DomainView, Snapshot
 from app.viewer.viewer import Viewer, pump_wait
 from tests.viewer.conftest import Browser, FakeFeed, choose, free_port, wait_until, walk
@@ -59,6 +61,99 @@ def test_viewer_session_options_follow_the_live_sessions(
     assert viewer.controls.session.options == (NONE, "w0", "w1")
     assert viewer.controls.picked_session is None
     assert viewer.controls.stats.content == "No session picked."
+
+
+def test_viewer_session_picker_lists_the_most_recently_active_first(
+    viewer: Viewer, feed: FakeFeed, domain: GridDomain, theta: np.ndarray
+) -> None:
+    """The feed gives sessions most recently active first (as the service's snapshot does);
+    the picker keeps that order, not the ids' (w0 is the longest walk, w2 the latest)."""
+    snap = snapshot(domain, theta, 3)
+    by_id = {s.session_id: s for s in snap.sessions}
+    feed.snapshot = Snapshot(snap.domains, [by_id["w2"], by_id["w0"], by_id["w1"]])
+    viewer.tick()
+    assert viewer.controls is not None
+    assert viewer.controls.session.options == (NONE, "w2", "w0", "w1")
+    choose(viewer.controls.session, "w0")
+    feed.snapshot = Snapshot(snap.domains, [by_id["w1"], by_id["w2"], by_id["w0"]])  # w1 moved
+    viewer.tick()
+    assert viewer.controls.session.options == (NONE, "w1", "w2", "w0")
+    assert viewer.controls.picked_session == "w0"  # the pick stays while the order changes
+
+
+def test_viewer_panel_has_a_legend_and_one_name_for_p_m1_h(
+    viewer: Viewer, feed: FakeFeed, domain: GridDomain, theta: np.ndarray
+) -> None:
+    feed.snapshot = snapshot(domain, theta, 1)
+    viewer.tick()
+    controls = viewer.controls
+    assert controls is not None
+    legend = controls.legend.content
+    for drawn in ("walls", "start", "goals", "Prior arrows", "Kappa shading", "Session markers",
+                  "Session paths", "Advice given"):  # fmt: skip
+        assert drawn in legend
+    # each layer's checkbox is named as the legend names it
+    assert all(box.label in legend for box in controls.layers.values())
+    assert controls.plot.title == PLOT_TITLE == "P(M1|H) over time"
+    choose(controls.session, "w0")
+    viewer.tick()
+    shown = (legend, controls.stats.content, controls.shading_text.content, controls.plot.title)
+    assert all("p_normal" not in text for text in shown)
+    assert "P(M1|H)" in controls.stats.content
+
+
+def camera(width: int, height: int, fov: float = DEFAULT_FOV) -> _messages.ViewerCameraMessage:
+    """The camera message a browser sends when its canvas is ``width`` x ``height``."""
+    return _messages.ViewerCameraMessage(
+        wxyz=(1.0, 0.0, 0.0, 0.0), position=(0.0, 0.0, 10.0), fov=fov, near=0.01, far=1000.0,
+        image_height=height, image_width=width, look_at=(0.0, 0.0, 0.0),
+        up_direction=(0.0, 1.0, 0.0),
+    )  # fmt: skip
+
+
+def test_viewer_fits_the_maze_to_the_browsers_window(
+    feed: FakeFeed, domain: GridDomain, theta: np.ndarray
+) -> None:
+    """The camera is put where the maze fills the canvas the browser reports; when the window
+    changes size (or the fit button is pressed) it is put there again."""
+    feed.snapshot = snapshot(domain, theta, 1)
+    viewer = Viewer(feed, port=free_port())
+    viewer.start(pump=False)
+    browser = Browser(viewer.port)
+    try:
+        wait_until(lambda: len(viewer.views) == 1)
+        view = next(iter(viewer.views.values()))
+        rows, cols = domain.shape
+
+        def fits(width: int, height: int, fov: float) -> bool:
+            cam = view.client.camera
+            if (cam.image_width, cam.image_height) != (width, height):
+                return False  # the browser's message has not arrived yet
+            viewer.tick()
+            # what the camera sees at the tops of the walls, half the width and height
+            half_v = (cam.position[2] - WALL_HEIGHT) * np.tan(fov / 2)
+            half_h = half_v * width / height
+            filled = max(rows / 2 / half_v, cols / 2 / half_h)
+            centred = np.allclose(cam.position[:2], [cols / 2, rows / 2])
+            return centred and bool(np.isclose(cam.look_at[2], 0.0)) and 0.95 < filled <= 1.0
+
+        for width, height, fov in [(1600, 800, DEFAULT_FOV), (500, 900, 1.0), (900, 900, 0.6)]:
+            browser.send(camera(width, height, fov))
+            wait_until(lambda w=width, h=height, f=fov: fits(w, h, f))  # type: ignore[misc]
+        # a person zoomed out; the window kept its size: the camera is left where they put it
+        cam = view.client.camera
+        cam.position = (cols / 2, rows / 2, 500.0)
+        viewer.tick()
+        assert cam.position[2] == 500.0
+        # the person clicks the fit button in their panel: the maze fills the window again
+        button = view.controls.fit
+        browser.send(_messages.GuiUpdateMessage(button._impl.uuid, {"value": True}))
+        wait_until(lambda: view.controls._fit_asked)
+        viewer.tick()
+        assert fits(900, 900, 0.6)
+    finally:
+        browser.close()
+        viewer.stop()
 
 
 def test_viewer_kappa_slider_and_lost_mode_drive_the_shading(
