@@ -1,6 +1,8 @@
 // The dashboard: polls GET /overview about once a second and redraws two tables. Live sessions
 // (where explorers are and were) are listed for an operator's key only: the page asks for it
-// and keeps it in this tab's sessionStorage; without it, the figures per domain.
+// and keeps it in this tab's sessionStorage; without it, the figures per domain. The sessions
+// table sorts by any column (a click on its heading); with the admin key, a session can be
+// ended from its row (DELETE /sessions/{id}); a refusal is shown with the service's reason.
 "use strict";
 
 (() => {
@@ -9,6 +11,9 @@
   const KEY = "advisor-operator-key";
   const $ = (id) => document.getElementById(id);
   let refused = null; // the service's reason, when the key given was refused
+  let last = null; // the last answer, to redraw at once when the sort changes
+  const sort = { key: null, dir: 1 }; // null: the service's order (most recently active first)
+  const ending = new Set(); // sessions whose DELETE is under way
 
   function cell(text, className = "") {
     const td = document.createElement("td");
@@ -26,39 +31,51 @@
     return tr;
   }
 
-  function bar(p) {
-    const td = document.createElement("td");
-    td.className = "left";
+  /** A bar as long as p (0..1): blue at 0.5 or more, red below. */
+  function barOf(p) {
     const outer = document.createElement("span");
     outer.className = p < 0.5 ? "bar lost" : "bar";
     const inner = document.createElement("span");
     inner.style.width = `${Math.round(100 * Math.min(1, Math.max(0, p)))}%`;
     outer.append(inner);
-    td.append(outer, document.createTextNode(fmt(p)));
+    return outer;
+  }
+
+  function bar(p) {
+    const td = document.createElement("td");
+    td.className = "left";
+    td.append(barOf(p), document.createTextNode(fmt(p)));
     return td;
   }
 
-  /** A small line of recent P(M1|H) values on a fixed 0..1 scale. */
-  function sparkline(values) {
-    const td = document.createElement("td");
-    td.className = "left";
-    const w = 110, h = 22;
-    const svg = document.createElementNS("http://www.w3.org/2000/svg", "svg");
+  /** A small line of recent P(M1|H) values on a fixed 0..1 scale, a dotted line at 0.5. */
+  function sparklineOf(values) {
+    const w = 90, h = 22;
+    const ns = "http://www.w3.org/2000/svg";
+    const svg = document.createElementNS(ns, "svg");
     svg.setAttribute("class", "spark");
     svg.setAttribute("width", w);
     svg.setAttribute("height", h);
     svg.setAttribute("viewBox", `0 0 ${w} ${h}`);
+    const y = (v) => (1 - v) * (h - 2) + 1;
+    const half = document.createElementNS(ns, "line");
+    Object.entries({ x1: 0, x2: w, y1: y(0.5), y2: y(0.5), class: "half" })
+      .forEach(([k, v]) => half.setAttribute(k, v));
+    svg.append(half);
     if (values.length > 1) {
-      const line = document.createElementNS(svg.namespaceURI, "polyline");
-      const points = values.map((v, i) => `${(i * (w - 2)) / (values.length - 1) + 1},` +
-        `${(1 - v) * (h - 2) + 1}`);
+      const line = document.createElementNS(ns, "polyline");
+      const points = values.map((v, i) => `${(i * (w - 2)) / (values.length - 1) + 1},${y(v)}`);
       line.setAttribute("points", points.join(" "));
-      line.setAttribute("fill", "none");
-      line.setAttribute("stroke", "#326edc");
-      line.setAttribute("stroke-width", "1.5");
+      line.setAttribute("class", "line");
       svg.append(line);
     }
-    td.append(svg);
+    return svg;
+  }
+
+  function sparkline(values) {
+    const td = document.createElement("td");
+    td.className = "left";
+    td.append(sparklineOf(values));
     return td;
   }
 
@@ -66,29 +83,7 @@
     if (!advice) return cell("–", "left");
     const best = ACTIONS.reduce((a, b) => (advice.advice[b] > advice.advice[a] ? b : a));
     return cell(`step ${advice.step} at [${advice.state.join(", ")}]: ` +
-      `${ARROWS[best]} ${best} ${Math.round(100 * advice.advice[best])}%`, "left");
-  }
-
-  function renderDomains(domains) {
-    const body = $("domains").tBodies[0];
-    if (!domains.length) {
-      body.replaceChildren(emptyRow(9, "No domains."));
-      return;
-    }
-    body.replaceChildren(...domains.map((d) => {
-      const tr = document.createElement("tr");
-      tr.dataset.domain = d.name;
-      const walk = document.createElement("td");
-      walk.className = "left";
-      const a = document.createElement("a");
-      a.href = `/walk?domain=${encodeURIComponent(d.name)}`;
-      a.textContent = "walk it";
-      walk.append(a);
-      tr.append(cell(d.name, "left"), cell(`${d.rows}×${d.cols}`), cell(d.n_states),
-                cell(d.trajectories), cell(d.sessions), cell(d.steps),
-                cell(fmt(d.advice_per_100, 1)), cell(d.looking_lost), walk);
-      return tr;
-    }));
+      `${ARROWS[best]} ${best} ${Math.round(100 * advice.advice[best])}%`, "left last");
   }
 
   // The advising strategy; goal_aware sessions also list the goals still possible.
@@ -102,31 +97,187 @@
     return td;
   }
 
+  function walkLink(d) {
+    const td = document.createElement("td");
+    td.className = "left";
+    const a = document.createElement("a");
+    a.href = `/walk?domain=${encodeURIComponent(d.name)}`;
+    a.textContent = "walk it";
+    td.append(a);
+    return td;
+  }
+
+  // One button per session, kept across redraws: a click is not lost to the next poll's rows.
+  const buttons = new Map();
+
+  function endButton(s) {
+    const td = document.createElement("td");
+    td.className = "left";
+    let button = buttons.get(s.session_id);
+    if (!button) {
+      button = document.createElement("button");
+      button.type = "button";
+      button.className = "end";
+      button.title = "End this session (DELETE /sessions/{id}, the admin key)";
+      button.addEventListener("click", () => endSession(s.session_id));
+      buttons.set(s.session_id, button);
+    }
+    button.textContent = ending.has(s.session_id) ? "Ending…" : "End";
+    button.disabled = ending.has(s.session_id);
+    td.append(button);
+    return td;
+  }
+
+  // Each column: heading, unit (shown under it), how a cell is drawn, and the value it sorts by
+  // (none: not sortable). Units: κ, the KL and the cost are in nats; cost = κ × advice given.
+  const DOMAIN_COLUMNS = [
+    { label: "Name", left: true, draw: (d) => cell(d.name, "left") },
+    { label: "Size", unit: "rows × cols", draw: (d) => cell(`${d.rows}×${d.cols}`) },
+    { label: "Free cells", unit: "cells", draw: (d) => cell(d.n_states) },
+    { label: "Expert trajectories", unit: "stored", draw: (d) => cell(d.trajectories) },
+    { label: "Live sessions", unit: "sessions", draw: (d) => cell(d.sessions) },
+    { label: "Steps", unit: "moves, all sessions", draw: (d) => cell(d.steps) },
+    { label: "Advice per 100", unit: "decisions", draw: (d) => cell(fmt(d.advice_per_100, 1)) },
+    { label: "Looking lost", unit: "sessions, P(M1|H) < 0.5", draw: (d) => cell(d.looking_lost) },
+    { label: "", left: true, draw: walkLink },
+  ];
+  const SESSION_COLUMNS = [
+    { key: "session", label: "Session", left: true, draw: (s) => cell(s.session_id, "left mono"), value: (s) => s.session_id },
+    { key: "domain", label: "Domain", left: true, draw: (s) => cell(s.domain, "left"), value: (s) => s.domain },
+    { key: "type", label: "Type", left: true, draw: (s) => cell(s.agent_type || "–", "left"), value: (s) => s.agent_type || "" },
+    { key: "strategy", label: "Strategy", left: true, draw: strategy, value: (s) => s.strategy || "paper" },
+    { key: "kappa", label: "κ", unit: "nats", draw: (s) => cell(s.kappa), value: (s) => s.kappa },
+    { key: "steps", label: "Steps", unit: "moves", draw: (s) => cell(s.steps), value: (s) => s.steps },
+    { key: "position", label: "Position", unit: "[row, col]", draw: (s) => cell(`[${s.position.join(", ")}]`), value: (s) => s.position[0] * 1e6 + s.position[1] },
+    { key: "p", label: "P(M1|H)", unit: "0 to 1", left: true, draw: (s) => bar(s.p_normal), value: (s) => s.p_normal },
+    { key: "recent", label: "Recent P(M1|H)", unit: "recent decisions", left: true, draw: (s) => sparkline(s.p_normal_history || []) },
+    { key: "advice", label: "Advice", unit: "given", draw: (s) => cell(s.advice_count), value: (s) => s.advice_count },
+    { key: "cost", label: "Cost", unit: "nats", draw: (s) => cell(fmt(s.total_cost, 2)), value: (s) => s.total_cost },
+    { key: "per100", label: "Per 100", unit: "decisions", draw: (s) => cell(fmt(s.advice_per_100, 1)), value: (s) => s.advice_per_100 },
+    { key: "last", label: "Last advice", unit: "step, cell", left: true, draw: (s) => lastAdvice(s.last_advice), value: (s) => (s.last_advice ? s.last_advice.step : -1) },
+    { key: "end", label: "", left: true, draw: endButton },
+  ];
+
+  function heading(column, sortable) {
+    const th = document.createElement("th");
+    if (column.left) th.className = "left";
+    th.dataset.column = column.key || "";
+    const label = sortable ? document.createElement("button") : document.createElement("span");
+    label.textContent = column.label;
+    if (sortable) {
+      label.type = "button";
+      label.className = "sort";
+      label.title = `Sort by ${column.label}`;
+      label.addEventListener("click", () => sortBy(column.key));
+      const on = sort.key === column.key;
+      th.setAttribute("aria-sort", on ? (sort.dir > 0 ? "ascending" : "descending") : "none");
+      const mark = document.createElement("span");
+      mark.className = "mark";
+      mark.textContent = on ? (sort.dir > 0 ? " ▲" : " ▼") : "";
+      label.append(mark);
+    }
+    th.append(label);
+    if (column.unit) {
+      const unit = document.createElement("span");
+      unit.className = "unit";
+      unit.textContent = column.unit;
+      th.append(unit);
+    }
+    return th;
+  }
+
+  function renderHeadings() {
+    $("domains").tHead.rows[0].replaceChildren(...DOMAIN_COLUMNS.map((c) => heading(c, false)));
+    $("sessions").tHead.rows[0].replaceChildren(
+      ...SESSION_COLUMNS.map((c) => heading(c, Boolean(c.value))));
+    const column = SESSION_COLUMNS.find((c) => c.key === sort.key);
+    $("sort-note").textContent = column
+      ? `sorted by ${column.label}, ${sort.dir > 0 ? "ascending" : "descending"}.`
+      : "sorted as the service lists them: most recently active first.";
+  }
+
+  function sortBy(key) {
+    if (sort.key === key) sort.dir = -sort.dir;
+    else Object.assign(sort, { key, dir: 1 });
+    renderHeadings();
+    if (last) renderSessions(last.sessions, last.total_sessions, last.detail);
+  }
+
+  /** The sessions in the order chosen; ties keep the service's order. */
+  function sorted(sessions) {
+    const column = SESSION_COLUMNS.find((c) => c.key === sort.key);
+    if (!column) return sessions;
+    const keyed = sessions.map((s, i) => [column.value(s), i, s]);
+    keyed.sort((a, b) => {
+      const order = typeof a[0] === "string" ? a[0].localeCompare(b[0]) : a[0] - b[0];
+      return sort.dir * order || a[1] - b[1];
+    });
+    return keyed.map((k) => k[2]);
+  }
+
+  function renderDomains(domains) {
+    const body = $("domains").tBodies[0];
+    if (!domains.length) {
+      body.replaceChildren(emptyRow(DOMAIN_COLUMNS.length, "No domains."));
+      return;
+    }
+    body.replaceChildren(...domains.map((d) => {
+      const tr = document.createElement("tr");
+      tr.dataset.domain = d.name;
+      tr.append(...DOMAIN_COLUMNS.map((c) => c.draw(d)));
+      return tr;
+    }));
+  }
+
   function renderSessions(sessions, total, detail) {
     const body = $("sessions").tBodies[0];
+    const columns = SESSION_COLUMNS.length;
     $("session-total").textContent = total > sessions.length
       ? `(${total} live; the ${sessions.length} most recently active shown)` : `(${total} live)`;
     if (!detail) {
-      body.replaceChildren(emptyRow(13, refused
+      body.replaceChildren(emptyRow(columns, refused
         ? `The key was refused (${refused}): enter the operator key to see live sessions.`
         : "Live sessions are shown with the operator key (above)."));
       return;
     }
     if (!sessions.length) {
-      body.replaceChildren(emptyRow(13, "No live sessions. Walk the maze, or run python -m app simulate."));
+      body.replaceChildren(emptyRow(columns, "No live sessions. Walk the maze, or run python -m app simulate."));
       return;
     }
-    body.replaceChildren(...sessions.map((s) => {
+    const listed = new Set(sessions.map((s) => s.session_id));
+    for (const id of buttons.keys()) if (!listed.has(id)) buttons.delete(id);
+    body.replaceChildren(...sorted(sessions).map((s) => {
       const tr = document.createElement("tr");
       tr.dataset.sessionId = s.session_id;
-      tr.append(cell(s.session_id, "left mono"), cell(s.domain, "left"),
-                cell(s.agent_type || "–", "left"), strategy(s), cell(s.kappa), cell(s.steps),
-                cell(`[${s.position.join(", ")}]`), bar(s.p_normal),
-                sparkline(s.p_normal_history || []), cell(s.advice_count),
-                cell(fmt(s.total_cost, 2)), cell(fmt(s.advice_per_100, 1)),
-                lastAdvice(s.last_advice));
+      tr.append(...SESSION_COLUMNS.map((c) => c.draw(s)));
       return tr;
     }));
+  }
+
+  function say(text, isError) {
+    const el = $("session-message");
+    el.textContent = text;
+    el.classList.toggle("error", isError);
+    el.hidden = false;
+  }
+
+  async function endSession(id) {
+    if (ending.has(id)) return;
+    ending.add(id);
+    if (last) renderSessions(last.sessions, last.total_sessions, last.detail);
+    try {
+      const ended = await fetchJSON(`/sessions/${encodeURIComponent(id)}`, {
+        method: "DELETE", headers: { "X-API-Key": key() },
+      });
+      say(`Session ${id} ended after ${ended.steps} steps (${ended.advice_count} pieces of ` +
+          `advice, cost ${fmt(ended.total_cost, 2)} nats).`, false);
+      if (last) last.sessions = last.sessions.filter((s) => s.session_id !== id);
+    } catch (err) {
+      say(`Could not end session ${id}: ${err.message}`, true);
+    } finally {
+      ending.delete(id);
+      if (last) renderSessions(last.sessions, last.total_sessions, last.detail);
+    }
   }
 
   function key() {
@@ -167,9 +318,17 @@
   });
   showKeyForm();
 
+  // the legend's samples, drawn by the same functions as the table's cells
+  document.querySelector('[data-sample="bar-normal"]').append(barOf(0.8));
+  document.querySelector('[data-sample="bar-lost"]').append(barOf(0.2));
+  document.querySelector('[data-sample="sparkline"]')
+    .append(sparklineOf([0.9, 0.85, 0.6, 0.3, 0.1, 0.15, 0.45, 0.7, 0.9]));
+  renderHeadings();
+
   async function poll() {
     try {
       const answer = await overview();
+      last = answer;
       renderDomains(answer.domains);
       renderSessions(answer.sessions, answer.total_sessions, answer.detail);
       $("status").textContent = `Updated ${new Date().toLocaleTimeString()}`;

@@ -127,12 +127,25 @@ def browser() -> Iterator[Browser]:
 
 @dataclass
 class Problems:
-    """Console errors and uncaught page errors seen by one page."""
+    """Console errors and uncaught page errors seen by one page, but for those a test said it
+    causes on purpose (:meth:`expect`)."""
 
     messages: list[str] = field(default_factory=list)
+    expected: list[re.Pattern[str]] = field(default_factory=list)
+    seen_expected: list[str] = field(default_factory=list)
+
+    def expect(self, pattern: str) -> None:
+        """The test causes console errors matching ``pattern`` (say, the browser's own line for
+        an answer the test provokes, "the server responded with a status of 403"): they are
+        not problems."""
+        self.expected.append(re.compile(pattern))
 
     def console(self, message: ConsoleMessage) -> None:
-        if message.type == "error":
+        if message.type != "error":
+            return
+        if any(p.search(message.text) for p in self.expected):
+            self.seen_expected.append(message.text)
+        else:
             self.messages.append(f"console error: {message.text} at {message.location}")
 
     def page_error(self, error: Exception) -> None:
@@ -140,11 +153,16 @@ class Problems:
 
 
 @pytest.fixture
-def page(browser: Browser, request: pytest.FixtureRequest) -> Iterator[Page]:
+def problems() -> Problems:
+    """What the ``page`` fixture fails the test on, for a test to name errors it provokes."""
+    return Problems()
+
+
+@pytest.fixture
+def page(browser: Browser, problems: Problems) -> Iterator[Page]:
     context = browser.new_context(viewport={"width": 1280, "height": 860})
     tab = context.new_page()
     tab.set_default_timeout(20_000)
-    problems = Problems()
     tab.on("console", problems.console)
     tab.on("pageerror", problems.page_error)
     yield tab
