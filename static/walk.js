@@ -1,5 +1,6 @@
 // The walk page: a person walks a maze with the arrow keys; every move goes to the advisor over
 // the session's websocket, and each decision that advises is drawn as arrows with probabilities.
+// Beside the maze: a legend of what it shows, the KL against κ, and P(M1|H) after each move.
 "use strict";
 
 (() => {
@@ -10,6 +11,7 @@
     w: "N", d: "E", s: "S", a: "W", W: "N", D: "E", S: "S", A: "W",
   };
   const MIN_ADVICE_P = 0.03; // arrows below this probability are not drawn
+  const ADVISED_FILL = "rgba(214, 69, 69, 0.35)"; // a dot where advice was given
   const $ = (id) => document.getElementById(id);
   const canvas = $("maze");
   const ctx = canvas.getContext("2d");
@@ -17,6 +19,7 @@
   const walk = {
     map: null, cell: 20, pos: null, path: [], session: null, socket: null, pending: 0,
     decision: null, advice: null, advisedCells: [], background: null,
+    history: [], // {step, p, advised} of every decision of this walk, oldest first
   };
   const NOTES = {
     paper: "The experts' action prior θ for this cell: how often people who know the building " +
@@ -66,7 +69,7 @@
     ctx.setTransform(1, 0, 0, 1, 0, 0);
     ctx.drawImage(background(), 0, 0);
     ctx.restore();
-    ctx.fillStyle = "rgba(214, 69, 69, 0.35)";
+    ctx.fillStyle = ADVISED_FILL;
     for (const rc of walk.advisedCells) {
       const [x, y] = centre(rc, cell);
       ctx.beginPath();
@@ -113,12 +116,80 @@
     }
   }
 
+  /** P(M1|H) after each decision of this walk, 0 to 1 upwards, a dotted line at 0.5, the
+   *  decisions that advised marked in red. */
+  function drawChart() {
+    const chart = $("p-chart");
+    const w = 300, h = 120, left = 26, right = 6, top = 6, bottom = 18;
+    const ratio = window.devicePixelRatio || 1;
+    if (chart.width !== Math.round(w * ratio)) {
+      chart.width = Math.round(w * ratio);
+      chart.height = Math.round(h * ratio);
+      chart.style.width = `${w}px`;
+      chart.style.height = `${h}px`;
+    }
+    const g = chart.getContext("2d");
+    g.setTransform(ratio, 0, 0, ratio, 0, 0);
+    g.clearRect(0, 0, w, h);
+    const points = walk.history;
+    const first = points.length ? points[0].step : 0;
+    const span = Math.max(10, points.length ? points[points.length - 1].step - first : 0);
+    const x = (step) => left + ((step - first) / span) * (w - left - right);
+    const y = (p) => top + (1 - p) * (h - top - bottom);
+    g.font = "10px system-ui, sans-serif";
+    g.fillStyle = COLOURS.text;
+    g.textAlign = "right";
+    g.textBaseline = "middle";
+    for (const p of [0, 0.5, 1]) g.fillText(String(p), left - 4, y(p));
+    g.textAlign = "center";
+    g.textBaseline = "top";
+    g.fillText(`step ${first}`, left + 14, h - bottom + 4);
+    g.fillText(`${first + span}`, w - right - 8, h - bottom + 4);
+    g.strokeStyle = "#d9dce3";
+    g.lineWidth = 1;
+    g.strokeRect(left, top, w - left - right, h - top - bottom);
+    g.setLineDash([2, 3]);
+    g.beginPath();
+    g.moveTo(left, y(0.5));
+    g.lineTo(w - right, y(0.5));
+    g.stroke();
+    g.setLineDash([]);
+    if (points.length) {
+      g.strokeStyle = COLOURS.walker;
+      g.lineWidth = 1.5;
+      g.beginPath();
+      points.forEach((pt, i) => (i ? g.lineTo(x(pt.step), y(pt.p)) : g.moveTo(x(pt.step), y(pt.p))));
+      g.stroke();
+      g.fillStyle = COLOURS.advice;
+      for (const pt of points) {
+        if (!pt.advised) continue;
+        g.beginPath();
+        g.arc(x(pt.step), y(pt.p), 2.2, 0, 2 * Math.PI);
+        g.fill();
+      }
+    }
+    chart.dataset.points = points.length;
+    chart.dataset.last = points.length ? points[points.length - 1].p : "";
+  }
+
+  function remember(d) {
+    const h = walk.history;
+    while (h.length && h[h.length - 1].step >= d.step) h.pop(); // a decision given again
+    h.push({ step: d.step, p: d.p_normal, advised: Boolean(d.advise) });
+  }
+
   function showDecision(d) {
     walk.decision = d;
     $("steps").textContent = d.step;
     $("position").textContent = `[${d.state[0]}, ${d.state[1]}]`;
     $("p-normal").textContent = fmt(d.p_normal);
+    const kappa = walk.session ? walk.session.kappa : NaN;
     $("kl").textContent = `${fmt(d.kl)} nats`;
+    $("kl-rule").textContent = `KL ${fmt(d.kl)} ${d.advise ? "≥" : "<"} κ ${kappa} → ` +
+      (d.advise ? "advised" : "not advised");
+    $("kl-rule").classList.toggle("advised", Boolean(d.advise));
+    remember(d);
+    drawChart();
     $("advice-count").textContent = d.cost.advice_count;
     $("cost").textContent = fmt(d.cost.total, 2);
     const g = goalIndex(walk.map, d.state);
@@ -228,6 +299,7 @@
       Object.assign(walk, {
         map: domain.map, pos: created.decision.state, path: [created.decision.state],
         session: created, pending: 0, advice: null, advisedCells: [], background: null,
+        history: [],
       });
       walk.cell = fitCanvas(canvas, domain.rows, domain.cols, 640);
       $("advice-note").textContent = NOTES[created.strategy] || NOTES.paper;
@@ -257,12 +329,61 @@
     select.value = names.includes(wanted) ? wanted : (names.includes("default") ? "default" : names[0]);
   }
 
+  /** The legend's swatches, drawn with the maze's own colours and shapes. */
+  function drawLegend() {
+    const size = 22;
+    const ratio = window.devicePixelRatio || 1;
+    const shapes = {
+      wall: (g) => { g.fillStyle = COLOURS.wall; g.fillRect(2, 2, size - 4, size - 4); },
+      start: (g) => drawMaze(g, ["S"], size),
+      goal: (g) => drawMaze(g, ["G"], size),
+      walker: (g) => {
+        g.fillStyle = COLOURS.walker;
+        g.beginPath();
+        g.arc(size / 2, size / 2, size * 0.32, 0, 2 * Math.PI);
+        g.fill();
+      },
+      path: (g) => {
+        g.strokeStyle = COLOURS.path;
+        g.lineWidth = size * 0.18;
+        g.lineCap = "round";
+        g.beginPath();
+        g.moveTo(3, size - 6);
+        g.lineTo(size - 3, 6);
+        g.stroke();
+      },
+      advised: (g) => {
+        g.fillStyle = ADVISED_FILL;
+        g.beginPath();
+        g.arc(size / 2, size / 2, size * 0.16, 0, 2 * Math.PI);
+        g.fill();
+      },
+      advice: (g) => drawArrow(g, 3, size / 2, "E", size - 5, COLOURS.advice, 2.5),
+    };
+    for (const li of document.querySelectorAll("#maze-legend li")) {
+      const swatch = document.createElement("canvas");
+      swatch.className = "swatch";
+      swatch.width = size * ratio;
+      swatch.height = size * ratio;
+      swatch.style.width = `${size}px`;
+      swatch.style.height = `${size}px`;
+      const g = swatch.getContext("2d");
+      g.setTransform(ratio, 0, 0, ratio, 0, 0);
+      g.fillStyle = COLOURS.floor;
+      g.fillRect(0, 0, size, size);
+      shapes[li.dataset.item](g);
+      li.prepend(swatch);
+    }
+  }
+
   document.addEventListener("keydown", (e) => {
     const a = KEYS[e.key];
     if (!a || e.target.closest("input, select, textarea")) return;
     e.preventDefault();
     move(a);
   });
+  drawLegend();
+  drawChart();
   $("restart").addEventListener("click", newWalk);
   $("domain").addEventListener("change", newWalk);
   $("strategy").addEventListener("change", newWalk);

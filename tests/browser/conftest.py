@@ -170,8 +170,10 @@ def page(browser: Browser, problems: Problems) -> Iterator[Page]:
     assert not problems.messages, "\n".join(problems.messages)
 
 
-def screenshot(page: Page, name: str) -> Path:
+def screenshot(page: Page, name: str, full_page: bool = False) -> Path:
+    """The page as shown (the whole page, scrolled, with ``full_page``) in
+    ``test-artifacts/<name>.png``; ``make screenshots`` copies them into docs/screenshots/."""
     ARTIFACTS.mkdir(exist_ok=True)
     path = ARTIFACTS / f"{re.sub(r'[^A-Za-z0-9_.-]', '_', name)}.png"
-    page.screenshot(path=str(path))
+    page.screenshot(path=str(path), full_page=full_page)
     return path

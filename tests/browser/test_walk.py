@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import random
+import re
 
 import pytest
 from playwright.sync_api import Page, expect
@@ -44,12 +45,31 @@ def test_walk_keys_move_the_explorer_and_advice_appears_when_lost(
     assert seen["steps"] == 3 and seen["position"] == [28, 3]
     assert float(page.locator("#p-normal").inner_text()) > 0.5
     expect(page.locator("#advice")).to_be_hidden()
+    # the KL beside kappa, and why no advice; P(M1|H) after each decision (the start's too)
+    kl = page.locator("#kl").inner_text()
+    assert re.fullmatch(r"\d+\.\d{3} nats", kl)
+    rule = page.locator("#kl-rule")
+    expect(rule).to_have_text(f"KL {kl.split()[0]} < κ 0.5 → not advised")
+    chart = page.locator("#p-chart")
+    expect(chart).to_have_attribute("data-points", "4")
+    assert float(chart.get_attribute("data-last") or "nan") == pytest.approx(
+        float(page.locator("#p-normal").inner_text()), abs=6e-4
+    )
+    # the legend names what the maze shows, each with a swatch drawn as the maze draws it
+    legend = page.locator("#maze-legend li")
+    expect(legend).to_have_count(7)
+    expect(page.locator("#maze-legend li canvas.swatch")).to_have_count(7)
+    for item in ("wall", "start", "goal", "walker", "path", "advised", "advice"):
+        expect(page.locator(f'#maze-legend li[data-item="{item}"]')).to_be_visible()
 
     # a lost-looking walk: bumping into the walls and going back and forth
     for key in ["ArrowDown", "ArrowDown", "ArrowLeft", "ArrowRight", "ArrowLeft", "ArrowRight"]:
         page.keyboard.press(key)
     expect(page.locator("#steps")).to_have_text("9")
     expect(page.locator("#advice")).to_be_visible()
+    expect(rule).to_have_text(re.compile(r"^KL \d+\.\d{3} ≥ κ 0\.5 → advised$"))
+    expect(rule).to_have_class(re.compile("advised"))
+    expect(chart).to_have_attribute("data-points", "10")
     items = page.locator("#advice-list li")
     expect(items).to_have_count(4)
     expect(items.first).to_contain_text("%")
@@ -65,7 +85,7 @@ def test_walk_keys_move_the_explorer_and_advice_appears_when_lost(
     best = "NESW"[max(range(4), key=lambda a: prior[a])]
     shown = {li.get_attribute("data-action"): li.inner_text() for li in items.all()}
     assert f"{100 * max(prior):.1f}%" in shown[best]
-    screenshot(page, "walk-advised")
+    screenshot(page, "walk-advised", full_page=True)
 
 
 def test_a_walker_in_a_128_building_is_led_to_a_destination_by_guide(
@@ -99,6 +119,8 @@ def test_a_walker_in_a_128_building_is_led_to_a_destination_by_guide(
     else:
         pytest.fail("the walker did not reach a destination in 3,000 moves")
     assert advised > 0
+    # P(M1|H) of every decision of the walk is on the chart, the start's included
+    expect(page.locator("#p-chart")).to_have_attribute("data-points", str(int(seen["step"]) + 1))
     cell = json.loads(seen["position"])
     assert grid.state(*cell) in grid.goals
     sid = page.evaluate("document.body.dataset.sessionId")
@@ -106,7 +128,7 @@ def test_a_walker_in_a_128_building_is_led_to_a_destination_by_guide(
     assert summary_["strategy"] == "guide" and summary_["position"] == cell
     advice_count = summary_["advice_count"]
     assert isinstance(advice_count, int) and advice_count >= advised
-    screenshot(page, "walk-guide-128")
+    screenshot(page, "walk-guide-128", full_page=True)
 
 
 def test_walk_draws_a_256_map_and_answers_moves(service: Service, page: Page) -> None:
