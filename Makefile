@@ -7,7 +7,7 @@ RUN_STAMP := $(VENV)/.run-stamp
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 SRC := app tests benchmarks client
 
-.PHONY: run test venv run-venv chromium wrk lint format bench clean
+.PHONY: run test venv run-venv chromium wrk lint format bench screenshots clean
 
 ## What running needs: the client (client/, its own distribution) and the service.
 $(RUN_STAMP): pyproject.toml client/pyproject.toml
@@ -51,6 +51,11 @@ format: venv
 ## Runs the whole suite; pytest exits non-zero (5) when no test ran, which fails the target.
 test: venv chromium lint
 	$(BIN)/python -m pytest
+
+## The browser tests, then their screenshots of every page copied into docs/screenshots/
+## (README.md, "Pages"). `make test` leaves docs/ alone: its screenshots stay in test-artifacts/.
+screenshots: venv chromium
+	$(BIN)/python -m tests.browser.screenshots
 
 ## The service on 127.0.0.1:8000 with the viewer on :8080; SQLite and the admin key under ./data.
 run: run-venv

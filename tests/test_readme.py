@@ -1,5 +1,5 @@
 """The README says what the code does: every setting listed, the library example runs (from
-outside the repository) and shows advice being given."""
+outside the repository) and shows advice being given, a screenshot of every page shown."""
 
 from __future__ import annotations
 
@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 from app.service.config import Settings
+from tests.browser.screenshots import PAGES, TARGET
 
 README = (Path(__file__).resolve().parents[1] / "README.md").read_text(encoding="utf-8")
 
@@ -33,3 +34,15 @@ def test_readme_library_example_runs_outside_the_repository_and_advises(tmp_path
     shown = re.search(r"# True ([\d.]+) ([\d.]+)", code)
     assert shown is not None and (shown.group(1), shown.group(2)) == (kl, p_normal)
     assert advice.startswith("(0.0119")
+
+
+def test_readme_shows_a_screenshot_of_every_page() -> None:
+    """Each page's screenshot (``make screenshots`` copies them from the browser tests' run)
+    is a PNG in docs/screenshots/ that the README's "Pages" section shows, and nothing else
+    is kept there."""
+    pages = README.split("## Pages", 1)[1].split("\n## ", 1)[0]
+    shown = re.findall(r"!\[[^\]]*\]\(docs/screenshots/([\w.-]+)\.png\)", pages)
+    assert shown == list(PAGES)
+    for name in PAGES:
+        assert (TARGET / f"{name}.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", name
+    assert sorted(p.stem for p in TARGET.iterdir()) == sorted(PAGES)
