@@ -217,7 +217,7 @@ def bench_parts(tmp: Path, repeats: int) -> dict[str, float]:
     grid = domain.domain
     frames = frames_for(grid, 7)
     limit = state.settings.max_batch_events
-    session, _ = ops.create_session(state, domain, SessionCreate())
+    session, _ = asyncio.run(ops.create_session(state, domain, SessionCreate()))
     moves = [read_moves(grid, f, limit)[0] for f in frames]
     ops.warm_up()
     libm_only(np.random.default_rng(0).random(FRAME) + 0.5)

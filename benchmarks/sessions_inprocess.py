@@ -11,6 +11,7 @@ exist, as in ``bench_service.py``'s memory figure.
 from __future__ import annotations
 
 import argparse
+import asyncio
 import gc
 import sys
 import tempfile
@@ -40,7 +41,7 @@ def main() -> None:
         events = b"[" + b",".join([b'{"state":[28,0],"action":"E"}',
                                    b'{"state":[28,1],"action":"W"}'] * 100) + b"]"  # fmt: skip
         for _ in range(n):
-            session, _ = ops.create_session(state, domain, SessionCreate())
+            session, _ = asyncio.run(ops.create_session(state, domain, SessionCreate()))
             ops.apply_events(state, session, events)
         tracked = len(gc.get_objects())
         full = []

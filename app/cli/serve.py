@@ -26,6 +26,14 @@ def serve(
     no_viewer: Annotated[
         bool, typer.Option("--no-viewer", help="Do not start the viewer (its own process).")
     ] = False,
+    workers: Annotated[
+        int | None,
+        typer.Option(help="Worker processes, one per core (default 1); more needs --redis-url."),
+    ] = None,
+    redis_url: Annotated[
+        str | None,
+        typer.Option(help="Redis for live sessions, e.g. redis://127.0.0.1:6379/0 (workers)."),
+    ] = None,
     log_level: Annotated[str, typer.Option(help="uvicorn log level.")] = "info",
 ) -> None:
     """Run the advice service (settings also from ADVISOR_* environment variables)."""
@@ -35,6 +43,7 @@ def serve(
 
     given: dict[str, Any] = {
         "host": host, "port": port, "data_dir": data_dir, "database_url": database_url,
+        "workers": workers, "redis_url": redis_url,
     }  # fmt: skip
     overrides = {k: v for k, v in given.items() if v is not None}
     if no_viewer:
@@ -50,7 +59,10 @@ def serve(
         raise typer.Exit(code=2)
     viewer = start_viewer(settings) if settings.viewer_enabled else None
     try:
-        uvicorn.run(create_app(settings), **uvicorn_options(settings, log_level))
+        if settings.workers == 1:
+            uvicorn.run(create_app(settings), **uvicorn_options(settings, log_level))
+        else:
+            run_workers(settings, overrides, log_level)
     finally:
         if viewer is not None:
             viewer.terminate()
@@ -58,6 +70,32 @@ def serve(
                 viewer.wait(10)
             except subprocess.TimeoutExpired:
                 viewer.kill()
+
+
+def run_workers(settings: Settings, overrides: dict[str, Any], log_level: str) -> None:
+    """``settings.workers`` processes on one port (uvicorn's supervisor, which starts a new
+    one when one dies), sharing live sessions through Redis and data through the database.
+    The first start (the default domain, the keys) happens here, once, before they start;
+    each worker reads the settings from the environment."""
+    import tempfile
+
+    import uvicorn
+
+    from app.service.state import open_state
+
+    for name, value in overrides.items():
+        os.environ[f"ADVISOR_{name.upper()}"] = str(value)
+    state, messages = open_state(settings)  # made once: the workers find it all there
+    state.close()
+    for message in messages:
+        typer.echo(message, err=True)
+    if settings.metrics_enabled and "PROMETHEUS_MULTIPROC_DIR" not in os.environ:
+        # prometheus-client's multiprocess mode: each worker writes its samples there,
+        # /metrics sums them (a fresh directory for every start)
+        os.environ["PROMETHEUS_MULTIPROC_DIR"] = tempfile.mkdtemp(prefix="advisor-metrics-")
+    options = uvicorn_options(settings, log_level)
+    options["http"] = "app.service.worker_http:WorkerHttp"
+    uvicorn.run("app.service.main:create_app", factory=True, workers=settings.workers, **options)
 
 
 def start_viewer(settings: Settings) -> subprocess.Popen[bytes]:
@@ -110,7 +148,7 @@ def uvicorn_options(settings: Settings, log_level: str = "info") -> dict[str, An
     HTTP goes through :mod:`app.service.guard` (bounded headers, read deadlines, a cap on
     connections); uvicorn's reading of X-Forwarded-For is off (it would trust any from
     127.0.0.1): :mod:`app.service.clients` reads it from the proxies the settings trust."""
-    from app.service.guard import guarded_http
+    from app.service.guard import connection_cap, guarded_http
 
     http = guarded_http(
         settings.max_header_bytes, settings.header_timeout, settings.body_timeout,
@@ -130,15 +168,3 @@ def uvicorn_options(settings: Settings, log_level: str = "info") -> dict[str, An
 
         options["log_config"] = json_log_config(log_level)
     return options
-
-
-def connection_cap(wanted: int) -> int:
-    """``wanted``, or fewer if the process may not open that many files (each connection is
-    one; 64 are kept for the database, logs and the rest)."""
-    import resource
-
-    soft, _ = resource.getrlimit(resource.RLIMIT_NOFILE)
-    if soft != resource.RLIM_INFINITY and soft - 64 < wanted:
-        typer.echo(f"max_connections {wanted} lowered to {soft - 64} (open files limit {soft})")
-        return max(soft - 64, 1)
-    return wanted

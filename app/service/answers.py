@@ -16,9 +16,10 @@ while it is being built wait for that one build (:func:`once`):
 from __future__ import annotations
 
 import asyncio
+import inspect
 import time
 import weakref
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from typing import Any
 
 import numpy as np
@@ -40,12 +41,14 @@ _domains: weakref.WeakKeyDictionary[DomainState, tuple[PriorView, bytes]] = (
 )
 
 
-async def once(key: object, build: Callable[[], bytes]) -> bytes:
-    """``build()`` in a worker thread, once for all who ask for ``key`` while it runs (a
-    reader that goes away does not cancel it for the others)."""
+async def once(key: object, build: Callable[[], bytes | Awaitable[bytes]]) -> bytes:
+    """``build()`` in a worker thread (or, a coroutine function, awaited), once for all who
+    ask for ``key`` while it runs (a reader that goes away does not cancel it for the
+    others)."""
     running = _building.get(key)
     if running is None:
-        running = asyncio.ensure_future(run_in_threadpool(build))
+        work = build() if inspect.iscoroutinefunction(build) else run_in_threadpool(build)
+        running = asyncio.ensure_future(work)  # type: ignore[arg-type]
         _building[key] = running
         running.add_done_callback(lambda _: _building.pop(key, None))
     return await asyncio.shield(running)
@@ -99,8 +102,9 @@ class Fresh:
     def __init__(self) -> None:
         self._made: dict[Any, tuple[float, bytes]] = {}
 
-    async def get(self, key: Any, max_age: float, build: Callable[[], bytes]) -> bytes:
-        """``build()`` in a worker thread, or its answer if made less than ``max_age`` ago."""
+    async def get(self, key: Any, max_age: float, build: Callable[[], Awaitable[bytes]]) -> bytes:
+        """``await build()`` (which makes its text in a worker thread), once for all who ask
+        meanwhile, or its answer if made less than ``max_age`` ago."""
         made = self._made.get(key)
         if made is not None and time.monotonic() - made[0] < max_age:
             return made[1]

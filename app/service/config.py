@@ -6,7 +6,7 @@ from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Literal
 
-from pydantic import Field, SecretStr, field_validator
+from pydantic import Field, SecretStr, field_validator, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from app.service.clients import networks
@@ -57,6 +57,12 @@ class Settings(BaseSettings):
     max_map_cells: int = Field(250_000, ge=4, description="Largest map (rows x cols).")
     recent_path: int = Field(100, ge=1, description="Cells of recent path kept per session.")
     recent_p_normal: int = Field(200, ge=1, description="p_normal values kept per session.")
+    replay_steps: int = Field(
+        500, ge=0, le=100_000,
+        description="Decisions of its last steps each session keeps, so that a retried event "
+        "(one with a step already applied) is answered again rather than applied twice; an "
+        "older step is refused (409). 53 bytes a step, reserved for each session.",
+    )  # fmt: skip
     viewer_enabled: bool = Field(
         True, description="serve starts the viser viewer, in a process of its own."
     )
@@ -73,6 +79,21 @@ class Settings(BaseSettings):
     bootstrap_per_goal: int = Field(10, ge=1, description="Expert trajectories per goal.")
     bootstrap_seed: int = Field(0, description="Seed of the default domain's experts.")
     bootstrap_alpha0: float = Field(1.0, gt=0, description="alpha0 of the default domain.")
+    # ---- several workers: sessions in Redis (docs/SCALING.md) ----
+    workers: int = Field(
+        1, ge=1, le=64,
+        description="Worker processes serving the API (one per core); more than 1 needs "
+        "ADVISOR_REDIS_URL.",
+    )  # fmt: skip
+    redis_url: str | None = Field(
+        None,
+        description="Redis, e.g. redis://127.0.0.1:6379/0: live sessions are kept there, every "
+        "event acknowledged once its session's new state is in Redis, so any worker answers "
+        "any session and a worker's death loses none.",
+    )
+    redis_prefix: str = Field(
+        "advisor", pattern=r"^[A-Za-z0-9_.-]{1,64}$", description="First part of its keys."
+    )
     # ---- operations: metrics, logs, the MQTT bridge ----
     metrics_enabled: bool = Field(True, description="Count requests; serve GET /metrics.")
     log_format: Literal["text", "json"] = Field(
@@ -145,6 +166,15 @@ class Settings(BaseSettings):
         description="Open connections at most, websockets included (then 503 and closed); "
         "lowered to the process's file descriptor limit less 64 if that is lower.",
     )  # fmt: skip
+
+    @model_validator(mode="after")
+    def _workers_share(self) -> Settings:
+        if self.workers > 1 and not self.redis_url:
+            raise ValueError(
+                f"workers {self.workers} needs ADVISOR_REDIS_URL: workers share their live "
+                "sessions through Redis (one worker runs without it)"
+            )
+        return self
 
     @field_validator("trusted_proxies")
     @classmethod

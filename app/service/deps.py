@@ -72,7 +72,7 @@ async def require_operator(
 
 
 async def get_domain(name: DomainName, state: StateDep) -> DomainState:
-    return state.catalog.get(name)
+    return await state.sessions.domain(name)
 
 
 def bearer_token(conn: HTTPConnection) -> str | None:
@@ -90,10 +90,10 @@ def bearer_token(conn: HTTPConnection) -> str | None:
 
 async def get_session(conn: HTTPConnection, session_id: SessionId) -> LiveSession:
     """The session, if the bearer token is its own (401 without one, 403 for another's)."""
-    return session_for(conn, session_id)
+    return await session_for(conn, session_id)
 
 
-def session_for(
+async def session_for(
     conn: HTTPConnection, session_id: str, state: ServiceState | None = None
 ) -> LiveSession:
     """:func:`get_session` as a plain call, for the event route: it runs on every event, and
@@ -105,9 +105,9 @@ def session_for(
     token = bearer_token(conn)
     if not token:
         check_session_token(None, b"", session_id)  # raises 401
-    session = state.registry.get(session_id)
+    session = await state.sessions.get(session_id)
     check_session_token(token, session.token_digest, session_id)
-    state.registry.touch(session)
+    state.sessions.touch(session)
     return session
 
 
@@ -121,7 +121,7 @@ async def get_session_or_admin(
     """As :func:`get_session`, or any session for the admin key (to read or end it)."""
     if key and not credentials:
         check_admin(key, state.admin_key)
-        return state.registry.get(session_id)
+        return await state.sessions.get(session_id)
     return await get_session(conn, session_id)
 
 
@@ -135,7 +135,7 @@ async def get_session_or_operator(
     """As :func:`get_session`, or any session for the admin or operator key (to read it)."""
     if key and not credentials:
         is_operator(key, state.admin_key, state.operator_key)
-        return state.registry.get(session_id)
+        return await state.sessions.get(session_id)
     return await get_session(conn, session_id)
 
 

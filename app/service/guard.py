@@ -25,6 +25,7 @@ import asyncio
 import http
 import json
 import logging
+import sys
 from typing import Any
 
 import httptools
@@ -177,3 +178,16 @@ def guarded_http(
         "max_connections": max_connections,
     }
     return type("GuardedHttp", (GuardedHttpTools,), attrs)
+
+
+def connection_cap(wanted: int) -> int:
+    """``wanted``, or fewer if the process may not open that many files (each connection is
+    one; 64 are kept for the database, logs and the rest)."""
+    import resource
+
+    soft, _ = resource.getrlimit(resource.RLIMIT_NOFILE)
+    if soft != resource.RLIM_INFINITY and soft - 64 < wanted:
+        print(f"max_connections {wanted} lowered to {soft - 64} (open files limit {soft})",
+              file=sys.stderr, flush=True)  # fmt: skip
+        return max(soft - 64, 1)
+    return wanted

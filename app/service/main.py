@@ -42,8 +42,7 @@ async def start_background(app: FastAPI, settings: Settings) -> list[Stop]:
 async def _expire_idle(state: ServiceState) -> None:
     while True:
         await asyncio.sleep(state.settings.sweep_seconds)
-        state.registry.expire()
-        state.registry.forget_old()  # the retention of where explorers were
+        await state.sessions.sweep()  # idle sessions, and the retention of where explorers were
 
 
 @asynccontextmanager
@@ -56,6 +55,7 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
     for message in messages:
         print(message, file=sys.stderr, flush=True)
     await run_in_threadpool(warm_up)
+    await state.sessions.start()
     app.state.service = state
     # Everything alive now (modules, tables, priors) lives as long as the process: keep it out
     # of the collector, whose full passes over it would otherwise pause requests for ~100 ms.
@@ -72,6 +72,11 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         sweeper.cancel()
         if gauges is not None:
             gauges.cancel()
+        await state.sessions.close()
+        if not state.sessions.shared:  # a graceful restart keeps the live sessions
+            kept = await run_in_threadpool(state.sessions.save, state.store)
+            if kept:
+                print(f"Kept {kept} live sessions for the next start", file=sys.stderr, flush=True)
         await run_in_threadpool(state.close)
 
 

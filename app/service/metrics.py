@@ -163,9 +163,9 @@ def viewer_tick(seconds: float) -> None:
     VIEWER_TICK.observe(seconds)
 
 
-def refresh_sessions(state: ServiceState) -> None:
-    """Set the live-sessions gauge from the registry (domains without sessions show 0)."""
-    counts = state.registry.count_by_domain()
+async def refresh_sessions(state: ServiceState) -> None:
+    """Set the live-sessions gauge (domains without sessions show 0)."""
+    counts = await state.sessions.count_by_domain()
     for d in state.catalog.states():
         SESSIONS.labels(d.name).set(counts.get(d.name, 0))
 
@@ -173,7 +173,7 @@ def refresh_sessions(state: ServiceState) -> None:
 async def keep_gauges(state: ServiceState) -> None:
     """Refresh this worker's gauge now and then (other workers' scrapes read it)."""
     while True:
-        refresh_sessions(state)
+        await refresh_sessions(state)
         await asyncio.sleep(GAUGE_SECONDS)
 
 
@@ -192,7 +192,7 @@ router = APIRouter(tags=["operations"])
 @router.get("/metrics", response_class=Response, responses={200: {"content": {"text/plain": {}}}})
 async def metrics(state: StateDep) -> Response:
     """Prometheus metrics in the text exposition format (README, "Operations")."""
-    refresh_sessions(state)
+    await refresh_sessions(state)
     return Response(exposition(), media_type=CONTENT_TYPE_LATEST)
 
 

@@ -224,7 +224,7 @@ class Bridge:
             if not (NAME.match(domain) and NAME.match(explorer)):
                 raise Refused(422, f"domain and explorer ids must match {NAME_PATTERN}")
             if kind == "config":
-                self.configure((domain, explorer), payload)
+                await self.configure((domain, explorer), payload)
                 return
             decisions = await self.events((domain, explorer), payload)
         except Refused as exc:
@@ -236,10 +236,10 @@ class Bridge:
             self.pending.extend((out, d) for d in decisions)
             MQTT_MESSAGES.labels("out", "decisions").inc(len(decisions))
 
-    def configure(self, key: Key, payload: bytes) -> None:
+    async def configure(self, key: Key, payload: bytes) -> None:
         """A retained config: the options of the explorer's next session (an empty payload
         clears it). A live session of the explorer ends, so the next event starts anew."""
-        self._end(key)
+        await self._end(key)
         if not payload:
             self.configs.pop(key, None)
             return
@@ -282,7 +282,7 @@ class Bridge:
     async def _open(self, key: Key, payload: bytes) -> tuple[LiveSession, bytes]:
         domain_name, _ = key
         try:
-            domain = self.state.catalog.get(domain_name)
+            domain = await self.state.sessions.domain(domain_name)
         except DomainNotFound:
             raise Refused(404, f"no domain named {domain_name!r}") from None
         body = self.configs.get(key) or SessionCreate()
@@ -296,19 +296,19 @@ class Bridge:
             except ValueError as exc:
                 raise Refused(422, f"strategy guide: {exc}") from None
         try:
-            session, decision = ops.create_session(self.state, domain, body)
+            session, decision = await ops.create_session(self.state, domain, body)
         except BadInput as exc:
             raise Refused(exc.status, exc.detail) from None
         self.sessions[key] = session
         while len(self.sessions) > self.max_explorers:
-            self._end(next(iter(self.sessions)))
+            await self._end(next(iter(self.sessions)))
         return session, decision_json(decision, domain.domain)
 
-    def _end(self, key: Key) -> None:
+    async def _end(self, key: Key) -> None:
         session = self.sessions.pop(key, None)
         if session is not None:
             with contextlib.suppress(SessionNotFound):
-                self.state.registry.end(session.id)
+                await self.state.sessions.end(session)
 
 
 def _bytes(payload: Any) -> bytes:

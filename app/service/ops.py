@@ -23,9 +23,11 @@ from app.service.data.domains import DomainNotFound, DomainState
 from app.service.data.ingest import parse_trajectories, to_trajectories
 from app.service.data.store import POOLED, Trajectory
 from app.service.live.registry import (
+    Aggregate,
     ClientQuotaReached,
     LiveSession,
     SessionMemoryFull,
+    SessionSnapshot,
     TooManySessions,
 )
 from app.service.live.replay import StepConflict
@@ -89,7 +91,7 @@ def session_params(state: ServiceState, domain: DomainState, body: SessionCreate
     return params
 
 
-def create_session(
+async def create_session(
     state: ServiceState, domain: DomainState, body: SessionCreate,
     params: StrategyParams | None = None, client: str | None = None,
 ) -> tuple[LiveSession, Decision]:  # fmt: skip
@@ -101,15 +103,15 @@ def create_session(
         params = session_params(state, domain, body)
     grid = domain.domain
     start = grid.start if body.start is None else cell_state(grid, body.start, "start")
-    registry = state.registry
+    sessions = state.sessions
     try:
-        session, decision = registry.create(
+        session, decision = await sessions.create(
             domain, body.kappa, body.window, body.agent_type, start, body.strategy, params,
             client,
         )  # fmt: skip
     except TooManySessions:
         raise BadInput(
-            f"the service has its maximum of {registry.max_sessions} live sessions: "
+            f"the service has its maximum of {sessions.max_sessions} live sessions: "
             "end one (DELETE /sessions/{id}) or retry after idle sessions expire",
             503,
         ) from None
@@ -171,16 +173,16 @@ async def answer_events(
     """:func:`apply_events` (or, ``binary``, :func:`apply_events_binary`) as the routes run it:
     a long batch in slices, the event loop free for others between them
     (:meth:`SessionRegistry.observe_sliced`)."""
-    grid, registry = session.domain.domain, state.registry
+    grid, sessions = session.domain.domain, state.sessions
     try:
         if not binary:
             move = read_move(grid, raw)
             if move is not None:
-                d = await registry.observe_after(session, *move)
+                d = await sessions.observe_one(session, *move)
                 _count(state, session, 1, int(d.advise))
                 return decision_json(d, grid)
         moves, _, first = read_moves(grid, raw, state.settings.max_batch_events)
-        out = await registry.observe_sliced(session, moves, first)
+        out = await sessions.observe(session, moves, first)
     except StepConflict as exc:
         raise conflict(exc) from None
     _count_batch(state, session, out)
@@ -195,7 +197,7 @@ async def apply_positions(state: ServiceState, session: LiveSession, body: Posit
     moves = position_moves(state, session, body)
     if moves is None:
         return b"[]"
-    out = await state.registry.observe_sliced(session, moves)
+    out = await state.sessions.observe(session, moves)
     _count_batch(state, session, out)
     return batch_json(out, session.domain.domain)
 
@@ -321,17 +323,21 @@ def simulated_experts(grid: GridDomain, experts: ExpertsIn, max_pairs: int) -> l
     return [Trajectory(None, w.pairs, w.goal) for w in walks]
 
 
-def after_put(state: ServiceState, domain: DomainState, kept: bool) -> None:
-    """On the loop: sessions follow a domain whose map stayed; others end with their map."""
+async def after_put(state: ServiceState, domain: DomainState, created: bool, kept: bool) -> None:
+    """Sessions follow a domain whose map stayed; others end with their map. Other workers
+    read it again from their next request that uses it."""
     if kept:
-        state.registry.retable(domain)
+        await state.sessions.retable(domain)
     else:
-        state.registry.end_domain(domain.name)
+        await state.sessions.end_domain(domain.name)
+    await state.sessions.domain_changed(domain.name, domain.version, created or not kept)
 
 
-def after_delete(state: ServiceState, name: str) -> None:
-    """On the loop: a deleted domain's sessions end and its metric series go."""
-    state.registry.end_domain(name)
+async def after_delete(state: ServiceState, name: str, version: int) -> None:
+    """A deleted domain's sessions end and its metric series go (``version``: its last data
+    version: other workers see one above it, and that it is gone)."""
+    await state.sessions.end_domain(name)
+    await state.sessions.domain_changed(name, version + 1, True)
     METRICS.forget_domain(name)
 
 
@@ -350,12 +356,13 @@ def ingest(
     return accepted, domain
 
 
-def overview(state: ServiceState, detail: bool, limit: int, domain: str | None) -> bytes:
+def overview(
+    state: ServiceState, detail: bool, aggregates: dict[str, Aggregate],
+    sessions: list[SessionSnapshot],
+) -> bytes:  # fmt: skip
     """*Worker thread.* ``GET /overview``: per domain its figures over its live sessions; with
-    ``detail`` (an operator's key) also the ``limit`` most recently active sessions (of
-    ``domain``), where each is and was."""
-    aggregates = state.registry.aggregates()
-    sessions = state.registry.snapshot(limit, domain) if detail else []
+    ``detail`` (an operator's key) also the most recently active sessions, where each is and
+    was (``sessions``, read by the route)."""
     return orjson.dumps({
         "detail": detail,
         "domains": [overview_domain(d, aggregates.get(d.name)) for d in state.catalog.states()],

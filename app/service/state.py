@@ -10,9 +10,10 @@ from app.service.answers import Fresh
 from app.service.clients import Network, networks
 from app.service.config import Settings
 from app.service.data.bootstrap import bootstrap
-from app.service.data.domains import DomainCatalog
+from app.service.data.domains import DomainCatalog, DomainState
 from app.service.data.store import Store
 from app.service.live.registry import Limits, SessionRegistry
+from app.service.live.sessions import LocalSessions
 from app.service.security import load_admin_key, load_operator_key
 
 
@@ -27,6 +28,11 @@ class ServiceState:
     started: float = field(default_factory=time.monotonic)
     trusted: tuple[Network, ...] = ()  # proxies whose X-Forwarded-For is believed
     fresh: Fresh = field(default_factory=Fresh)  # answers made at most once a second
+    sessions: LocalSessions = None  # type: ignore[assignment]  # the live sessions (below)
+
+    def __post_init__(self) -> None:
+        if self.sessions is None:  # the embedded default: the sessions of this process
+            self.sessions = LocalSessions(self.registry, self.catalog)
 
     def close(self) -> None:
         self.store.close()
@@ -53,6 +59,7 @@ def open_state(settings: Settings) -> tuple[ServiceState, list[str]]:
         settings.session_idle_seconds,
         settings.recent_path,
         settings.recent_p_normal,
+        settings.replay_steps,
     )
     registry.retention = settings.path_retention_seconds
     messages = [m for m in (key_message, operator_message) if m]
@@ -60,7 +67,34 @@ def open_state(settings: Settings) -> tuple[ServiceState, list[str]]:
     if made:
         messages.append(made)
     trusted = networks(settings.trusted_proxies)
+    sessions: LocalSessions | None = None
+    if settings.redis_url:  # sessions in Redis; this registry a cache of those it used
+        from app.service.live.shared import SharedSessions
+
+        registry.evicts = True  # within this worker's memory budget; quotas are Redis'
+        registry.limits = Limits(settings.max_sessions, settings.max_session_memory)
+        registry.replay_steps = 0  # the decisions kept for retries are in Redis
+        sessions = SharedSessions(
+            registry, catalog, settings.redis_url, settings.redis_prefix,
+            settings.replay_steps,
+            (settings.max_sessions, settings.max_session_memory,
+             settings.client_max_sessions, settings.client_max_session_memory),
+        )  # fmt: skip
     state = ServiceState(
-        settings, store, catalog, registry, admin_key, operator_key, trusted=trusted
-    )
+        settings, store, catalog, registry, admin_key, operator_key, trusted=trusted,
+        sessions=sessions,  # type: ignore[arg-type]
+    )  # fmt: skip
+    if not state.sessions.shared:
+        kept = state.sessions.restore(store, catalog.get, lambda d, s: prepare(catalog, d, s))
+        if kept:
+            messages.append(f"Restored {kept} live sessions kept at the last shutdown")
     return state, messages
+
+
+def prepare(catalog: DomainCatalog, domain: DomainState, strategy: str) -> None:
+    """*Worker thread.* Build what ``strategy`` reads of ``domain`` (goal_aware: the goal
+    priors; guide: the guide map) if it is not built yet."""
+    if strategy == "goal_aware":
+        catalog.goal_priors(domain)
+    elif strategy == "guide":
+        catalog.guide_map(domain)

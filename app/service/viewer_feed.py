@@ -13,6 +13,7 @@ Nothing a browser sends to the viewer reaches this process.
 from __future__ import annotations
 
 from datetime import datetime
+from functools import partial
 from typing import Any
 
 import orjson
@@ -59,13 +60,13 @@ class ViewerSnapshot(BaseModel):
     sessions: list[ViewerSession] = Field(description="Most recently active first.")
 
 
-def snapshot(state: ServiceState) -> bytes:
-    """*Worker thread.* What the viewer draws now, as JSON."""
+async def snapshot(state: ServiceState) -> bytes:
+    """What the viewer draws now, as JSON (the sessions' copies made in a worker thread)."""
     domains = [
         {"name": d.name, "updated_at": d.updated_at, "prior_version": d.view.version}
         for d in state.catalog.states()
     ]
-    sessions = [_session(s) for s in state.registry.snapshot(VIEWER_SESSIONS)]
+    sessions = [_session(s) for s in await state.sessions.snapshot(VIEWER_SESSIONS)]
     return orjson.dumps({"domains": domains, "sessions": sessions})
 
 
@@ -107,7 +108,7 @@ async def viewer_snapshot(state: StateDep, request: Request) -> Response:
         if seconds is not None:
             viewer_tick(seconds)
     age = min(0.05, state.settings.overview_seconds)
-    text = await state.fresh.get(("viewer",), age, lambda: snapshot(state))
+    text = await state.fresh.get(("viewer",), age, partial(snapshot, state))
     return Response(text, media_type="application/json")
 
 

@@ -7,6 +7,7 @@ import stat
 from pathlib import Path
 
 import numpy as np
+import pytest
 from fastapi.testclient import TestClient
 
 from app.service.main import create_app
@@ -53,8 +54,58 @@ def test_domains_trajectories_and_counts_survive_a_restart(tmp_path: Path, db_ur
             assert sorted(counts) == sorted(recount)
             for k in counts:
                 np.testing.assert_array_equal(counts[k].counts, recount[k].counts)
-        # sessions are watchers held in memory: they do not survive (clients open new ones)
-        assert client.get(f"/sessions/{sid}", headers=auth).status_code == 404
+        # a graceful restart keeps the live sessions (saved at shutdown, read back at start)
+        assert client.get(f"/sessions/{sid}", headers=auth).status_code == 200
+
+
+def _walk(grid_rows: list[str], n: int, seed: int) -> list[dict[str, object]]:
+    from app.domain.grid import ACTIONS, GridDomain
+
+    grid = GridDomain.from_strings(grid_rows)
+    rng = np.random.default_rng(seed)
+    s, out = grid.start, []
+    for a in rng.integers(0, 4, n).tolist():
+        out.append({"state": list(grid.cell(s)), "action": ACTIONS[a]})
+        s = grid.step(s, a)
+    return out
+
+
+@pytest.mark.parametrize(
+    "options",
+    [
+        {"kappa": 0.3, "window": 25},
+        {"strategy": "goal_aware", "params": {"beta": 0.5}, "window": 30},
+        {"strategy": "guide", "kappa": 0.2},
+        {"strategy": "random", "params": {"rate": 0.4, "seed": 3}},
+    ],
+)
+def test_a_graceful_restart_keeps_live_sessions_exactly(
+    tmp_path: Path, options: dict[str, object]
+) -> None:
+    """Windows, steps, costs, a random rule's draws: the session after a restart answers as
+    one in a service that never stopped (the same bootstrap prior), decision for decision."""
+    url_a = f"sqlite:///{tmp_path / 'a.db'}"
+    url_b = f"sqlite:///{tmp_path / 'b.db'}"
+    with _start(tmp_path / "b", url_b) as steady:
+        rows = steady.get("/domains/default").json()["map"]
+        events = _walk(rows, 120, seed=5)
+        _, auth_b, created_b = open_session(steady, **options)
+        sid_b = created_b["session_id"]
+        want = [
+            steady.post(f"/sessions/{sid_b}/events", json=events[i : i + 20], headers=auth_b).json()
+            for i in range(0, 120, 20)
+        ]
+        figures_b = steady.get(f"/sessions/{sid_b}", headers=auth_b).json()
+    with _start(tmp_path / "a", url_a) as client:
+        sid, auth, created = open_session(client, **options)
+        assert created["decision"] == created_b["decision"]
+        got = [client.post(f"/sessions/{sid}/events", json=events[:60], headers=auth).json()]
+    with _start(tmp_path / "a", url_a) as client:  # the same data directory: a restart
+        got.append(client.post(f"/sessions/{sid}/events", json=events[60:], headers=auth).json())
+        figures = client.get(f"/sessions/{sid}", headers=auth).json()
+    assert [d for part in got for d in part] == [d for part in want for d in part]
+    for key in ("steps", "advice_count", "total_cost", "benefit", "p_normal", "position", "goals"):
+        assert figures[key] == figures_b[key], key
 
 
 def test_first_start_happens_once(tmp_path: Path, db_url: str) -> None:

@@ -81,6 +81,7 @@ class DomainState:
     # guide sessions: distances to every destination, with the experts' counts of
     # ``goal_priors``; built with them when the first guide session starts
     guide_map: GuideMap | None = None
+    version: int = 0  # the store's data version this state holds (store.py)
 
     def __post_init__(self) -> None:
         self.view = _view(self.prior, None, set())
@@ -105,7 +106,7 @@ class DomainCatalog:
             domain = GridDomain.from_text(rec.map_text, name=rec.name)
             prior = restore_prior(rec.alpha0, domain.n_states, self.store.counts(rec.name))
             self._domains[rec.name] = DomainState(
-                rec.name, domain, prior, rec.created_at, rec.updated_at
+                rec.name, domain, prior, rec.created_at, rec.updated_at, version=rec.version
             )
 
     def states(self) -> list[DomainState]:
@@ -114,6 +115,10 @@ class DomainCatalog:
 
     def __len__(self) -> int:
         return len(self._domains)
+
+    def find(self, name: str) -> DomainState | None:
+        """The domain ``name``, or None."""
+        return self._domains.get(name)
 
     def get(self, name: str) -> DomainState:
         try:
@@ -158,6 +163,7 @@ class DomainCatalog:
             rec.updated_at,
             goal_priors=goals,
             guide_map=guide,
+            version=rec.version,
         )
 
     def goal_priors(self, state: DomainState) -> GoalPriors:
@@ -193,22 +199,33 @@ class DomainCatalog:
 
         If ``state`` was replaced meanwhile by a put of the same map (another alpha0 or
         frame), they go to the domain now of that name: its map is theirs. A put of another
-        map refuses them (:class:`DomainChanged`), a delete too (:class:`DomainNotFound`)."""
+        map refuses them (:class:`DomainChanged`), a delete too (:class:`DomainNotFound`).
+        If another process (a worker sharing the store) changed the domain since ``state`` was
+        read, the state returned is read again from the store (:meth:`refresh`)."""
         while True:
             with state.lock:
                 current = self._domains.get(state.name)
-                if current is state:
-                    self._add(state, items)
+                if current is state and self._add(state, items):
                     return state
+            if current is state:  # stored after others' changes that this state lacks
+                now = self.refresh(state.name)
+                if now is None:
+                    raise DomainNotFound(state.name)
+                return now
             if current is None:
                 raise DomainNotFound(state.name)
             if current.domain.rows_text != state.domain.rows_text:
                 raise DomainChanged(state.name)
             state = current  # the same map, put again: the trajectories fit it as they are
 
-    def _add(self, state: DomainState, items: Sequence[Trajectory]) -> None:
-        """Under ``state.lock``, ``state`` being the current domain of its name."""
-        self.store.add_trajectories(state.name, items, state.domain.n_states)
+    def _add(self, state: DomainState, items: Sequence[Trajectory]) -> bool:
+        """Under ``state.lock``, ``state`` being the current domain of its name: store ``items``
+        and add them to ``state`` (True), or, when the store's data version shows changes by
+        another process that ``state`` lacks, only store them (False: read it again)."""
+        version = self.store.add_trajectories(state.name, items, state.domain.n_states)
+        if version != state.version + 1:
+            return False
+        state.version = version
         groups: dict[str | None, list[Trajectory]] = {}
         for t in items:
             groups.setdefault(t.agent_type, []).append(t)
@@ -220,6 +237,64 @@ class DomainCatalog:
             state.goal_priors = add_goals(state.goal_priors.copy(), items)
             if state.guide_map is not None:
                 state.guide_map = state.guide_map.replace_counts(state.goal_priors)
+        return True
+
+    def refresh(self, name: str) -> DomainState | None:
+        """*Worker thread.* The domain ``name`` as the store holds it now, for a process that
+        shares the store with others (workers): the state held if its data version is the
+        store's, else a new state read from the store (its counts as of one data version; the
+        goal priors and guide map carried over, with the trajectories added since, when the
+        map is the same one); None, and dropped, when the domain is gone. The caller moves
+        the live sessions: to a new state of the same map (``retable``), or ends them."""
+        with self._lock:
+            old = self._domains.get(name)
+            with old.lock if old is not None else nullcontext():
+                return self._reload(name, old)
+
+    def _reload(self, name: str, old: DomainState | None) -> DomainState | None:
+        snap = self.store.snapshot(name, None if old is None else old.version)
+        if snap is None:
+            self._domains.pop(name, None)
+            return None
+        rec, counts, added = snap
+        if old is not None and old.version == rec.version:
+            return old
+        grid = GridDomain.from_text(rec.map_text, name=name)
+        prior = restore_prior(rec.alpha0, grid.n_states, counts)
+        goals, guide = None, None
+        if old is not None and old.goal_priors is not None and same_map(old, rec, grid):
+            goals = add_goals(old.goal_priors.copy(alpha0=rec.alpha0), added)
+            if old.guide_map is not None:  # the same map: the same distances
+                guide = old.guide_map.replace_counts(goals)
+        state = DomainState(
+            name, grid, prior, rec.created_at, rec.updated_at, goal_priors=goals,
+            guide_map=guide, version=rec.version,
+        )  # fmt: skip
+        self._domains[name] = state
+        return state
+
+    def sync(self, versions: Mapping[str, int] | None = None) -> list[DomainState]:
+        """*Worker thread.* Every domain as the store holds it now (``versions``: their data
+        versions by name, if the caller read them): the states that changed (new or read
+        again; a deleted one as it was)."""
+        versions = self.store.versions() if versions is None else versions
+        changed: list[DomainState] = []
+        for name in sorted(set(versions) | set(self._domains)):
+            old = self._domains.get(name)
+            if old is not None and versions.get(name) == old.version:
+                continue
+            new = self.refresh(name)
+            if new is not None and new is not old:
+                changed.append(new)
+            elif new is None and old is not None:
+                changed.append(old)
+        return changed
+
+
+def same_map(state: DomainState, rec: DomainRecord, grid: GridDomain) -> bool:
+    """Whether ``rec`` (read as ``grid``) is the map ``state`` holds, not a new domain of the
+    same name (made after a delete) or another map: the states are the same cells."""
+    return state.created_at == rec.created_at and state.domain.rows_text == grid.rows_text
 
 
 def add_goals(priors: GoalPriors, items: Sequence[Trajectory]) -> GoalPriors:

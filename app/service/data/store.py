@@ -2,9 +2,13 @@
 
 Tables (the same on every database; only the engine's connect options differ):
 
-* ``domains``: name, map text, alpha0, created/updated times;
+* ``domains``: name, map text, alpha0, created/updated times, and the data version: it goes up
+  by one in the transaction of every change of the domain's prior (a put, an ingest), so a
+  process that holds version v of a domain knows whether another has changed it since; a new
+  domain's versions start at its creation time in milliseconds times 1,000 (:func:`first_version`),
+  above any version of an earlier domain of the same name;
 * ``trajectories``: domain, agent type, steps as a compact blob of little-endian int32
-  (state, action) pairs, optional goal state;
+  (state, action) pairs, optional goal state, the data version that added it;
 * ``prior_counts``: per (domain, table) the eq. (1)-(2) increments as an int32 (states x 4) blob
   and the number of trajectories; table ``"*"`` is pooled over all agent types.
 
@@ -23,6 +27,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 from sqlalchemy import (
+    BigInteger,
     DateTime,
     Float,
     ForeignKey,
@@ -34,6 +39,7 @@ from sqlalchemy import (
     delete,
     event,
     insert,
+    inspect,
     select,
     text,
     update,
@@ -61,6 +67,7 @@ class DomainRow(Base):
     alpha0: Mapped[float] = mapped_column(Float)
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))
     updated_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))
+    version: Mapped[int] = mapped_column(BigInteger, default=0, server_default="0")
 
 
 class TrajectoryRow(Base):
@@ -72,6 +79,11 @@ class TrajectoryRow(Base):
     steps: Mapped[bytes] = mapped_column(LargeBinary)
     goal: Mapped[int | None] = mapped_column(Integer)
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))
+    version: Mapped[int] = mapped_column(BigInteger, default=0, server_default="0")
+
+
+#: columns added after the first release: ``create_schema`` adds them to an older database
+ADDED_COLUMNS = (("domains", "version"), ("trajectories", "version"))
 
 
 class CountsRow(Base):
@@ -80,6 +92,16 @@ class CountsRow(Base):
     agent_type: Mapped[str] = mapped_column(String(64), primary_key=True)
     n_trajectories: Mapped[int] = mapped_column(Integer)
     counts: Mapped[bytes] = mapped_column(LargeBinary)
+
+
+class LiveSessionRow(Base):
+    """A live session written at a graceful shutdown, read back (and deleted) at the next
+    start (:mod:`app.service.live.codec`)."""
+
+    __tablename__ = "live_sessions"
+    id: Mapped[str] = mapped_column(String(64), primary_key=True)
+    state: Mapped[bytes] = mapped_column(LargeBinary)
+    saved_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))
 
 
 class MetaRow(Base):
@@ -95,6 +117,7 @@ class DomainRecord:
     alpha0: float
     created_at: datetime
     updated_at: datetime
+    version: int = 0  # the data version (see the module)
 
 
 @dataclass(frozen=True)
@@ -112,6 +135,7 @@ class Trajectory:
     agent_type: str | None
     pairs: IntArray
     goal: int | None = None
+    version: int = 0  # the data version that stored it (0: not stored yet)
 
 
 #: The largest stored count (and trajectory number): counts are int32, the column 4 bytes on
@@ -136,14 +160,23 @@ def _unpack(blob: bytes, width: int = 2) -> IntArray:
     return np.frombuffer(blob, dtype="<i4").reshape(-1, width).astype(np.int64)
 
 
+def first_version(created: datetime) -> int:
+    """A new domain's first data version: its creation time in milliseconds, times 1,000 (below
+    2**53 until the year 2255, so that Redis' scripts compare versions exactly). A domain
+    deleted and made again starts above every version of the one before as long as that one
+    took fewer than 1,000 changes per millisecond of its life."""
+    return int(created.timestamp() * 1000) * 1000
+
+
 def _utc(t: datetime) -> datetime:
     return t if t.tzinfo is not None else t.replace(tzinfo=UTC)
 
 
 def _record(row: Any) -> DomainRecord:
     return DomainRecord(
-        row.name, row.map_text, row.alpha0, _utc(row.created_at), _utc(row.updated_at)
-    )
+        row.name, row.map_text, row.alpha0, _utc(row.created_at), _utc(row.updated_at),
+        row.version,
+    )  # fmt: skip
 
 
 def _rows(map_text: str) -> list[str]:
@@ -178,7 +211,15 @@ class Store:
         return self.engine.dialect.name
 
     def create_schema(self) -> None:
+        """The tables, and the columns of :data:`ADDED_COLUMNS` an older database lacks."""
         Base.metadata.create_all(self.engine)
+        have = inspect(self.engine)
+        for table, column in ADDED_COLUMNS:
+            if column not in {c["name"] for c in have.get_columns(table)}:
+                with self.engine.begin() as conn:
+                    conn.execute(text(
+                        f"ALTER TABLE {table} ADD COLUMN {column} BIGINT NOT NULL DEFAULT 0"
+                    ))  # fmt: skip
 
     def close(self) -> None:
         self.engine.dispose()
@@ -197,11 +238,64 @@ class Store:
             conn.execute(delete(MetaRow).where(MetaRow.key == key))
             conn.execute(insert(MetaRow).values(key=key, value=value))
 
+    # ---- live sessions over a restart ---------------------------------------------------------
+    def save_sessions(self, sessions: Sequence[tuple[str, bytes]]) -> None:
+        """Write (id, state) of the live sessions, replacing any written before."""
+        now = datetime.now(UTC)
+        with self.engine.begin() as conn:
+            conn.execute(delete(LiveSessionRow))
+            if sessions:
+                conn.execute(
+                    insert(LiveSessionRow),
+                    [{"id": sid, "state": raw, "saved_at": now} for sid, raw in sessions],
+                )
+
+    def take_sessions(self) -> list[bytes]:
+        """The sessions written at the last shutdown, deleted as they are read (a crash later
+        must not bring back sessions that went on elsewhere)."""
+        with self.engine.begin() as conn:
+            rows = conn.execute(select(LiveSessionRow.state)).scalars().all()
+            conn.execute(delete(LiveSessionRow))
+        return list(rows)
+
     # ---- domains ------------------------------------------------------------------------------
     def domains(self) -> list[DomainRecord]:
         with self.engine.connect() as conn:
             rows = conn.execute(select(DomainRow).order_by(DomainRow.name)).all()
         return [_record(r) for r in rows]
+
+    def domain(self, name: str) -> DomainRecord | None:
+        with self.engine.connect() as conn:
+            row = conn.execute(select(DomainRow).where(DomainRow.name == name)).one_or_none()
+        return None if row is None else _record(row)
+
+    def versions(self) -> dict[str, int]:
+        """Every domain's data version, by name."""
+        with self.engine.connect() as conn:
+            rows = conn.execute(select(DomainRow.name, DomainRow.version)).all()
+        return {r.name: r.version for r in rows}
+
+    def snapshot(
+        self, name: str, since: int | None = None
+    ) -> tuple[DomainRecord, dict[str, TableCounts], list[Trajectory]] | None:
+        """(record, counts, the trajectories added after data version ``since``) of ``name``
+        as of one data version (None: no such domain; ``since`` None: no trajectories). Read
+        with the version before and after: a change between them reads again, so the counts
+        are those of the record's version."""
+        for _ in range(100):
+            rec = self.domain(name)
+            if rec is None:
+                return None
+            counts = self.counts(name)
+            added = [] if since is None else self.trajectories(name, since)
+            again = self.domain(name)
+            if (
+                again is not None
+                and again.version == rec.version
+                and again.map_text == rec.map_text
+            ):
+                return rec, counts, [t for t in added if t.version <= rec.version]
+        raise RuntimeError(f"domain {name!r} kept changing while it was read")
 
     def put_domain(
         self, name: str, map_text: str, alpha0: float
@@ -216,19 +310,26 @@ class Store:
             if old is None:
                 conn.execute(
                     insert(DomainRow).values(
-                        name=name, map_text=map_text, alpha0=alpha0, created_at=now, updated_at=now
+                        name=name, map_text=map_text, alpha0=alpha0, created_at=now,
+                        updated_at=now, version=first_version(now),
                     )
+                )  # fmt: skip
+                return (
+                    DomainRecord(name, map_text, alpha0, now, now, first_version(now)),
+                    True,
+                    False,
                 )
-                return DomainRecord(name, map_text, alpha0, now, now), True, False
             kept = _rows(old.map_text) == _rows(map_text)  # a new frame keeps the states
             if not kept:
                 self._delete_data(conn, old.id)
+            version = old.version + 1
             conn.execute(
                 update(DomainRow)
                 .where(DomainRow.id == old.id)
-                .values(map_text=map_text, alpha0=alpha0, updated_at=now)
+                .values(map_text=map_text, alpha0=alpha0, updated_at=now, version=version)
             )
-            return DomainRecord(name, map_text, alpha0, _utc(old.created_at), now), False, kept
+            created = _utc(old.created_at)
+            return DomainRecord(name, map_text, alpha0, created, now, version), False, kept
 
     def delete_domain(self, name: str) -> bool:
         with self.engine.begin() as conn:
@@ -249,19 +350,20 @@ class Store:
         return conn.execute(select(DomainRow.id).where(DomainRow.name == name)).scalar()
 
     # ---- trajectories and counts --------------------------------------------------------------
-    def add_trajectories(self, name: str, items: Sequence[Trajectory], n_states: int) -> None:
-        """Store ``items`` and add their counts, in one transaction. KeyError: no such domain.
+    def add_trajectories(self, name: str, items: Sequence[Trajectory], n_states: int) -> int:
+        """Store ``items`` and add their counts, in one transaction; returns the domain's data
+        version that holds them. KeyError: no such domain.
 
         Two writers may both create a table's counts row; the loser's transaction is rolled
         back whole and retried, and then finds the row and adds to it."""
         increments = table_increments(items, n_states)
         for attempt in range(RETRIES):
             try:
-                self._add_trajectories(name, items, n_states, increments)
-                return
+                return self._add_trajectories(name, items, n_states, increments)
             except IntegrityError:
                 if attempt == RETRIES - 1:
                     raise
+        raise AssertionError("unreachable")
 
     def _add_trajectories(
         self,
@@ -269,22 +371,31 @@ class Store:
         items: Sequence[Trajectory],
         n_states: int,
         increments: dict[str, TableCounts],
-    ) -> None:
+    ) -> int:
         now = datetime.now(UTC)
         with self.engine.begin() as conn:
             dom = self._domain_id(conn, name)
             if dom is None:
                 raise KeyError(name)
-            conn.execute(  # writes first: the transaction holds the write lock from here on
+            # writes first: the transaction holds the write lock (on PostgreSQL the domain's
+            # row) from here on, so versions are taken in the order of the commits
+            conn.execute(
+                update(DomainRow).where(DomainRow.id == dom).values(version=DomainRow.version + 1)
+            )
+            version = int(conn.execute(select(DomainRow.version).where(DomainRow.id == dom))
+                          .scalar_one())  # fmt: skip
+            conn.execute(
                 insert(TrajectoryRow),
                 [
                     {"domain_id": dom, "agent_type": t.agent_type, "n_steps": len(t.pairs),
-                     "steps": _pack(t.pairs), "goal": t.goal, "created_at": now}
+                     "steps": _pack(t.pairs), "goal": t.goal, "created_at": now,
+                     "version": version}
                     for t in items
                 ],
             )  # fmt: skip
             for key, inc in increments.items():
                 self._add_counts(conn, dom, key, inc, n_states)
+        return version
 
     @staticmethod
     def _add_counts(conn: Connection, dom: int, key: str, inc: TableCounts, n_states: int) -> None:
@@ -314,15 +425,23 @@ class Store:
             ).all()
         return {r.agent_type: TableCounts(r.n_trajectories, _unpack(r.counts, 4)) for r in rows}
 
-    def trajectories(self, name: str) -> list[Trajectory]:
+    def trajectories(self, name: str, since: int | None = None) -> list[Trajectory]:
+        """The stored trajectories of ``name`` in the order they were stored (``since``: only
+        those added after that data version)."""
         with self.engine.connect() as conn:
             dom = self._domain_id(conn, name)
+            where = TrajectoryRow.domain_id == dom
+            if since is not None:
+                where = where & (TrajectoryRow.version > since)
             rows = conn.execute(
-                select(TrajectoryRow.agent_type, TrajectoryRow.steps, TrajectoryRow.goal)
-                .where(TrajectoryRow.domain_id == dom)
+                select(
+                    TrajectoryRow.agent_type, TrajectoryRow.steps, TrajectoryRow.goal,
+                    TrajectoryRow.version,
+                )
+                .where(where)
                 .order_by(TrajectoryRow.id)
-            ).all()
-        return [Trajectory(r.agent_type, _unpack(r.steps), r.goal) for r in rows]
+            ).all()  # fmt: skip
+        return [Trajectory(r.agent_type, _unpack(r.steps), r.goal, r.version) for r in rows]
 
     def recount(self, name: str, n_states: int) -> dict[str, TableCounts]:
         """The counts recomputed from the stored trajectories (to check :meth:`counts`)."""

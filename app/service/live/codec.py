@@ -203,12 +203,13 @@ def _batch(b: DecisionBatch) -> dict[str, Any]:
 
 
 def replay_record(b: DecisionBatch) -> bytes:
-    """One batch of decisions as bytes (what a retry of its steps is answered)."""
-    return _encoder.encode(_batch(b))
+    """One batch of decisions as bytes (what a retry of its steps is answered): its length
+    in 10 digits (what Redis reads of it to keep the last steps), then the columns."""
+    return b"%010d" % len(b) + _encoder.encode(_batch(b))
 
 
 def read_replay_record(raw: bytes) -> DecisionBatch:
-    return _unbatch(_decoder.decode(raw))
+    return _unbatch(_decoder.decode(raw[10:]))
 
 
 def _unbatch(v: dict[str, Any]) -> DecisionBatch:

@@ -19,6 +19,7 @@ import secrets
 import threading
 import time
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
 from typing import Any
@@ -246,6 +247,9 @@ class SessionRegistry:
         self._clients: dict[str, list[int]] = {}  # client -> [sessions, bytes]
         #: seconds the cells an explorer was at are kept (None: as long as the rings hold them)
         self.retention: float | None = None
+        #: a cache of sessions kept elsewhere (Redis): beyond the limits the least recently
+        #: seen are dropped, rather than new ones refused
+        self.evicts = False
 
     @property
     def max_sessions(self) -> int:
@@ -299,11 +303,7 @@ class SessionRegistry:
         decision = advisor.start(start)
         now = time.monotonic()
         with self.lock:
-            if self._refusal(need, client) is not None:
-                self._expire(now)
-            refused = self._refusal(need, client)
-            if refused is not None:
-                raise refused
+            self._admit(need, client, now)
             sid = secrets.token_hex(8)
             token = secrets.token_urlsafe(24)
             session = LiveSession(
@@ -322,6 +322,37 @@ class SessionRegistry:
                 used[0] += 1
                 used[1] += need
         return session, decision
+
+    def put(self, session: LiveSession) -> None:
+        """Hold a session made elsewhere (read back after a restart, or from Redis), within
+        the limits as :meth:`create` admits one; one of the same id is replaced."""
+        need = self.reservation(session.advisor)
+        with self.lock:
+            old = self._sessions.get(session.id)
+            if old is not None:
+                self._drop(old)
+            self._admit(need, session.client, time.monotonic())
+            session.reserved = need
+            self._sessions[session.id] = session
+            self.reserved += need
+            if session.client is not None:
+                used = self._clients.setdefault(session.client, [0, 0])
+                used[0] += 1
+                used[1] += need
+
+    def _admit(self, need: int, client: str | None, now: float) -> None:
+        """Under the lock: room for a session reserving ``need`` bytes for ``client``, idle
+        sessions expired first; then, in a registry that :attr:`evicts` (a cache of sessions
+        kept elsewhere), the least recently seen dropped; else the refusal raised."""
+        if self._refusal(need, client) is None:
+            return
+        self._expire(now)
+        refused = self._refusal(need, client)
+        while refused is not None and self.evicts and self._sessions:
+            self._drop(min(self._sessions.values(), key=lambda s: s.last_seen))
+            refused = self._refusal(need, client)
+        if refused is not None:
+            raise refused
 
     def _refusal(self, need: int, client: str | None) -> RuntimeError | None:
         """Why a session reserving ``need`` bytes for ``client`` cannot be admitted now."""
@@ -478,6 +509,18 @@ class SessionRegistry:
     def touch(self, session: LiveSession) -> None:
         session.last_seen = time.monotonic()
 
+    def cached(self, session_id: str) -> LiveSession | None:
+        """The session if this registry holds it (None otherwise: no error)."""
+        session = self._sessions.get(session_id)
+        return None if session is None or session.closed else session
+
+    def forget(self, session_id: str) -> None:
+        """Drop the session if held (a cache letting go; nothing ends elsewhere)."""
+        with self.lock:
+            session = self._sessions.get(session_id)
+            if session is not None:
+                self._drop(session)
+
     def end(self, session_id: str) -> LiveSession:
         with self.lock:
             session = self._sessions.get(session_id)
@@ -518,6 +561,12 @@ class SessionRegistry:
     def sessions(self) -> list[LiveSession]:
         with self.lock:
             return list(self._sessions.values())
+
+    def written(self, write: Callable[[LiveSession], bytes]) -> list[tuple[str, bytes]]:
+        """(id, ``write(session)``) of every live session, each written under the lock (so
+        between events, and between the slices of a batch still running)."""
+        with self.lock:
+            return [(s.id, write(s)) for s in self._sessions.values()]
 
     def count_by_domain(self) -> dict[str, int]:
         with self.lock:

@@ -31,6 +31,7 @@ BODY: dict[int | str, dict[str, Any]] = {  # unreadable, oversize or not JSON bo
 async def list_domains(state: StateDep) -> Response:
     """Every domain: its map, start, goals and prior size (each made once per version, in a
     worker thread)."""
+    await state.sessions.sync_catalog()
     return Response(await answers.domains(state.catalog.states()), media_type=JSON)
 
 
@@ -48,8 +49,9 @@ async def read_domain(domain: DomainDep) -> Response:
 async def put_domain(name: DomainName, body: DomainPut, state: StateDep) -> Response:
     """Create (201) or replace (200) a domain. The same map keeps its trajectories and its
     live sessions; a new map starts with an empty prior and ends the old map's sessions."""
+    await state.sessions.sync_domain(name)
     domain, created, kept = await run_in_threadpool(ops.put_domain, state, name, body)
-    ops.after_put(state, domain, kept)
+    await ops.after_put(state, domain, created, kept)
     return Response(await answers.domain(domain), 201 if created else 200, media_type=JSON)
 
 
@@ -58,8 +60,9 @@ async def put_domain(name: DomainName, body: DomainPut, state: StateDep) -> Resp
 )
 async def delete_domain(name: DomainName, state: StateDep) -> None:
     """Delete a domain with its trajectories and counts; its live sessions end."""
+    domain = await state.sessions.domain(name)
     await run_in_threadpool(state.catalog.delete, name)
-    ops.after_delete(state, name)
+    await ops.after_delete(state, name, domain.version)
 
 
 @router.post(
@@ -77,7 +80,7 @@ async def add_trajectories(
     domain is PUT again with the same map meanwhile, they go to it; if its map is replaced by
     another, nothing is stored and the answer is 409."""
     accepted, went = await run_in_threadpool(ops.ingest, state, domain, await request.body())
-    state.registry.retable(went)
+    await state.sessions.retable(went)
     return accepted
 
 

@@ -24,7 +24,7 @@ async def health(state: StateDep) -> HealthPublic:
         version=VERSION,
         database=state.store.dialect,
         domains=len(state.catalog),
-        sessions=len(state.registry),
+        sessions=await state.sessions.count(),
         uptime_seconds=time.monotonic() - state.started,
     )
 

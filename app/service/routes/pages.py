@@ -7,6 +7,7 @@ from typing import Annotated
 
 from fastapi import APIRouter, HTTPException, Query, Response
 from fastapi.responses import FileResponse
+from starlette.concurrency import run_in_threadpool
 
 from app.service import ops
 from app.service.deps import OperatorView, StateDep
@@ -34,7 +35,13 @@ async def overview(
     once a second (ADVISOR_OVERVIEW_SECONDS), in a worker thread."""
     key = ("overview", detail, limit, domain)
     age = state.settings.overview_seconds
-    text = await state.fresh.get(key, age, lambda: ops.overview(state, detail, limit, domain))
+
+    async def build() -> bytes:
+        aggregates = await state.sessions.aggregates()
+        sessions = await state.sessions.snapshot(limit, domain) if detail else []
+        return await run_in_threadpool(ops.overview, state, detail, aggregates, sessions)
+
+    text = await state.fresh.get(key, age, build)
     return Response(text, media_type="application/json")
 
 

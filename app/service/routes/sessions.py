@@ -62,7 +62,7 @@ async def create_session(
         except GuideError as exc:
             raise BadInput(f"strategy guide: {exc}") from None
     client = client_of(request, state)
-    session, decision = ops.create_session(state, domain, body, params, client)
+    session, decision = await ops.create_session(state, domain, body, params, client)
     return session_created(session, decision)
 
 
@@ -73,7 +73,7 @@ async def post_events(request: Request, session_id: SessionId) -> Response:
     with their decisions and applies nothing; a step beyond the next one, or one applied with
     another move, is 409."""
     state = service_of(request)
-    session = session_for(request, session_id, state)  # not a dependency: see session_for
+    session = await session_for(request, session_id, state)  # not a dependency: see there
     text = await ops.answer_events(state, session, await request.body())
     return Response(text, media_type="application/json")
 
@@ -111,15 +111,13 @@ async def post_positions(session: SessionDep, body: PositionsIn, state: StateDep
 @router.get("/sessions/{session_id}", responses=ERRORS)
 async def read_session(session: SessionOrOperatorDep, state: StateDep) -> SessionPublic:
     """The session's figures (its token, or the admin or operator key)."""
-    return session_public(state.registry.describe(session))
+    return session_public(await state.sessions.describe(session))
 
 
 @router.delete("/sessions/{session_id}", responses=ERRORS)
 async def end_session(session: SessionOrAdminDep, state: StateDep) -> SessionPublic:
     """End the session; returns its final figures."""
-    final = state.registry.describe(session)
-    state.registry.end(session.id)
-    return session_public(final)
+    return session_public(await state.sessions.end(session))
 
 
 @router.get("/sessions", dependencies=[OperatorDep], responses=ERRORS)
@@ -129,8 +127,9 @@ async def list_sessions(
     domain: Annotated[str | None, Query(max_length=64)] = None,
 ) -> SessionList:
     """Live sessions, most recently active first (the admin or the operator key)."""
-    reg = state.registry
-    total = len(reg) if domain is None else reg.count_by_domain().get(domain, 0)
-    return SessionList(
-        total=total, sessions=[session_public(s) for s in reg.snapshot(limit, domain)]
-    )
+    sessions = state.sessions
+    total = await sessions.count() if domain is None else (
+        (await sessions.count_by_domain()).get(domain, 0)
+    )  # fmt: skip
+    listed = await sessions.snapshot(limit, domain)
+    return SessionList(total=total, sessions=[session_public(s) for s in listed])

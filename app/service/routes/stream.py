@@ -57,7 +57,7 @@ def offered_token(ws: WebSocket) -> str | None:
     return None
 
 
-def _authorize(state: ServiceState, session_id: str, ws: WebSocket) -> LiveSession:
+async def _authorize(state: ServiceState, session_id: str, ws: WebSocket) -> LiveSession:
     token = offered_token(ws)
     header = ws.headers.get("authorization", "")
     if not token and header.lower().startswith("bearer "):
@@ -66,7 +66,7 @@ def _authorize(state: ServiceState, session_id: str, ws: WebSocket) -> LiveSessi
         token = ws.query_params.get("token")
     if not token:
         check_session_token(None, b"", session_id)
-    session = state.registry.get(session_id)
+    session = await state.sessions.get(session_id)
     check_session_token(token, session.token_digest, session_id)
     return session
 
@@ -90,7 +90,7 @@ async def _serve(websocket: WebSocket, session_id: str) -> None:
                for p in v.split(",")}  # fmt: skip
     await websocket.accept(SUBPROTOCOL if SUBPROTOCOL in offered else None)
     try:
-        session = _authorize(state, session_id, websocket)
+        session = await _authorize(state, session_id, websocket)
     except (AuthError, SessionNotFound) as exc:
         code = 4400 + exc.status % 100 if isinstance(exc, AuthError) else 4404
         await websocket.close(code, CLOSE_REASONS[code])

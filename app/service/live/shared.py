@@ -1,0 +1,587 @@
+"""Live sessions kept in Redis, so that any worker answers any session and a worker's death
+loses nothing it acknowledged.
+
+Each session is a Redis hash: its state as :func:`app.service.live.codec.dump` writes it
+(window values, sums, counters, recent path, advice log), its step, its domain, its client and
+what it reserves. An event is applied by a worker to its copy of the session (read from Redis
+unless it holds a current one) and acknowledged only once the new state is in Redis: one
+script (:data:`SCRIPT`, ``commit``) writes it if the step in Redis is still the one the
+worker started from and the domain's prior has not changed since; otherwise it answers with
+what Redis holds, and the worker reads it, catches up with the prior from the database, and
+applies the event again. So decisions are those of one process, bit for bit, whichever
+workers the events reach, and a prior update acknowledged by one worker is used by every
+worker from the next event on.
+
+The limits are global: the same script admits a new session against the live count, the
+memory all sessions reserve, and the client's quota (one hash per client); the live sessions
+are a sorted set by last activity, and the idle ones expire through it (any worker's sweep).
+The decisions of each request are kept (a list per session, trimmed to the last
+``replay_steps`` steps) so that a retry is answered again, from any worker.
+
+Keys (``P`` the prefix, ``ADVISOR_REDIS_PREFIX``): ``P:s:<id>`` the session, ``P:r:<id>`` its
+kept decisions, ``P:live`` (sorted set), ``P:mem``, ``P:c:<client>``, ``P:dom:<domain>`` (set),
+``P:sum`` (hash: figures per session for the aggregates), ``P:v:<domain>`` (the data version
+of its prior, from the database), ``P:catalog`` (goes up when a domain is made or deleted).
+The script reaches keys it derives from its arguments: this is for one Redis server (or
+Sentinel), not Redis Cluster as it stands (docs/SCALING.md).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import time
+from typing import Any
+
+import numpy as np
+import redis.asyncio as aioredis
+from starlette.concurrency import run_in_threadpool
+
+from app.advice.advisor import Decision, DecisionBatch
+from app.advice.strategies import StrategyParams
+from app.service.data.domains import DomainCatalog, DomainNotFound, DomainState
+from app.service.live import codec
+from app.service.live.registry import (
+    Aggregate,
+    ClientQuotaReached,
+    LiveSession,
+    Moves,
+    SessionMemoryFull,
+    SessionNotFound,
+    SessionRegistry,
+    SessionSnapshot,
+    TooManySessions,
+    joined,
+)
+from app.service.live.replay import StepConflict, part
+from app.service.live.sessions import LocalSessions
+
+log = logging.getLogger("advisor.shared")
+
+#: attempts at applying one request before giving up (each failed one means another worker
+#: applied an event of the same session, or the prior changed, in between)
+ATTEMPTS = 50
+#: sessions that one sweep expires at most (the rest at the next)
+SWEEP_BATCH = 1000
+
+SCRIPT = r"""
+local p, cmd = ARGV[1], ARGV[2]
+local function skey(id) return p .. ':s:' .. id end
+local function rkey(id) return p .. ':r:' .. id end
+-- versions are integers below 2**53: compared as numbers, returned as the text Redis holds
+local function version(domain) return redis.call('GET', p .. ':v:' .. domain) or '0' end
+local function drop(id)
+  local k = skey(id)
+  local h = redis.call('HMGET', k, 'domain', 'client', 'reserved')
+  redis.call('ZREM', p .. ':live', id)
+  redis.call('HDEL', p .. ':sum', id)
+  if not h[1] then return 0 end
+  redis.call('DEL', k, rkey(id))
+  redis.call('SREM', p .. ':dom:' .. h[1], id)
+  local r = tonumber(h[3]) or 0
+  redis.call('DECRBY', p .. ':mem', r)
+  if h[2] and h[2] ~= '' then
+    local c = p .. ':c:' .. h[2]
+    local n = redis.call('HINCRBY', c, 'n', -1)
+    redis.call('HINCRBY', c, 'mem', -r)
+    if n <= 0 then redis.call('DEL', c) end
+  end
+  return 1
+end
+local function expire(now, idle, most)
+  local gone = redis.call('ZRANGEBYSCORE', p .. ':live', '-inf', now - idle, 'LIMIT', 0, most)
+  for _, id in ipairs(gone) do drop(id) end
+  return gone
+end
+local function refusal(reserved, client, limits)
+  if redis.call('ZCARD', p .. ':live') >= limits[1] then return 'sessions' end
+  local mem = tonumber(redis.call('GET', p .. ':mem') or '0')
+  if mem + reserved > limits[2] then return 'memory' end
+  if client ~= '' then
+    local c = redis.call('HMGET', p .. ':c:' .. client, 'n', 'mem')
+    if (tonumber(c[1]) or 0) >= limits[3] then return 'client_sessions' end
+    if (tonumber(c[2]) or 0) + reserved > limits[4] then return 'client_memory' end
+  end
+  return nil
+end
+
+if cmd == 'create' then
+  local id, blob, domain, client = ARGV[3], ARGV[4], ARGV[5], ARGV[6]
+  local reserved, now, idle = tonumber(ARGV[7]), tonumber(ARGV[8]), tonumber(ARGV[9])
+  local limits = {tonumber(ARGV[10]), tonumber(ARGV[11]), tonumber(ARGV[12]), tonumber(ARGV[13])}
+  local summary, used, ttl = ARGV[14], tonumber(ARGV[15]), tonumber(ARGV[16])
+  local v = version(domain)
+  if tonumber(v) > used then return {'stale', v} end
+  if refusal(reserved, client, limits) then expire(now, idle, 1000) end
+  local why = refusal(reserved, client, limits)
+  if why then return {why} end
+  local k = skey(id)
+  redis.call('HSET', k, 'blob', blob, 'step', '0', 'domain', domain, 'client', client,
+             'reserved', ARGV[7], 'kept', '0')
+  redis.call('PEXPIRE', k, ttl)
+  redis.call('ZADD', p .. ':live', now, id)
+  redis.call('INCRBY', p .. ':mem', reserved)
+  if client ~= '' then
+    redis.call('HINCRBY', p .. ':c:' .. client, 'n', 1)
+    redis.call('HINCRBY', p .. ':c:' .. client, 'mem', reserved)
+  end
+  redis.call('SADD', p .. ':dom:' .. domain, id)
+  redis.call('HSET', p .. ':sum', id, summary)
+  return {'ok'}
+elseif cmd == 'load' then
+  local h = redis.call('HMGET', skey(ARGV[3]), 'blob', 'step', 'domain')
+  if not h[1] then return {'gone'} end
+  return {'ok', h[1], h[2], version(h[3])}
+elseif cmd == 'commit' then
+  local id, expected, step, blob = ARGV[3], ARGV[4], ARGV[5], ARGV[6]
+  local record, n, used = ARGV[7], tonumber(ARGV[8]), tonumber(ARGV[9])
+  local now, keep = tonumber(ARGV[10]), tonumber(ARGV[11])
+  local summary, ttl = ARGV[12], tonumber(ARGV[13])
+  local k = skey(id)
+  local h = redis.call('HMGET', k, 'step', 'domain', 'blob')
+  if not h[1] then return {'gone'} end
+  local v = version(h[2])
+  if h[1] ~= expected then return {'moved', h[3], h[1], v} end
+  if tonumber(v) > used then return {'stale', h[3], h[1], v} end
+  redis.call('HSET', k, 'blob', blob, 'step', step)
+  redis.call('PEXPIRE', k, ttl)
+  redis.call('ZADD', p .. ':live', now, id)
+  redis.call('HSET', p .. ':sum', id, summary)
+  if n > 0 and keep > 0 then
+    local r = rkey(id)
+    redis.call('RPUSH', r, record)
+    redis.call('PEXPIRE', r, ttl)
+    local kept = redis.call('HINCRBY', k, 'kept', n)
+    while true do
+      local oldest = redis.call('LINDEX', r, 0)
+      local m = tonumber(string.sub(oldest, 1, 10))
+      if kept - m < keep then break end
+      redis.call('LPOP', r)
+      kept = redis.call('HINCRBY', k, 'kept', -m)
+    end
+  end
+  return {'ok'}
+elseif cmd == 'end' then
+  return drop(ARGV[3])
+elseif cmd == 'end_domain' then
+  local ids = redis.call('SMEMBERS', p .. ':dom:' .. ARGV[3])
+  for _, id in ipairs(ids) do drop(id) end
+  redis.call('DEL', p .. ':dom:' .. ARGV[3])
+  return #ids
+elseif cmd == 'expire' then
+  return expire(tonumber(ARGV[3]), tonumber(ARGV[4]), tonumber(ARGV[5]))
+elseif cmd == 'version' then
+  local key = p .. ':v:' .. ARGV[3]
+  if tonumber(ARGV[4]) > tonumber(redis.call('GET', key) or '0') then
+    redis.call('SET', key, ARGV[4])
+  end
+  return 1
+end
+return redis.error_reply('unknown command ' .. cmd)
+"""
+
+
+def _summary(s: LiveSession) -> str:
+    """What the aggregates read of a session: domain, steps, decisions, advice, P(M1 | H)."""
+    a = s.advisor
+    return f"{s.domain.name}|{a.steps}|{a.decisions}|{a.advice_count}|{s.p_normal!r}"
+
+
+class SharedSessions(LocalSessions):
+    """Live sessions in Redis, this worker's registry a cache of the ones it used lately (see
+    the module)."""
+
+    shared = True
+
+    def __init__(
+        self, registry: SessionRegistry, catalog: DomainCatalog, url: str, prefix: str,
+        replay_steps: int, limits: tuple[int, int, int, int],
+    ):  # fmt: skip
+        super().__init__(registry, catalog)
+        self.redis = aioredis.Redis.from_url(url)
+        self.prefix = prefix
+        self.replay_steps = replay_steps
+        self.limits = limits  # sessions, memory, per client: sessions, memory
+        self._script = self.redis.register_script(SCRIPT)
+        self._locks: dict[str, asyncio.Lock] = {}
+        self._refreshing: dict[str, asyncio.Future[DomainState | None]] = {}
+        self._catalog_epoch: int | None = None
+
+    @property
+    def max_sessions(self) -> int:
+        return self.limits[0]
+
+    async def _run(self, cmd: str, *args: Any) -> Any:
+        return await self._script(args=[self.prefix, cmd, *args])
+
+    def _ttl(self) -> int:
+        """Milliseconds a session's keys live without activity: past the idle timeout (the
+        sweep drops idle sessions first; this bounds what a sweep never reached keeps)."""
+        return int(self.registry.idle_seconds * 2000) + 60_000
+
+    async def start(self) -> None:
+        """Reach Redis (an error that says so if it does not answer), and tell it the data
+        versions this worker read from the database at start (a worker that died between a
+        commit and telling Redis left it behind)."""
+        try:
+            await self.redis.ping()  # type: ignore[misc]
+        except (aioredis.ConnectionError, aioredis.TimeoutError, OSError) as exc:
+            raise RuntimeError(f"ADVISOR_REDIS_URL: Redis does not answer ({exc})") from None
+        for d in self.catalog.states():
+            await self._run("version", d.name, d.version)
+        self._catalog_epoch = int(await self.redis.get(f"{self.prefix}:catalog") or 0)
+
+    async def domain(self, name: str) -> DomainState:
+        return await self.fresh_domain(name)
+
+    async def sync_domain(self, name: str) -> None:
+        with contextlib.suppress(DomainNotFound):
+            await self.fresh_domain(name)
+
+    # ---- domains: what the database holds now --------------------------------------------
+    async def fresh_domain(self, name: str) -> DomainState:
+        """The domain ``name`` at the data version Redis says is current (read again from the
+        database if this worker holds an older one); DomainNotFound if it is gone."""
+        raw = await self.redis.get(f"{self.prefix}:v:{name}")
+        local = self.catalog.find(name)
+        if raw is None and local is None:
+            state = await self._refresh(name)  # made elsewhere before any version was set?
+        elif local is None or raw is None or int(raw) > local.version:
+            state = await self._refresh(name)
+        else:
+            state = local
+        if state is None:
+            raise DomainNotFound(name)
+        return state
+
+    async def _at_version(self, name: str, version: int) -> DomainState:
+        """The domain at data ``version`` or later."""
+        local = self.catalog.find(name)
+        if local is not None and local.version >= version:
+            return local
+        state = await self._refresh(name)
+        if state is None:
+            raise DomainNotFound(name)
+        return state
+
+    async def _refresh(self, name: str) -> DomainState | None:
+        """Read ``name`` again from the database (once for all who ask meanwhile); the cached
+        sessions follow a new state of the same map, or go with another map."""
+        running = self._refreshing.get(name)
+        if running is None:
+            old = self.catalog.find(name)
+            running = asyncio.ensure_future(run_in_threadpool(self.catalog.refresh, name))
+            self._refreshing[name] = running
+            running.add_done_callback(lambda _: self._refreshing.pop(name, None))
+            new = await asyncio.shield(running)
+            if old is not None and new is not old:
+                if new is not None and new.domain.rows_text == old.domain.rows_text:
+                    self.registry.retable(new)
+                else:
+                    self.registry.end_domain(name)
+            return new
+        return await asyncio.shield(running)
+
+    async def sync_catalog(self) -> None:
+        """Every domain as the database holds it, when another worker made or deleted one
+        since this worker last looked (``P:catalog``)."""
+        raw = await self.redis.get(f"{self.prefix}:catalog")
+        epoch = int(raw or 0)
+        if epoch == self._catalog_epoch:
+            return
+        versions = await run_in_threadpool(self.catalog.store.versions)
+        for name in sorted(set(versions) | {d.name for d in self.catalog.states()}):
+            local = self.catalog.find(name)
+            if local is None or versions.get(name) != local.version:
+                await self._refresh(name)
+        self._catalog_epoch = epoch
+
+    async def domain_changed(self, name: str, version: int, made_or_gone: bool) -> None:
+        """This worker changed domain ``name`` (to data ``version``; a deleted domain's last
+        version plus one): other workers read it again from their next request that uses it
+        (the catalog's epoch goes up too when a domain was made or deleted)."""
+        await self._run("version", name, version)
+        if made_or_gone:
+            await self.redis.incr(f"{self.prefix}:catalog")
+
+    async def _prepare(self, domain: DomainState, strategy: str) -> None:
+        """What ``strategy`` reads of ``domain`` built (in a worker thread, the first time)."""
+        if strategy == "goal_aware" and domain.goal_priors is None:
+            await run_in_threadpool(self.catalog.goal_priors, domain)
+        elif strategy == "guide" and domain.guide_map is None:
+            await run_in_threadpool(self.catalog.guide_map, domain)
+
+    # ---- sessions --------------------------------------------------------------------------
+    def _lock(self, session_id: str) -> asyncio.Lock:
+        lock = self._locks.get(session_id)
+        if lock is None:
+            if len(self._locks) > 4 * max(len(self.registry), 256):  # unused ones go
+                idle = [k for k, v in self._locks.items() if not v.locked()]
+                for k in idle[: len(idle) // 2]:
+                    del self._locks[k]
+            lock = self._locks[session_id] = asyncio.Lock()
+        return lock
+
+    async def create(
+        self, domain: DomainState, kappa: float, window: int, agent_type: str | None,
+        start: int, strategy: str, params: StrategyParams, client: str | None,
+    ) -> tuple[LiveSession, Decision]:  # fmt: skip
+        for _ in range(ATTEMPTS):
+            session, decision = self.registry.create(
+                domain, kappa, window, agent_type, start, strategy, params, client
+            )
+            now = int(time.time() * 1000)
+            got = await self._run(
+                "create", session.id, codec.dump(session, replay=False), domain.name,
+                client or "", session.reserved, now, int(self.registry.idle_seconds * 1000),
+                *self.limits, _summary(session), domain.version, self._ttl(),
+            )  # fmt: skip
+            verdict = got[0].decode()
+            if verdict == "ok":
+                return session, decision
+            self.registry.forget(session.id)
+            if verdict == "stale":
+                domain = await self._at_version(domain.name, int(got[1]))
+                await self._prepare(domain, strategy)
+                continue
+            if verdict == "sessions":
+                raise TooManySessions(self.limits[0])
+            if verdict == "memory":
+                raise SessionMemoryFull(self.limits[1])
+            what = "sessions" if verdict == "client_sessions" else "memory"
+            raise ClientQuotaReached(client, what, self.limits[2 if what == "sessions" else 3])
+        raise RuntimeError("the domain's prior kept changing while a session was made")
+
+    async def get(self, session_id: str) -> LiveSession:
+        cached = self.registry.cached(session_id)
+        if cached is not None:
+            return cached
+        return await self._load(session_id)
+
+    async def _load(self, session_id: str) -> LiveSession:
+        got = await self._run("load", session_id)
+        if got[0] == b"gone":
+            self.registry.forget(session_id)
+            raise SessionNotFound(session_id)
+        return await self._adopt(got[1], int(got[3]))
+
+    async def _adopt(self, blob: bytes, version: int) -> LiveSession:
+        """This worker's copy of the session Redis holds as ``blob`` (``version``: the data
+        version of its domain's prior there)."""
+        v = codec.peek(blob)
+        try:
+            domain = await self._at_version(v["domain"], version)
+        except DomainNotFound:
+            raise SessionNotFound(v["id"]) from None
+        await self._prepare(domain, v["advisor"]["strategy"])
+        session = codec.load(v, domain, 0)
+        self.registry.put(session)
+        return session
+
+    def touch(self, session: LiveSession) -> None:
+        """Activity is what the events write (their commit): a read does not keep a session
+        alive across workers."""
+
+    async def observe_one(
+        self, session: LiveSession, state: int, action: int, next_state: int, step: int = -1
+    ) -> Decision:
+        moves = (np.array([state]), np.array([action]), np.array([next_state]))
+        out = await self._apply(session.id, moves, None if step < 0 else step, one=True)
+        return out.decisions()[0]
+
+    async def observe(
+        self, session: LiveSession, moves: Moves, first_step: int | None = None
+    ) -> DecisionBatch:
+        return await self._apply(session.id, moves, first_step)
+
+    async def _apply(
+        self, session_id: str, moves: Moves, first_step: int | None, one: bool = False
+    ) -> DecisionBatch:
+        """Apply ``moves`` to the session and write its new state to Redis before answering;
+        again from what Redis holds when another worker or a prior update came between."""
+        async with self._lock(session_id):
+            session = self.registry.cached(session_id) or await self._load(session_id)
+            for _ in range(ATTEMPTS):
+                session, done, rest = await self._replayed(session, moves, first_step)
+                if rest is None:
+                    assert done is not None
+                    return done
+                adv = session.advisor
+                expected, count, benefit = adv.steps, adv.advice_count, adv.benefit
+                if one:  # the one-event path of the registry, as the local form runs it
+                    d = self.registry.observe_one(session, *(int(m[0]) for m in rest))
+                    out = DecisionBatch.of([d], adv.kappa, count, benefit)
+                else:
+                    out = await self.registry.observe_sliced(session, rest)
+                got = await self._run(
+                    "commit", session_id, str(expected), str(adv.steps),
+                    codec.dump(session, replay=False), codec.replay_record(out), len(out),
+                    session.domain.version, int(time.time() * 1000), self.replay_steps,
+                    _summary(session), self._ttl(),
+                )  # fmt: skip
+                verdict = got[0]
+                if verdict == b"ok":
+                    return out if done is None else joined([done, out])
+                self.registry.forget(session_id)  # this copy went ahead of what Redis holds
+                if verdict == b"gone":
+                    raise SessionNotFound(session_id)
+                session = await self._adopt(got[1], int(got[3]))
+            raise RuntimeError(f"session {session_id} kept changing while its events were applied")
+
+    async def _replayed(
+        self, session: LiveSession, moves: Moves, first_step: int | None
+    ) -> tuple[LiveSession, DecisionBatch | None, Moves | None]:
+        """As :meth:`SessionRegistry.replayed`, from the decisions Redis keeps (what any worker
+        answered), and the session to go on with: a step out of turn is checked against what
+        Redis holds, not against this worker's copy."""
+        if first_step is None or first_step == session.advisor.steps + 1:
+            return session, None, moves
+        session = await self._load(session.id)  # this copy may be behind: Redis decides
+        steps = session.advisor.steps
+        if first_step == steps + 1:
+            return session, None, moves
+        if first_step > steps + 1:
+            raise StepConflict(
+                f"step {first_step} is not the next step of session {session.id}: it has "
+                f"applied {steps} (the next is {steps + 1}); send the events in between first"
+            )
+        n = len(moves[0])
+        k = min(n, steps + 1 - first_step)
+        records = await self.redis.lrange(f"{self.prefix}:r:{session.id}", 0, -1)  # type: ignore[misc]
+        batches = [codec.read_replay_record(r) for r in records]
+        got = _covering(batches, first_step, k)
+        if got is None:
+            kept = sum(len(b) for b in batches)
+            kept_text = f"steps {steps - kept + 1} to {steps}" if kept else "none"
+            raise StepConflict(
+                f"step {first_step} was applied already (session {session.id} is at step "
+                f"{steps}) and its decision is no longer kept for a retry (kept: "
+                f"{kept_text}); nothing was applied"
+            )
+        same = got.state == moves[2][:k]
+        if not same.all():
+            bad = first_step + int(np.argmin(same))
+            raise StepConflict(
+                f"step {bad} was applied already with another move; nothing was applied"
+            )
+        if k == n:
+            return session, got, None
+        return session, got, (moves[0][k:], moves[1][k:], moves[2][k:])
+
+    async def describe(self, session: LiveSession) -> SessionSnapshot:
+        fresh = await self._load(session.id)
+        return self.registry.describe(fresh)
+
+    async def end(self, session: LiveSession) -> SessionSnapshot:
+        fresh = await self._load(session.id)
+        final = self.registry.describe(fresh)
+        if not await self._run("end", session.id):
+            raise SessionNotFound(session.id)
+        self.registry.forget(session.id)
+        return final
+
+    async def snapshot(self, limit: int | None, domain: str | None = None) -> list[SessionSnapshot]:
+        """The ``limit`` most recently active sessions of every worker (of ``domain``)."""
+        live = f"{self.prefix}:live"
+        if domain is None:
+            ids = await self.redis.zrevrange(live, 0, -1 if limit is None else limit - 1)
+        else:
+            members = list(await self.redis.smembers(f"{self.prefix}:dom:{domain}"))  # type: ignore[misc]
+            scores = await self.redis.zmscore(live, members) if members else []
+            ranked = sorted(
+                (sc, m) for sc, m in zip(scores, members, strict=True) if sc is not None
+            )[::-1]
+            ids = [m for _, m in ranked[:limit]]
+        if not ids:
+            return []
+        async with self.redis.pipeline(transaction=False) as pipe:
+            for sid in ids:
+                pipe.hget(f"{self.prefix}:s:{sid.decode()}", "blob")
+            blobs = [b for b in await pipe.execute() if b is not None]  # None: ended meanwhile
+        peeked = [codec.peek(b) for b in blobs]
+        ready: dict[tuple[str, str], DomainState | None] = {}
+        for v in peeked:  # what their strategies read of their domains, built
+            key = (v["domain"], v["advisor"]["strategy"])
+            if key not in ready:
+                try:
+                    ready[key] = self.catalog.get(key[0])
+                    await self._prepare(ready[key], key[1])  # type: ignore[arg-type]
+                except DomainNotFound:
+                    ready[key] = None
+
+        def made() -> list[SessionSnapshot]:
+            out = []
+            for v in peeked:
+                domain = ready[(v["domain"], v["advisor"]["strategy"])]
+                if domain is None:
+                    continue
+                try:
+                    out.append(self.registry.describe(codec.load(v, domain, 0)))
+                except codec.CodecError:  # its domain's map was replaced meanwhile
+                    continue
+            return out
+
+        return await run_in_threadpool(made)
+
+    async def aggregates(self) -> dict[str, Aggregate]:
+        rows = await self.redis.hvals(f"{self.prefix}:sum")  # type: ignore[misc]
+        out: dict[str, Aggregate] = {}
+        for row in rows:
+            name, steps, decisions, advice, p = row.decode().rsplit("|", 4)
+            agg = out.setdefault(name, Aggregate())
+            agg.sessions += 1
+            agg.steps += int(steps)
+            agg.decisions += int(decisions)
+            agg.advice += int(advice)
+            agg.looking_lost += float(p) < 0.5
+        return out
+
+    async def count_by_domain(self) -> dict[str, int]:
+        names = [d.name for d in self.catalog.states()]
+        async with self.redis.pipeline(transaction=False) as pipe:
+            for name in names:
+                pipe.scard(f"{self.prefix}:dom:{name}")
+            counts = await pipe.execute()
+        return {n: int(c) for n, c in zip(names, counts, strict=True) if c}
+
+    async def count(self) -> int:
+        return int(await self.redis.zcard(f"{self.prefix}:live"))
+
+    async def retable(self, domain: DomainState) -> None:
+        self.registry.retable(domain)
+        await self.domain_changed(domain.name, domain.version, made_or_gone=False)
+
+    async def end_domain(self, name: str) -> int:
+        self.registry.end_domain(name)
+        return int(await self._run("end_domain", name))
+
+    async def sweep(self) -> None:
+        now = int(time.time() * 1000)
+        gone = await self._run("expire", now, int(self.registry.idle_seconds * 1000), SWEEP_BATCH)
+        for sid in gone:
+            self.registry.forget(sid.decode())
+        self.registry.expire()
+        self.registry.forget_old()
+
+    async def close(self) -> None:
+        await self.redis.aclose()
+
+
+def _covering(batches: list[DecisionBatch], first: int, n: int) -> DecisionBatch | None:
+    """Decisions of steps ``first`` .. ``first + n - 1`` from consecutive kept batches."""
+    parts = []
+    want = first
+    for b in batches:
+        lo, hi = b.first_step, b.first_step + len(b)
+        if hi <= want or want >= first + n:
+            continue
+        if lo > want:
+            return None
+        a = want - lo
+        z = min(hi, first + n) - lo
+        parts.append(part(b, a, z))
+        want = lo + z
+    if want != first + n:
+        return None
+    return joined(parts) if len(parts) > 1 else parts[0]
