@@ -36,9 +36,14 @@ class AdvisorUnreachable(AdvisorError):
         self.url = url
 
 
-@dataclass(frozen=True)
+@dataclass
 class Session:
-    """A live session: its id, its token (needed by every session call) and first decision."""
+    """A live session: its id, its token (needed by every session call) and first decision.
+
+    ``steps``: the steps the service has answered for it so far. The client numbers the events
+    it sends with the steps that follow (``"step"``), so that a call that got no answer can be
+    sent again: the service answers the steps it applied already instead of applying them
+    twice. Use one :class:`Session` object per session, from one thread or task at a time."""
 
     session_id: str
     token: str
@@ -47,13 +52,24 @@ class Session:
     window: int
     decision: Decision
     prior_table: str = "*"
+    steps: int = 0
 
     @classmethod
     def of(cls, body: dict[str, Any]) -> Session:
         return cls(
             body["session_id"], body["token"], body["domain"], body["kappa"], body["window"],
-            body["decision"], body.get("prior_table", "*"),
+            body["decision"], body.get("prior_table", "*"), body["decision"].get("step", 0),
         )  # fmt: skip
+
+    def answered(self, answer: Any) -> None:
+        """Count the steps of an answer to events (one decision, a list, or a binary frame)."""
+        if isinstance(answer, dict):
+            self.steps = int(answer["step"])
+        elif isinstance(answer, list):
+            if answer:
+                self.steps = int(answer[-1]["step"])
+        elif len(answer):  # a DecisionFrame: its steps column
+            self.steps = int(answer.step[-1])
 
     @property
     def auth(self) -> dict[str, str]:
@@ -64,8 +80,8 @@ class Session:
 class Call:
     """One API call. ``idempotent``: sending it twice does what sending it once does (GET,
     PUT, DELETE), so it is retried after any failure to get an answer; other calls are retried
-    only when the connection could not be made (nothing was sent). Events will be idempotent
-    once they carry their ``step`` (the service then ignores a step it has seen)."""
+    only when the connection could not be made (nothing was sent). Events are idempotent: they
+    carry their ``step``, and the service answers a step it has applied again."""
 
     method: str
     path: str
@@ -148,9 +164,21 @@ def create_session(
     return Call("POST", f"/domains/{_name(name)}/sessions", clean)
 
 
+def numbered(session: Session, batch: EventLike | Sequence[EventLike]) -> Any:
+    """The events as JSON, each with its ``step`` (the steps after ``session.steps``, unless
+    the caller numbered them)."""
+    if isinstance(batch, Mapping):
+        return {"step": session.steps + 1} | dict(batch)
+    return [{"step": session.steps + 1 + i} | dict(e) for i, e in enumerate(batch)]
+
+
 def events(session: Session, batch: EventLike | Sequence[EventLike]) -> Call:
-    body = dict(batch) if isinstance(batch, Mapping) else [dict(e) for e in batch]
-    return Call("POST", f"/sessions/{session.session_id}/events", body, headers=session.auth)
+    """Events with their steps: sending them twice applies them once (idempotent)."""
+    body = numbered(session, batch)
+    return Call(
+        "POST", f"/sessions/{session.session_id}/events", body, headers=session.auth,
+        idempotent=True,
+    )  # fmt: skip
 
 
 def positions(session: Session, points: Sequence[Sequence[float]]) -> Call:

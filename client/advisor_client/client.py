@@ -122,21 +122,26 @@ class _Base:
 
 
 class Stream:
-    """A session's websocket: :meth:`send` events, get their decisions (in order)."""
+    """A session's websocket: :meth:`send` events, get their decisions (in order). Events are
+    numbered with their steps as over REST (:class:`~advisor_client.api.Session`): after a
+    closed stream, send the unanswered ones again on a new one."""
 
-    def __init__(self, connection: ClientConnection):
+    def __init__(self, connection: ClientConnection, session: Session):
         self.connection = connection
+        self.session = session
 
     def send(self, events: EventLike | Sequence[EventLike]) -> Any:
         """One event -> one decision; a list -> a list (a binary stream: a
         :class:`~advisor_client.protocol.DecisionFrame` either way). AdvisorError for a refused
         batch (the stream stays usable) or a closed stream."""
-        body = dict(events) if isinstance(events, Mapping) else [dict(e) for e in events]
+        body = api.numbered(self.session, events)
         try:
             self.connection.send(json.dumps(body))
-            return api.frame_answer(self.connection.recv())
+            answer = api.frame_answer(self.connection.recv())
         except ConnectionClosed as exc:
             raise _closed(exc) from None
+        self.session.answered(answer)
+        return answer
 
     def close(self) -> None:
         self.connection.close()
@@ -235,8 +240,12 @@ class AdvisorClient(_Base):
         return Session.of(self.call(call))
 
     def events(self, session: Session, events: EventLike | Sequence[EventLike]) -> Any:
-        """Decisions over REST: one event -> one decision, a list -> a list."""
-        return self.call(api.events(session, events))
+        """Decisions over REST: one event -> one decision, a list -> a list. The events carry
+        their steps, so a call that got no answer is sent again (as :class:`_Base` says) and
+        applied once."""
+        answer = self.call(api.events(session, events))
+        session.answered(answer)
+        return answer
 
     def positions(self, session: Session, points: Sequence[Sequence[float]]) -> list[Decision]:
         """Positions in metres -> one decision per move they make (see the route)."""
@@ -266,7 +275,8 @@ class AdvisorClient(_Base):
         for attempt in range(self.retries + 1):
             try:
                 return Stream(
-                    connect(url, compression=None, max_size=None, additional_headers=headers)
+                    connect(url, compression=None, max_size=None, additional_headers=headers),
+                    session,
                 )
             except (OSError, TimeoutError) as exc:  # refused: nothing was sent, try again
                 if attempt == self.retries:
@@ -280,16 +290,19 @@ class AdvisorClient(_Base):
 class AsyncStream:
     """The async form of :class:`Stream`."""
 
-    def __init__(self, connection: AsyncConnection):
+    def __init__(self, connection: AsyncConnection, session: Session):
         self.connection = connection
+        self.session = session
 
     async def send(self, events: EventLike | Sequence[EventLike]) -> Any:
-        body = dict(events) if isinstance(events, Mapping) else [dict(e) for e in events]
+        body = api.numbered(self.session, events)
         try:
             await self.connection.send(json.dumps(body))
-            return api.frame_answer(await self.connection.recv())
+            answer = api.frame_answer(await self.connection.recv())
         except ConnectionClosed as exc:
             raise _closed(exc) from None
+        self.session.answered(answer)
+        return answer
 
     async def close(self) -> None:
         await self.connection.close()
@@ -381,7 +394,9 @@ class AsyncAdvisorClient(_Base):
         return Session.of(await self.call(call))
 
     async def events(self, session: Session, events: EventLike | Sequence[EventLike]) -> Any:
-        return await self.call(api.events(session, events))
+        answer = await self.call(api.events(session, events))
+        session.answered(answer)
+        return answer
 
     async def positions(
         self, session: Session, points: Sequence[Sequence[float]]
@@ -410,7 +425,8 @@ class AsyncAdvisorClient(_Base):
                 return AsyncStream(
                     await async_connect(
                         url, compression=None, max_size=None, additional_headers=headers
-                    )
+                    ),
+                    session,
                 )
             except (OSError, TimeoutError) as exc:  # refused: nothing was sent, try again
                 if attempt == self.retries:

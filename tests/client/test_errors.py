@@ -46,13 +46,15 @@ class Script:
     def __init__(self, *steps: int | Exception):
         self.steps = list(steps)
         self.calls: list[str] = []
+        self.bodies: list[bytes] = []
 
     def __call__(self, request: httpx.Request) -> httpx.Response:
         self.calls.append(request.method)
+        self.bodies.append(request.content)
         step = self.steps.pop(0)
         if isinstance(step, Exception):
             raise step
-        body = {"detail": "busy"} if step >= 400 else {"status": "ok"}
+        body = {"detail": "busy"} if step >= 400 else {"status": "ok", "step": 1}
         return httpx.Response(step, json=body)
 
 
@@ -80,14 +82,27 @@ def test_a_post_is_sent_again_only_when_nothing_was_sent() -> None:
     with client_for(refused) as client:
         client.call(api.create_session("default"))
     assert refused.calls == ["POST", "POST"]
-    lost = Script(httpx.ReadTimeout("slow"), 201)
+    lost = Script(httpx.ReadTimeout("slow"), 201)  # creating it may have happened: not again
     with client_for(lost) as client, pytest.raises(AdvisorUnreachable):
-        client.events(SESSION, {"state": [28, 0], "action": "E"})
-    assert lost.calls == ["POST"]  # the service may have applied it: not sent twice
-    busy = Script(503, 201)
-    with client_for(busy) as client, pytest.raises(AdvisorError) as err:
-        client.events(SESSION, {"state": [28, 0], "action": "E"})
-    assert err.value.status == 503 and busy.calls == ["POST"]
+        client.call(api.create_session("default"))
+    assert lost.calls == ["POST"]
+
+
+def test_events_are_sent_again_with_their_steps_after_a_lost_answer() -> None:
+    """Events carry their steps: the service answers a step it applied again instead of
+    applying it twice, so an event call is sent again after any failure to get an answer,
+    the same text each time; the session then counts the steps answered."""
+    session = Session("ab12", "tok", "default", 0.5, 300, {})  # type: ignore[typeddict-item]
+    lost = Script(httpx.ReadTimeout("slow"), 503, 200)
+    with client_for(lost) as client:
+        client.events(session, {"state": [28, 0], "action": "E"})
+    assert lost.calls == ["POST"] * 3
+    assert lost.bodies[0] == lost.bodies[1] == lost.bodies[2]
+    assert b'"step":1' in lost.bodies[0].replace(b" ", b"") and session.steps == 1
+    explicit = Script(200)
+    with client_for(explicit) as client:
+        client.events(session, [{"state": [28, 0], "action": "E", "step": 1}])
+    assert b'"step":1' in explicit.bodies[0].replace(b" ", b"")  # a step given is kept
 
 
 def test_the_async_client_retries_alike() -> None:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import stat
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -80,7 +81,7 @@ def _walk(grid_rows: list[str], n: int, seed: int) -> list[dict[str, object]]:
     ],
 )
 def test_a_graceful_restart_keeps_live_sessions_exactly(
-    tmp_path: Path, options: dict[str, object]
+    tmp_path: Path, options: dict[str, Any]
 ) -> None:
     """Windows, steps, costs, a random rule's draws: the session after a restart answers as
     one in a service that never stopped (the same bootstrap prior), decision for decision."""

@@ -1,0 +1,218 @@
+"""Workers that share Redis answer any session exactly as one process would.
+
+Two services in this process (each a worker: its own catalog, registry and event loop) share
+one database and one Redis (a prefix of keys of the test's own). Events of one session hop
+between them at random, one by one, in batches and over websockets (JSON and binary), with
+new expert data sent to either of them mid-stream; every decision must equal the core
+advisor's, built from what the database holds. Limits, quotas, idle expiry, retries and
+domains made or deleted are the same seen from either worker."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from advisor_client.protocol import unpack
+from fastapi.testclient import TestClient
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from app.advice.guide import GuideMap
+from app.advice.strategies import READS, STRATEGIES, StrategyParams, make_advisor
+from app.domain.grid import ACTIONS
+from app.service.main import create_app
+from app.service.state import ServiceState
+from tests.service.conftest import (
+    REDIS_URL,
+    TINY,
+    drop_redis_keys,
+    make_settings,
+    open_session,
+    redis_prefix,
+    redis_problem,
+)
+from tests.service.test_decisions_property import core_tables, expected_json
+from tests.service.test_strategies import add_expert, core_goal_priors, moves
+
+PROBLEM = redis_problem()
+pytestmark = pytest.mark.skipif(PROBLEM is not None, reason=f"Redis at {REDIS_URL}: {PROBLEM}")
+
+Workers = tuple[list[TestClient], ServiceState]
+
+
+def start_workers(tmp: Path, n: int, **overrides: Any) -> tuple[list[TestClient], str]:
+    prefix = redis_prefix()
+    url = f"sqlite:///{tmp / 'advisor.db'}"
+    clients = []
+    for _ in range(n):
+        settings = make_settings(
+            tmp, database_url=url, redis_url=REDIS_URL, redis_prefix=prefix, **overrides
+        )
+        client = TestClient(create_app(settings))
+        client.__enter__()
+        clients.append(client)
+    return clients, prefix
+
+
+@pytest.fixture(scope="module")
+def workers(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Workers]:
+    clients, prefix = start_workers(Path(tmp_path_factory.mktemp("data")), 2)
+    try:
+        yield clients, clients[0].app.state.service  # type: ignore[attr-defined]
+    finally:
+        for c in clients:
+            c.__exit__(None, None, None)
+        drop_redis_keys(prefix)
+
+
+class _Nothing:
+    def __enter__(self) -> None:
+        return None
+
+    def __exit__(self, *exc: object) -> None:
+        return None
+
+
+@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    strategy=st.sampled_from([*STRATEGIES, "goal_aware", "guide"]),
+    kappa=st.sampled_from([0.0, 0.3, 0.8]),
+    window=st.sampled_from([1, 7, 60, 300]),
+    beta=st.sampled_from([0.0, 0.5]),
+)
+def test_events_hopping_between_workers_decide_as_the_core(
+    workers: Workers, seed: int, strategy: str, kappa: float, window: int, beta: float
+) -> None:
+    clients, service = workers
+    grid = service.catalog.get("default").domain
+    rng = np.random.default_rng(seed)
+    start = grid.start if rng.random() < 0.5 else int(rng.integers(grid.n_states))
+    params = StrategyParams(beta=beta, rate=0.4, seed=seed % 1000, n_steps=7, threshold=0.3)
+    given = params.read_by(strategy)
+    maker = clients[int(rng.integers(2))]
+    sid, auth, created = open_session(
+        maker, kappa=kappa, window=window, start=grid.cell(start), strategy=strategy,
+        params=given,
+    )  # fmt: skip
+    goal_priors = core_goal_priors(service)
+    core = make_advisor(
+        strategy, core_tables(service), kappa, window, params, goal_priors,
+        GuideMap.of(grid, goal_priors),
+    )  # fmt: skip
+    assert created["decision"] == expected_json(core.start(start), service)
+    token = auth["Authorization"].removeprefix("Bearer ")
+    s, step = start, 1
+    for _ in range(int(rng.integers(2, 7))):
+        if rng.random() < 0.3:  # new expert data, through either worker: both follow it
+            add_expert(clients[int(rng.integers(2))], service, grid, rng)
+            core.use_tables(core_tables(service), core_goal_priors(service))
+        events, expected = [], []
+        for a in moves(grid, s, rng):
+            s2 = int(grid.next_state[s, a])
+            events.append({"state": grid.cell(s), "action": ACTIONS[a]})
+            expected.append(expected_json(core.observe(s, a, s2), service))
+            s = s2
+        if not events:
+            continue
+        client = clients[int(rng.integers(2))]
+        how = rng.choice(["one by one", "rest", "websocket", "binary"])
+        if how == "one by one":
+            got = []
+            for e in events:  # each event to a worker of its own
+                c = clients[int(rng.integers(2))]
+                r = c.post(f"/sessions/{sid}/events", json=e | {"step": step}, headers=auth)
+                assert r.status_code == 200, r.text
+                got.append(r.json())
+                step += 1
+        elif how == "rest":
+            r = client.post(f"/sessions/{sid}/events", json=events, headers=auth)
+            assert r.status_code == 200, r.text
+            got = r.json()
+            step += len(events)
+        else:
+            url = f"/sessions/{sid}/stream?token={token}" + "&format=binary" * (how == "binary")
+            with client.websocket_connect(url) as ws:
+                ws.send_text(json.dumps(events))
+                got = (
+                    unpack(ws.receive_bytes()).to_dicts()
+                    if how == "binary"
+                    else json.loads(ws.receive_text())
+                )
+            step += len(events)
+        assert got == expected
+        if rng.random() < 0.3:  # a retry of the last event, to the other worker: its answer
+            other = clients[int(rng.integers(2))]
+            last = events[-1] | {"step": step - 1}
+            r = other.post(f"/sessions/{sid}/events", json=last, headers=auth)
+            assert r.status_code == 200 and r.json() == expected[-1], r.text
+    for c in clients:  # both see the same figures
+        summary = c.get(f"/sessions/{sid}", headers=auth).json()
+        assert summary["steps"] == core.steps and summary["advice_count"] == core.advice_count
+        assert summary["benefit"] == core.benefit
+    assert clients[int(rng.integers(2))].delete(f"/sessions/{sid}", headers=auth).status_code == 200
+    for c in clients:
+        assert c.get(f"/sessions/{sid}", headers=auth).status_code == 404
+
+
+def test_limits_and_quotas_hold_across_workers(tmp_path: Path) -> None:
+    clients, prefix = start_workers(tmp_path, 2, max_sessions=3, client_max_sessions=2)
+    try:
+        a, b = clients
+        assert a.post("/domains/default/sessions", json={}).status_code == 201
+        assert b.post("/domains/default/sessions", json={}).status_code == 201
+        r = a.post("/domains/default/sessions", json={})  # this client's third: its quota
+        assert r.status_code == 429 and "ADVISOR_CLIENT_MAX_SESSIONS" in r.json()["detail"]
+        admin = {"X-API-Key": a.app.state.service.admin_key}  # type: ignore[attr-defined]
+        assert b.post("/domains/default/sessions", json={}, headers=admin).status_code == 201
+        r = a.post("/domains/default/sessions", json={}, headers=admin)  # the fourth in all
+        assert r.status_code == 503 and "maximum of 3 live sessions" in r.json()["detail"]
+        for c in clients:
+            assert c.get("/health").json()["sessions"] == 3
+    finally:
+        for c in clients:
+            c.__exit__(None, None, None)
+        drop_redis_keys(prefix)
+
+
+def test_idle_sessions_expire_for_every_worker(tmp_path: Path) -> None:
+    clients, prefix = start_workers(tmp_path, 2, session_idle_seconds=0.5, sweep_seconds=0.1)
+    try:
+        a, b = clients
+        sid, auth, _ = open_session(a)
+        assert b.get(f"/sessions/{sid}", headers=auth).status_code == 200
+        import time
+
+        deadline = time.monotonic() + 10
+        while b.get(f"/sessions/{sid}", headers=auth).status_code != 404:
+            assert time.monotonic() < deadline, "the idle session never expired"
+            time.sleep(0.1)
+        assert a.get(f"/sessions/{sid}", headers=auth).status_code == 404
+        assert a.get("/health").json()["sessions"] == 0
+    finally:
+        for c in clients:
+            c.__exit__(None, None, None)
+        drop_redis_keys(prefix)
+
+
+def test_domains_made_or_deleted_by_one_worker_are_seen_by_the_other(workers: Workers) -> None:
+    (a, b), service = workers
+    admin = {"X-API-Key": service.admin_key}
+    assert a.put("/domains/hall", json={"map": TINY}, headers=admin).status_code == 201
+    assert b.get("/domains/hall").status_code == 200
+    assert "hall" in [d["name"] for d in b.get("/domains").json()]
+    sid, auth, _ = open_session(b, "hall")
+    steps = {"trajectories": [{"steps": [{"state": [5, 1], "action": "E"}]}]}
+    assert b.post("/domains/hall/trajectories", json=steps, headers=admin).status_code == 201
+    assert a.get("/domains/hall").json()["trajectories"] == 1
+    r = a.put("/domains/hall", json={"map": TINY, "alpha0": 0.5}, headers=admin)
+    assert r.status_code == 200 and b.get("/domains/hall").json()["alpha0"] == 0.5
+    assert b.get(f"/sessions/{sid}", headers=auth).status_code == 200  # the same map: kept
+    assert a.delete("/domains/hall", headers=admin).status_code == 204
+    assert b.get("/domains/hall").status_code == 404
+    assert b.get(f"/sessions/{sid}", headers=auth).status_code == 404
+    assert "hall" not in [d["name"] for d in b.get("/domains").json()]
