@@ -22,7 +22,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from app.advice.guide import GuideMap
-from app.advice.strategies import READS, STRATEGIES, StrategyParams, make_advisor
+from app.advice.strategies import STRATEGIES, StrategyParams, make_advisor
 from app.domain.grid import ACTIONS
 from app.service.main import create_app
 from app.service.state import ServiceState
