@@ -17,6 +17,7 @@ import httpx
 import pytest
 
 from tests.client.conftest import free_port
+from tests.service.conftest import db_url  # noqa: F401  (the fixture: SQLite or PostgreSQL)
 
 REPO = Path(__file__).resolve().parents[2]
 

@@ -14,6 +14,10 @@ restarted on the same data directory, streamed to again and killed again. Then:
 * what the restarted service serves (trajectory count, theta) equals a prior fitted from
   the stored trajectories.
 
+It runs on SQLite with one process, and on PostgreSQL with one process and with two workers
+sharing Redis (``serve --workers 2``): writers' requests then reach both workers, which
+ingest at once into one database, and the kill takes every process of the server.
+
 This is a process crash: the OS survives, so it shows that an answer is sent only after the
 commit and that a transaction is never half-applied; it cannot show what a power cut does
 to the disk (SQLite is set to fsync at every commit for that).
@@ -21,6 +25,7 @@ to the disk (SQLite is set to fsync at every commit for that).
 
 from __future__ import annotations
 
+import os
 import signal
 import threading
 import time
@@ -31,12 +36,20 @@ from typing import Any
 
 import httpx
 import numpy as np
+import pytest
 
 from app.advice.priors import ActionPrior
 from app.domain.grid import ACTIONS, GridDomain
 from app.service.data.store import Store, Trajectory
 from tests.reliability.conftest import Live, server_errors, start, stop
-from tests.service.conftest import TINY
+from tests.reliability.test_workers import workers_of
+from tests.service.conftest import (
+    REDIS_URL,
+    TINY,
+    drop_redis_keys,
+    redis_prefix,
+    redis_problem,
+)
 
 WRITERS = 3
 KILL_AFTER = 25  # acknowledged batches per round before the kill
@@ -112,6 +125,8 @@ def crash_round(live: Live, journal: Journal, seed: int) -> None:
     while len(journal.acked) - before < KILL_AFTER and time.monotonic() < deadline:
         time.sleep(0.005)
     assert len(journal.acked) - before >= KILL_AFTER, "the writers did not get through"
+    for pid in workers_of(live):  # every worker too (none of them shuts down cleanly)
+        os.kill(pid, signal.SIGKILL)
     stop(live, signal.SIGKILL)
     for t in threads:
         t.join(30)
@@ -123,28 +138,45 @@ def stored_keys(trajs: list[Trajectory]) -> Counter[Key]:
     return Counter((t.agent_type, tuple(t.pairs.ravel().tolist()), t.goal) for t in trajs)
 
 
-def test_sigkill_mid_stream_loses_no_acknowledged_trajectory(tmp_path: Path) -> None:
+@pytest.mark.parametrize("workers", [1, 2])
+def test_sigkill_mid_stream_loses_no_acknowledged_trajectory(
+    tmp_path: Path,
+    db_url: str,
+    workers: int,
+) -> None:
+    if workers > 1 and db_url.startswith("sqlite"):
+        pytest.skip("several workers ingest at once on PostgreSQL (SQLite: one process)")
+    env: dict[str, Any] = {"ADVISOR_DATABASE_URL": db_url}
+    prefix = redis_prefix()
+    if workers > 1:
+        problem = redis_problem()
+        if problem:
+            pytest.skip(f"Redis at {REDIS_URL}: {problem}")
+        env |= {"ADVISOR_WORKERS": str(workers), "ADVISOR_REDIS_URL": REDIS_URL,
+                "ADVISOR_REDIS_PREFIX": prefix}  # fmt: skip
     data = tmp_path / "data"
-    live = start(data)
+    live = start(data, **env)
+    assert len(workers_of(live)) == (workers if workers > 1 else 0)
     r = httpx.put(f"{live.url}/domains/crash", json={"map": TINY}, headers=live.admin)
     assert r.status_code == 201
     journal = Journal()
     servers = [live]
-    for round_ in range(ROUNDS):
-        crash_round(live, journal, round_)
-        assert live.process.returncode == -signal.SIGKILL
-        live = start(data)  # the same data directory, a new port
-        servers.append(live)
     try:
-        check_after_restart(live, journal)
+        for round_ in range(ROUNDS):
+            crash_round(live, journal, round_)
+            assert live.process.returncode == -signal.SIGKILL
+            live = start(data, **env)  # the same data directory and database, a new port
+            servers.append(live)
+        check_after_restart(live, journal, db_url)
     finally:
         stop(live)
+        drop_redis_keys(prefix)
     assert [server_errors(s) for s in servers] == [[]] * len(servers)
 
 
-def check_after_restart(live: Live, journal: Journal) -> None:
+def check_after_restart(live: Live, journal: Journal, url: str) -> None:
     grid = GridDomain.from_strings(TINY)
-    store = Store(f"sqlite:///{live.data_dir / 'advisor.db'}")
+    store = Store(url)
     try:
         stored = stored_keys(store.trajectories("crash"))
         acked = Counter(k for keys in journal.acked for k in keys)
