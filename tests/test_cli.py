@@ -128,3 +128,11 @@ def test_cli_serve_finds_a_busy_port_before_creating_anything(tmp_path: Path) ->
         result = runner.invoke(cli, ["serve", "--port", str(port), "--data-dir", str(data)])
     assert result.exit_code == 2 and f"port {port} on 127.0.0.1 is in use" in result.output
     assert not data.exists()  # no data directory, no admin key
+
+
+def test_cli_serve_refuses_workers_without_redis(tmp_path: Path) -> None:
+    data = tmp_path / "data"
+    result = runner.invoke(cli, ["serve", "--workers", "2", "--data-dir", str(data)], env={})
+    assert result.exit_code == 2
+    assert "error: bad setting: workers 2 needs ADVISOR_REDIS_URL" in result.output
+    assert not data.exists()

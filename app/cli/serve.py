@@ -121,7 +121,9 @@ def setting_errors(exc: ValidationError) -> str:
     lines = []
     for e in exc.errors():
         name = ".".join(str(part) for part in e["loc"])
-        lines.append(f"{name} (ADVISOR_{name.upper()}): {e['msg'].removeprefix('Value error, ')}")
+        what = e["msg"].removeprefix("Value error, ")
+        lines.append(f"{name} (ADVISOR_{name.upper()}): {what}" if name else what)  # a rule of
+        # several settings names them itself
     return "; ".join(lines)
 
 
