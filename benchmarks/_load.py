@@ -142,13 +142,13 @@ class WrkResult:
 
 def run_wrk(
     url: str, script: str, args: list[str], seconds: float, connections: int, workdir: Path,
-    done: Callable[[], bool] | None = None,
+    done: Callable[[], bool] | None = None, threads: int = 1,
 ) -> WrkResult:  # fmt: skip
-    """One wrk run (one thread) of at most ``seconds``, with a Lua ``script``; stopped early
-    (SIGINT: wrk then reports as usual) as soon as ``done()`` says so."""
+    """One wrk run (``threads`` threads) of at most ``seconds``, with a Lua ``script``; stopped
+    early (SIGINT: wrk then reports as usual) as soon as ``done()`` says so."""
     lua = workdir / f"wrk-{abs(hash(script)) % 10**8}.lua"
     lua.write_text(script + DONE_LUA)
-    cmd = [wrk_path(), "-t1", f"-c{connections}", f"-d{max(1, round(seconds))}s", "--latency",
+    cmd = [wrk_path(), f"-t{threads}", f"-c{connections}", f"-d{max(1, round(seconds))}s", "--latency",
            "--timeout", "10s", "-s", str(lua), url, "--", *args]  # fmt: skip
     with subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as proc:
         if done is not None:

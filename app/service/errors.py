@@ -9,6 +9,7 @@
 
 from __future__ import annotations
 
+import logging
 import re
 from typing import Any
 
@@ -16,15 +17,21 @@ from fastapi import FastAPI, Request, Response
 from fastapi.exception_handlers import http_exception_handler
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
+from redis.exceptions import ConnectionError as RedisConnectionError
+from redis.exceptions import TimeoutError as RedisTimeoutError
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.requests import ClientDisconnect
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from app.service.data.domains import DomainChanged, DomainNotFound
 from app.service.data.store import COUNT_MAX, CountsFull
+from app.service.live.lanes import LaneError
 from app.service.live.registry import SessionNotFound
+from app.service.live.sessions import StoreUnavailable
 from app.service.problems import BadInput, describe_errors
 from app.service.security import AuthError
+
+log = logging.getLogger("advisor.errors")
 
 
 def _json(
@@ -110,6 +117,21 @@ async def _domain_changed(_: Request, exc: Exception) -> JSONResponse:
     )
 
 
+#: what Redis failing looks like (the live sessions' store, with workers)
+STORE_DOWN: tuple[type[Exception], ...] = (
+    StoreUnavailable, RedisConnectionError, RedisTimeoutError, LaneError,
+)  # fmt: skip
+STORE_DOWN_TEXT = (
+    "the live sessions are kept in Redis, which does not answer now; nothing was applied: "
+    "send the same request again (events with their step are applied once)"
+)
+
+
+async def _store_down(_: Request, exc: Exception) -> JSONResponse:
+    log.warning("Redis does not answer: %s", exc)
+    return _json(503, STORE_DOWN_TEXT)
+
+
 async def _counts_full(_: Request, exc: Exception) -> JSONResponse:
     return _json(
         409,
@@ -146,6 +168,8 @@ def install_error_handlers(app: FastAPI) -> None:
     app.add_exception_handler(RecursionError, _too_deep)
     app.add_exception_handler(ClientDisconnect, _gone)
     app.add_exception_handler(CountsFull, _counts_full)
+    for unavailable in STORE_DOWN:
+        app.add_exception_handler(unavailable, _store_down)
 
 
 class _TooLarge(Exception):

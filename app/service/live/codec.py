@@ -16,8 +16,11 @@ Nothing of the token is kept but its SHA-256 digest; a loaded session has no pla
 
 from __future__ import annotations
 
+import hashlib
 import json
+import struct
 import time
+import weakref
 from array import array
 from datetime import datetime
 from typing import Any
@@ -26,8 +29,10 @@ import msgspec
 import numpy as np
 import numpy.typing as npt
 
-from app.advice.advisor import DecisionBatch
+from app.advice.advisor import Decision, DecisionBatch
+from app.advice.models import AdviceTables
 from app.advice.strategies import StrategyParams, strategy_params
+from app.domain.grid import GridDomain
 from app.service.data.domains import DomainState
 from app.service.live.history import AdviceLog, Recent
 from app.service.live.registry import RECENT_ADVICE, LiveSession, ServiceAdvisor, new_advisor
@@ -50,12 +55,31 @@ class CodecError(ValueError):
     """Bytes that are not a session this service can load (another format or domain)."""
 
 
+_SLOTS: dict[type, list[str]] = {}
+
+
+_DIGESTS: weakref.WeakKeyDictionary[GridDomain, bytes] = weakref.WeakKeyDictionary()
+
+
+def map_digest(grid: GridDomain) -> bytes:
+    """What a session keeps of its map: the SHA-256 of its rows (a session loaded on another
+    map of the same name is refused), made once a map."""
+    digest = _DIGESTS.get(grid)
+    if digest is None:
+        digest = _DIGESTS[grid] = hashlib.sha256("\n".join(grid.rows_text).encode()).digest()
+    return digest
+
+
 def _slots(obj: object) -> list[str]:
-    names: list[str] = []
-    for cls in type(obj).__mro__:
-        for name in getattr(cls, "__slots__", ()):
-            if name not in names and name not in _SHARED:
-                names.append(name)
+    """The slots of ``obj``'s class that :func:`advisor_state` writes (found once a class)."""
+    names = _SLOTS.get(type(obj))
+    if names is None:
+        names = []
+        for cls in type(obj).__mro__:
+            for name in getattr(cls, "__slots__", ()):
+                if name not in names and name not in _SHARED:
+                    names.append(name)
+        _SLOTS[type(obj)] = names
     return names
 
 
@@ -156,47 +180,21 @@ def _unring(v: dict[str, Any] | None) -> Recent | None:
     return r
 
 
-def _advice_log(log: AdviceLog | None) -> dict[str, Any] | None:
-    """The log's entries with their advice written out (theta_s read now: the loading side
-    may have other tables)."""
-    if log is None:
-        return None
-    order = log._order()
-    rows = log._rows()[:, order]
-    advice = np.array([_advice_row(src, st) for _, st, src in log.items()], dtype=np.float64)
-    return {
-        "steps": rows[0].tobytes(), "states": rows[1].tobytes(), "when": rows[3].tobytes(),
-        "advice": advice.reshape(-1, 4).tobytes(),
-    }  # fmt: skip
+def _advice_log(log: AdviceLog | None) -> dict[str, bytes] | None:
+    return None if log is None else log.written()
 
 
-def _advice_row(src: Any, state: int) -> tuple[float, float, float, float]:
-    if isinstance(src, tuple):
-        return src  # the advisor's own advice
-    n, e, s, w = src.theta[state].tolist()
-    return (n, e, s, w)
-
-
-def _unadvice_log(v: dict[str, Any] | None, tables: Any) -> AdviceLog | None:
-    if v is None:
-        return None
-    log = AdviceLog(RECENT_ADVICE)
-    steps = np.frombuffer(v["steps"], dtype=np.int64)
-    states = np.frombuffer(v["states"], dtype=np.int64)
-    when = np.frombuffer(v["when"], dtype=np.int64)
-    advice = np.frombuffer(v["advice"], dtype=np.float64).reshape(-1, 4)
-    for k in range(len(steps)):
-        row = advice[k].tolist()
-        log.add(int(steps[k]), int(states[k]), tables, (row[0], row[1], row[2], row[3]),
-                int(when[k]))  # fmt: skip
-    return log
+def _unadvice_log(v: dict[str, bytes] | None, tables: AdviceTables) -> AdviceLog | None:
+    return None if v is None else AdviceLog.read(RECENT_ADVICE, v, tables)
 
 
 def _batch(b: DecisionBatch) -> dict[str, Any]:
+    """The columns of ``b`` that its others follow from: the running advice count and benefit
+    are the figures before it plus, one decision at a time, what each advised one added (as
+    the advisor adds them up: ``np.add.accumulate`` gives the same bits)."""
     return {
         "first": b.first_step, "state": b.state.astype(np.int32).tobytes(),
         "advise": b.advise.tobytes(), "kl": b.kl.tobytes(), "p": b.p_normal.tobytes(),
-        "count": b.advice_count.tobytes(), "benefit": b.benefit.tobytes(),
         "advice": b.advice.tobytes(), "kappa": b.kappa, "count_before": b.count_before,
         "benefit_before": b.benefit_before,
     }  # fmt: skip
@@ -208,6 +206,20 @@ def replay_record(b: DecisionBatch) -> bytes:
     return b"%010d" % len(b) + _encoder.encode(_batch(b))
 
 
+def decision_record(d: Decision, kappa: float, count_before: int, benefit_before: float) -> bytes:
+    """:func:`replay_record` of one decision, without making a batch of it (the one-event
+    path: numpy arrays of one cost more than the rest)."""
+    advice = b"" if not d.advise or d.advice is None else _ADVICE.pack(*d.advice)
+    return b"%010d" % 1 + _encoder.encode({
+        "first": d.step, "state": _I4.pack(d.state), "advise": b"\x01" if d.advise else b"\x00",
+        "kl": _F8.pack(d.kl), "p": _F8.pack(d.p_normal), "advice": advice, "kappa": kappa,
+        "count_before": count_before, "benefit_before": benefit_before,
+    })  # fmt: skip
+
+
+_I4, _F8, _ADVICE = struct.Struct("<i"), struct.Struct("<d"), struct.Struct("<4d")
+
+
 def read_replay_record(raw: bytes) -> DecisionBatch:
     return _unbatch(_decoder.decode(raw[10:]))
 
@@ -216,11 +228,13 @@ def _unbatch(v: dict[str, Any]) -> DecisionBatch:
     def arr(key: str, dtype: type[np.generic]) -> npt.NDArray[Any]:
         return np.frombuffer(v[key], dtype=dtype).copy()
 
+    advise, kl = arr("advise", np.bool_), arr("kl", np.float64)
+    count = v["count_before"] + np.cumsum(advise, dtype=np.int64)
+    gains = np.concatenate([[v["benefit_before"]], np.where(advise, kl, 0.0)])
     return DecisionBatch(
-        v["first"], arr("state", np.int32).astype(np.int64), arr("advise", np.bool_),
-        arr("kl", np.float64), arr("p", np.float64), arr("count", np.int64),
-        arr("benefit", np.float64), arr("advice", np.float64).reshape(-1, 4), v["kappa"],
-        v["count_before"], v["benefit_before"], None,
+        v["first"], arr("state", np.int32).astype(np.int64), advise, kl, arr("p", np.float64),
+        count, np.add.accumulate(gains)[1:], arr("advice", np.float64).reshape(-1, 4),
+        v["kappa"], v["count_before"], v["benefit_before"], None,
     )  # fmt: skip
 
 
@@ -231,7 +245,7 @@ def dump(session: LiveSession, replay: bool = True) -> bytes:
     s = session
     out = {
         "format": FORMAT, "id": s.id, "token_digest": s.token_digest, "domain": s.domain.name,
-        "map": "\n".join(s.domain.domain.rows_text), "agent_type": s.agent_type,
+        "map": map_digest(s.domain.domain), "agent_type": s.agent_type,
         "table_key": s.table_key,
         "position": s.position, "p_normal": s.p_normal, "created_at": s.created_at.isoformat(),
         "last_seen": wall - (mono - s.last_seen), "born": wall - (mono - s.born),
@@ -256,7 +270,7 @@ def load(raw: bytes | dict[str, Any], domain: DomainState, replay_steps: int) ->
     """The session ``raw`` holds, on ``domain`` (the domain of its name now: CodecError if
     its map is another); its idle time goes on from when it was written."""
     v = raw if isinstance(raw, dict) else peek(raw)
-    if v["domain"] != domain.name or v["map"] != "\n".join(domain.domain.rows_text):
+    if v["domain"] != domain.name or v["map"] != map_digest(domain.domain):
         raise CodecError(f"session {v['id']} belongs to another map of domain {v['domain']!r}")
     table_key = v["table_key"] if v["table_key"] in domain.view.tables else "*"
     advisor = restore_advisor(v["advisor"], domain, table_key)

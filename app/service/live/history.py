@@ -85,7 +85,7 @@ class AdviceLog:
     of where explorers were: :meth:`forget_before`). About 1.7 kB for 50 entries where a deque
     of tuples takes about 7 kB: 100,000 sessions hold one each (docs/PERFORMANCE.md, memory)."""
 
-    __slots__ = ("_buf", "_count", "_own", "_tables")
+    __slots__ = ("_buf", "_count", "_done", "_own", "_rows_out", "_tables", "_written")
 
     def __init__(self, size: int):
         # rows step, state, index into _tables, when; an array.array, as in Recent
@@ -94,6 +94,10 @@ class AdviceLog:
         self._tables: list[AdviceTables] = []
         # the advice itself, for advisors whose advice is not theta_s (made at the first one)
         self._own: npt.NDArray[np.float64] | None = None
+        self._written: dict[str, bytes] | None = None  # what written() gave, while unchanged
+        # for written(): each slot's advice written out, for the entries up to ``_done``
+        self._rows_out: npt.NDArray[np.float64] | None = None
+        self._done = 0
 
     def extend(
         self, steps: IntArray, states: IntArray, tables: AdviceTables,
@@ -101,6 +105,7 @@ class AdviceLog:
     ) -> None:  # fmt: skip
         """Log advice given at ``states`` (arrays) at ``when`` (ms): theta_s of ``tables``, or
         the rows of ``advice`` (one per entry) for advisors whose advice is not theta_s."""
+        self._written = None
         k, size = len(steps), len(self._buf) // ROWS
         if not k:
             return
@@ -129,6 +134,7 @@ class AdviceLog:
     ) -> None:
         """:meth:`extend` for one piece of advice (``advice`` None: theta_s of ``tables``;
         pass it only for advisors whose advice is not theta_s), without index arrays."""
+        self._written = None
         which, buf, size = self._index(tables), self._buf, len(self._buf) // ROWS
         at = self._count % size
         buf[at], buf[size + at], buf[2 * size + at] = step, state, which
@@ -174,6 +180,7 @@ class AdviceLog:
 
     def forget_before(self, when: int) -> int:
         """Drop the entries logged before ``when`` (ms): how many are left."""
+        self._written = None
         order = self._order()
         times = self._rows()[3, order]
         keep = int(np.count_nonzero(times >= when))  # times only grow along the ring
@@ -183,7 +190,53 @@ class AdviceLog:
             if self._own is not None:
                 self._own[:keep] = self._own[newest]
             self._count = keep
+            self._rows_out = None
         return keep
+
+    def written(self) -> dict[str, bytes]:
+        """The entries, oldest first, as arrays of bytes with their advice written out (theta_s
+        read now for the entries whose advice is the tables': who reads them back may hold
+        other tables). :meth:`read` takes them back. Made again only after a change."""
+        if self._written is not None:
+            return self._written
+        size = len(self._buf) // ROWS
+        if self._rows_out is None:  # made (again): every entry kept is new to it
+            self._rows_out = np.full((size, 4), np.nan)
+            self._done = self._count - min(self._count, size)
+        new = range(max(self._done, self._count - size), self._count)
+        for i in new:  # one or two since the last call, as a rule
+            at = i % size
+            own = None if self._own is None else self._own[at]
+            if own is not None and own[0] == own[0]:  # not NaN: the advisor's own advice
+                self._rows_out[at] = own
+            else:
+                state, t = self._buf[size + at], self._buf[2 * size + at]
+                self._rows_out[at] = self._tables[t].theta[state]
+        self._done = self._count
+        order = self._order()
+        rows = self._rows()[:, order]
+        advice = self._rows_out[order]
+        self._written = {
+            "steps": rows[0].tobytes(), "states": rows[1].tobytes(), "when": rows[3].tobytes(),
+            "advice": advice.tobytes(),
+        }  # fmt: skip
+        return self._written
+
+    @classmethod
+    def read(cls, size: int, v: dict[str, bytes], tables: AdviceTables) -> AdviceLog:
+        """A log of ``size`` entries holding what :meth:`written` wrote (each with its own
+        advice; ``tables`` stands for the table index, never read)."""
+        log = cls(size)
+        steps = np.frombuffer(v["steps"], dtype=np.int64)
+        advice = np.frombuffer(v["advice"], dtype=np.float64).reshape(-1, 4)
+        if len(steps):
+            log.extend(
+                steps, np.frombuffer(v["states"], dtype=np.int64), tables, advice,
+                0,
+            )  # fmt: skip
+            when = np.frombuffer(v["when"], dtype=np.int64)
+            log._rows()[3, : len(when)] = when[-size:]
+        return log
 
     def items(self) -> list[tuple[int, int, AdviceTables | Advice]]:
         order = self._order()

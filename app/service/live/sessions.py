@@ -34,6 +34,12 @@ from app.service.live.registry import (
 )
 
 log = logging.getLogger("advisor.sessions")
+
+
+class StoreUnavailable(RuntimeError):
+    """Where the live sessions are kept (Redis) does not answer: nothing was applied."""
+
+
 #: what :meth:`LocalSessions.restore` needs of the catalog: a domain by name, and a domain made
 #: ready for a strategy (its goal priors or guide map built, for the strategies that read them)
 CatalogGet = Callable[[str], DomainState]

@@ -34,6 +34,7 @@ import logging
 import time
 from typing import Any
 
+import hiredis
 import numpy as np
 import redis.asyncio as aioredis
 from starlette.concurrency import run_in_threadpool
@@ -42,6 +43,7 @@ from app.advice.advisor import Decision, DecisionBatch
 from app.advice.strategies import StrategyParams
 from app.service.data.domains import DomainCatalog, DomainNotFound, DomainState
 from app.service.live import codec
+from app.service.live.lanes import Lane
 from app.service.live.registry import (
     Aggregate,
     ClientQuotaReached,
@@ -64,6 +66,9 @@ log = logging.getLogger("advisor.shared")
 ATTEMPTS = 50
 #: sessions that one sweep expires at most (the rest at the next)
 SWEEP_BATCH = 1000
+#: connections to Redis a worker keeps for the events' scripts: a session's always goes
+#: through the same one (by its id), so its commands keep their order
+LANES = 4
 
 SCRIPT = r"""
 local p, cmd = ARGV[1], ARGV[2]
@@ -139,11 +144,11 @@ elseif cmd == 'commit' then
   local now, keep = tonumber(ARGV[10]), tonumber(ARGV[11])
   local summary, ttl = ARGV[12], tonumber(ARGV[13])
   local k = skey(id)
-  local h = redis.call('HMGET', k, 'step', 'domain', 'blob')
+  local h = redis.call('HMGET', k, 'step', 'domain')
   if not h[1] then return {'gone'} end
   local v = version(h[2])
-  if h[1] ~= expected then return {'moved', h[3], h[1], v} end
-  if tonumber(v) > used then return {'stale', h[3], h[1], v} end
+  if h[1] ~= expected then return {'moved', redis.call('HGET', k, 'blob'), h[1], v} end
+  if tonumber(v) > used then return {'stale', redis.call('HGET', k, 'blob'), h[1], v} end
   redis.call('HSET', k, 'blob', blob, 'step', step)
   redis.call('PEXPIRE', k, ttl)
   redis.call('ZADD', p .. ':live', now, id)
@@ -153,12 +158,17 @@ elseif cmd == 'commit' then
     redis.call('RPUSH', r, record)
     redis.call('PEXPIRE', r, ttl)
     local kept = redis.call('HINCRBY', k, 'kept', n)
-    while true do
-      local oldest = redis.call('LINDEX', r, 0)
-      local m = tonumber(string.sub(oldest, 1, 10))
-      if kept - m < keep then break end
-      redis.call('LPOP', r)
-      kept = redis.call('HINCRBY', k, 'kept', -m)
+    -- trimmed once the list holds a quarter more than it keeps (a few commands an event
+    -- fewer): the oldest records go while the rest still hold at least ``keep`` steps
+    if kept >= keep + math.max(64, math.floor(keep / 4)) then
+      while true do
+        local oldest = redis.call('LINDEX', r, 0)
+        local m = tonumber(string.sub(oldest, 1, 10))
+        if kept - m < keep then break end
+        redis.call('LPOP', r)
+        kept = kept - m
+      end
+      redis.call('HSET', k, 'kept', kept)
     end
   end
   return {'ok'}
@@ -199,11 +209,14 @@ class SharedSessions(LocalSessions):
         replay_steps: int, limits: tuple[int, int, int, int],
     ):  # fmt: skip
         super().__init__(registry, catalog)
-        self.redis = aioredis.Redis.from_url(url)
+        self.redis = aioredis.Redis.from_url(url)  # reads and rare writes: a pool
+        # the scripts of events: a few single connections, which cost about half of a
+        # pool's CPU a call (measured: docs/PERFORMANCE.md, "Workers")
+        self._lanes = [Lane(url) for _ in range(LANES)]
+        self._sha = ""
         self.prefix = prefix
         self.replay_steps = replay_steps
         self.limits = limits  # sessions, memory, per client: sessions, memory
-        self._script = self.redis.register_script(SCRIPT)
         self._locks: dict[str, asyncio.Lock] = {}
         self._refreshing: dict[str, asyncio.Future[DomainState | None]] = {}
         self._catalog_epoch: int | None = None
@@ -212,8 +225,19 @@ class SharedSessions(LocalSessions):
     def max_sessions(self) -> int:
         return self.limits[0]
 
-    async def _run(self, cmd: str, *args: Any) -> Any:
-        return await self._script(args=[self.prefix, cmd, *args])
+    async def _run(self, cmd: str, *args: Any, lane: str = "") -> Any:
+        """The script's command ``cmd``: through the lane of session ``lane`` (the events'
+        path: :mod:`app.service.live.lanes`), else redis-py's pool."""
+        call = ("EVALSHA", self._sha, 0, self.prefix, cmd, *args)
+        try:
+            if lane:
+                return await self._lanes[hash(lane) % LANES].call(*call)
+            return await self.redis.execute_command(*call)  # type: ignore[no-untyped-call]
+        except (aioredis.ResponseError, hiredis.ReplyError) as exc:
+            if "NOSCRIPT" not in str(exc):
+                raise
+            self._sha = await self.redis.script_load(SCRIPT)  # Redis restarted, or flushed
+            return await self._run(cmd, *args, lane=lane)
 
     def _ttl(self) -> int:
         """Milliseconds a session's keys live without activity: past the idle timeout (the
@@ -226,6 +250,7 @@ class SharedSessions(LocalSessions):
         commit and telling Redis left it behind)."""
         try:
             await self.redis.ping()  # type: ignore[misc]
+            self._sha = await self.redis.script_load(SCRIPT)
         except (aioredis.ConnectionError, aioredis.TimeoutError, OSError) as exc:
             raise RuntimeError(f"ADVISOR_REDIS_URL: Redis does not answer ({exc})") from None
         for d in self.catalog.states():
@@ -360,7 +385,7 @@ class SharedSessions(LocalSessions):
         return await self._load(session_id)
 
     async def _load(self, session_id: str) -> LiveSession:
-        got = await self._run("load", session_id)
+        got = await self._run("load", session_id, lane=session_id)
         if got[0] == b"gone":
             self.registry.forget(session_id)
             raise SessionNotFound(session_id)
@@ -388,16 +413,18 @@ class SharedSessions(LocalSessions):
     ) -> Decision:
         moves = (np.array([state]), np.array([action]), np.array([next_state]))
         out = await self._apply(session.id, moves, None if step < 0 else step, one=True)
-        return out.decisions()[0]
+        return out if isinstance(out, Decision) else out.decisions()[0]
 
     async def observe(
         self, session: LiveSession, moves: Moves, first_step: int | None = None
     ) -> DecisionBatch:
-        return await self._apply(session.id, moves, first_step)
+        out = await self._apply(session.id, moves, first_step)
+        assert isinstance(out, DecisionBatch)  # one= is not asked
+        return out
 
     async def _apply(
         self, session_id: str, moves: Moves, first_step: int | None, one: bool = False
-    ) -> DecisionBatch:
+    ) -> DecisionBatch | Decision:
         """Apply ``moves`` to the session and write its new state to Redis before answering;
         again from what Redis holds when another worker or a prior update came between."""
         async with self._lock(session_id):
@@ -409,20 +436,25 @@ class SharedSessions(LocalSessions):
                     return done
                 adv = session.advisor
                 expected, count, benefit = adv.steps, adv.advice_count, adv.benefit
-                if one:  # the one-event path of the registry, as the local form runs it
-                    d = self.registry.observe_one(session, *(int(m[0]) for m in rest))
-                    out = DecisionBatch.of([d], adv.kappa, count, benefit)
+                out: DecisionBatch | Decision
+                if one and done is None:  # the one-event path, as the local form runs it
+                    out = self.registry.observe_one(session, *(int(m[0]) for m in rest))
+                    record = codec.decision_record(out, adv.kappa, count, benefit)
                 else:
                     out = await self.registry.observe_sliced(session, rest)
+                    record = codec.replay_record(out)
                 got = await self._run(
                     "commit", session_id, str(expected), str(adv.steps),
-                    codec.dump(session, replay=False), codec.replay_record(out), len(out),
+                    codec.dump(session, replay=False), record, adv.steps - expected,
                     session.domain.version, int(time.time() * 1000), self.replay_steps,
-                    _summary(session), self._ttl(),
+                    _summary(session), self._ttl(), lane=session_id,
                 )  # fmt: skip
                 verdict = got[0]
                 if verdict == b"ok":
-                    return out if done is None else joined([done, out])
+                    if done is None:
+                        return out
+                    assert isinstance(out, DecisionBatch)
+                    return joined([done, out])
                 self.registry.forget(session_id)  # this copy went ahead of what Redis holds
                 if verdict == b"gone":
                     raise SessionNotFound(session_id)
@@ -566,6 +598,8 @@ class SharedSessions(LocalSessions):
 
     async def close(self) -> None:
         await self.redis.aclose()
+        for lane in self._lanes:
+            await lane.close()
 
 
 def _covering(batches: list[DecisionBatch], first: int, n: int) -> DecisionBatch | None:

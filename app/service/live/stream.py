@@ -105,10 +105,10 @@ class KeyedWindow(Advisor):
     def _window(self) -> FloatArray:
         """The window as the core holds it: (models, W) log-probabilities, 0.0 where empty."""
         self._sync_tables()
-        log_probs = self.tables.arrays[0]
-        filled = self._keys >= 0
-        values = np.zeros((log_probs.shape[0], self.window))
-        values[:, filled] = log_probs[:, self._keys[filled]]
+        keys = self._keys
+        values = self.tables.arrays[0].take(keys, axis=1)  # an empty slot (-1): the last one
+        if keys.min() < 0:  # the window not full yet: 0.0 where empty
+            values[:, keys < 0] = 0.0
         if self._old is not None:
             kept = self._kept == 1
             values[:, kept] = self._old[:, kept]

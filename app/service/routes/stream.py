@@ -24,18 +24,21 @@ connection with 4422.
 from __future__ import annotations
 
 import json
+import logging
 
 from fastapi import APIRouter, WebSocket, WebSocketDisconnect
 from starlette.websockets import WebSocketState
 
 from app.service import ops
 from app.service.deps import service_of
+from app.service.errors import STORE_DOWN, STORE_DOWN_TEXT
 from app.service.live.registry import LiveSession, SessionNotFound
 from app.service.problems import BadInput
 from app.service.security import AuthError, check_session_token
 from app.service.state import ServiceState
 
 router = APIRouter(tags=["sessions"])
+log = logging.getLogger("advisor.stream")
 SUBPROTOCOL, TOKEN_PREFIX = "advisor", "token."
 CLOSE_REASONS = {  # a close reason holds at most 123 bytes
     4401: "no token: send Authorization: Bearer <token>, or subprotocols advisor, token.<token>",
@@ -120,6 +123,9 @@ async def _serve(websocket: WebSocket, session_id: str) -> None:
                 await websocket.send_text(answer.decode())
         except BadInput as exc:
             await websocket.send_text(_error(exc.status, exc.detail))
+        except STORE_DOWN as exc:  # nothing applied: the client may send the frame again
+            log.warning("Redis does not answer: %s", exc)
+            await websocket.send_text(_error(503, STORE_DOWN_TEXT))
         except SessionNotFound:
             if websocket.client_state == WebSocketState.CONNECTED:
                 await websocket.close(4404, CLOSE_REASONS[4404])

@@ -15,7 +15,15 @@ from app.advice.advisor import DecisionBatch
 from app.advice.strategies import STRATEGIES, StrategyParams
 from app.service.data.domains import DomainState
 from app.service.data.store import Trajectory
-from app.service.live.codec import CodecError, dump, load, peek
+from app.service.live.codec import (
+    CodecError,
+    decision_record,
+    dump,
+    load,
+    peek,
+    read_replay_record,
+    replay_record,
+)
 from app.service.live.registry import Limits, LiveSession, SessionRegistry
 from app.service.security import token_digest
 from app.service.state import ServiceState
@@ -149,5 +157,22 @@ def test_a_session_of_another_map_is_refused(service: ServiceState, domain: Doma
 
 def _renamed(raw: bytes) -> dict[str, Any]:
     v = peek(raw)
-    v["map"] = v["map"] + "x"
+    v["map"] = v["map"][::-1]  # the digest of another map
     return v
+
+
+def test_a_decisions_record_reads_back_as_its_batch_does(domain: DomainState) -> None:
+    reg = SessionRegistry(Limits(10), 3600.0)
+    session, _ = reg.create(domain, 0.0, 30, None, domain.domain.start, "guide")
+    rng = np.random.default_rng(2)
+    grid = domain.domain
+    s = grid.start
+    for a in rng.integers(0, 4, 40).tolist():
+        adv = session.advisor
+        before = (adv.advice_count, adv.benefit)
+        d = reg.observe_one(session, s, a, int(grid.next_state[s, a]))
+        s = d.state
+        one = read_replay_record(decision_record(d, adv.kappa, *before))
+        batch = read_replay_record(replay_record(DecisionBatch.of([d], adv.kappa, *before)))
+        assert columns(one) == columns(batch)
+        assert one.decisions() == [d]
