@@ -148,8 +148,8 @@ def run_wrk(
     early (SIGINT: wrk then reports as usual) as soon as ``done()`` says so."""
     lua = workdir / f"wrk-{abs(hash(script)) % 10**8}.lua"
     lua.write_text(script + DONE_LUA)
-    cmd = [wrk_path(), f"-t{threads}", f"-c{connections}", f"-d{max(1, round(seconds))}s", "--latency",
-           "--timeout", "10s", "-s", str(lua), url, "--", *args]  # fmt: skip
+    cmd = [wrk_path(), f"-t{threads}", f"-c{connections}", f"-d{max(1, round(seconds))}s",
+           "--latency", "--timeout", "10s", "-s", str(lua), url, "--", *args]  # fmt: skip
     with subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as proc:
         if done is not None:
             deadline = time.monotonic() + seconds + 5
