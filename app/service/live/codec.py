@@ -188,53 +188,56 @@ def _unadvice_log(v: dict[str, bytes] | None, tables: AdviceTables) -> AdviceLog
     return None if v is None else AdviceLog.read(RECENT_ADVICE, v, tables)
 
 
-def _batch(b: DecisionBatch) -> dict[str, Any]:
-    """The columns of ``b`` that its others follow from: the running advice count and benefit
-    are the figures before it plus, one decision at a time, what each advised one added (as
-    the advisor adds them up: ``np.add.accumulate`` gives the same bits)."""
-    return {
-        "first": b.first_step, "state": b.state.astype(np.int32).tobytes(),
-        "advise": b.advise.tobytes(), "kl": b.kl.tobytes(), "p": b.p_normal.tobytes(),
-        "advice": b.advice.tobytes(), "kappa": b.kappa, "count_before": b.count_before,
-        "benefit_before": b.benefit_before,
-    }  # fmt: skip
+#: a record's head: its first step, kappa, the advice count and benefit before it, its length
+_HEAD = struct.Struct("<qdqdI")
+_I4, _F8, _ADVICE = struct.Struct("<i"), struct.Struct("<d"), struct.Struct("<4d")
 
 
 def replay_record(b: DecisionBatch) -> bytes:
-    """One batch of decisions as bytes (what a retry of its steps is answered): its length
-    in 10 digits (what Redis reads of it to keep the last steps), then the columns."""
-    return b"%010d" % len(b) + _encoder.encode(_batch(b))
+    """One batch of decisions as bytes (what a retry of its steps is answered): its length in
+    10 digits (what Redis reads of it to keep the last steps), a head, then the columns that
+    the others follow from: the running advice count and benefit are the figures before it
+    plus, one decision at a time, what each advised one added (as the advisor adds them up:
+    ``np.add.accumulate`` gives the same bits)."""
+    n = len(b)
+    return b"".join((
+        b"%010d" % n, _HEAD.pack(b.first_step, b.kappa, b.count_before, b.benefit_before, n),
+        b.state.astype("<i4").tobytes(), b.advise.astype(np.uint8).tobytes(),
+        b.kl.astype("<f8").tobytes(), b.p_normal.astype("<f8").tobytes(),
+        b.advice.astype("<f8").tobytes(),
+    ))  # fmt: skip
 
 
 def decision_record(d: Decision, kappa: float, count_before: int, benefit_before: float) -> bytes:
     """:func:`replay_record` of one decision, without making a batch of it (the one-event
     path: numpy arrays of one cost more than the rest)."""
-    advice = b"" if not d.advise or d.advice is None else _ADVICE.pack(*d.advice)
-    return b"%010d" % 1 + _encoder.encode({
-        "first": d.step, "state": _I4.pack(d.state), "advise": b"\x01" if d.advise else b"\x00",
-        "kl": _F8.pack(d.kl), "p": _F8.pack(d.p_normal), "advice": advice, "kappa": kappa,
-        "count_before": count_before, "benefit_before": benefit_before,
-    })  # fmt: skip
-
-
-_I4, _F8, _ADVICE = struct.Struct("<i"), struct.Struct("<d"), struct.Struct("<4d")
+    advice = _ADVICE.pack(*d.advice) if d.advise and d.advice is not None else b""
+    return b"".join((
+        b"%010d" % 1, _HEAD.pack(d.step, kappa, count_before, benefit_before, 1),
+        _I4.pack(d.state), b"\x01" if d.advise else b"\x00", _F8.pack(d.kl),
+        _F8.pack(d.p_normal), advice,
+    ))  # fmt: skip
 
 
 def read_replay_record(raw: bytes) -> DecisionBatch:
-    return _unbatch(_decoder.decode(raw[10:]))
+    first, kappa, count_before, benefit_before, n = _HEAD.unpack_from(raw, 10)
+    at = 10 + _HEAD.size
 
+    def column(dtype: str, size: int) -> npt.NDArray[Any]:
+        nonlocal at
+        out = np.frombuffer(raw, dtype=dtype, count=size, offset=at).copy()
+        at += out.nbytes
+        return out
 
-def _unbatch(v: dict[str, Any]) -> DecisionBatch:
-    def arr(key: str, dtype: type[np.generic]) -> npt.NDArray[Any]:
-        return np.frombuffer(v[key], dtype=dtype).copy()
-
-    advise, kl = arr("advise", np.bool_), arr("kl", np.float64)
-    count = v["count_before"] + np.cumsum(advise, dtype=np.int64)
-    gains = np.concatenate([[v["benefit_before"]], np.where(advise, kl, 0.0)])
+    state = column("<i4", n).astype(np.int64)
+    advise = column("u1", n).astype(np.bool_)
+    kl, p = column("<f8", n), column("<f8", n)
+    advice = column("<f8", 4 * int(np.count_nonzero(advise))).reshape(-1, 4)
+    count = count_before + np.cumsum(advise, dtype=np.int64)
+    gains = np.concatenate([[benefit_before], np.where(advise, kl, 0.0)])
     return DecisionBatch(
-        v["first"], arr("state", np.int32).astype(np.int64), advise, kl, arr("p", np.float64),
-        count, np.add.accumulate(gains)[1:], arr("advice", np.float64).reshape(-1, 4),
-        v["kappa"], v["count_before"], v["benefit_before"], None,
+        first, state, advise, kl, p, count, np.add.accumulate(gains)[1:], advice, kappa,
+        count_before, benefit_before, None,
     )  # fmt: skip
 
 
