@@ -259,7 +259,10 @@ class DomainCatalog:
         rec, counts, added = snap
         if old is not None and old.version == rec.version:
             return old
-        grid = GridDomain.from_text(rec.map_text, name=name)
+        if old is not None and old.created_at == rec.created_at and old.map_text == rec.map_text:
+            grid = old.domain  # the same map (and frame): not read again
+        else:
+            grid = GridDomain.from_text(rec.map_text, name=name)
         prior = restore_prior(rec.alpha0, grid.n_states, counts)
         goals, guide = None, None
         if old is not None and old.goal_priors is not None and same_map(old, rec, grid):
