@@ -97,7 +97,8 @@ def add_event_route(app: FastAPI) -> None:
     "/sessions/{session_id}/positions",
     response_model=list[DecisionPublic],
     openapi_extra=BEARER,
-    responses=ERRORS | {413: {"model": ErrorPublic}, 415: {"model": ErrorPublic}},
+    # 400: a body that is not readable JSON (not UTF-8, nested too deeply), as FastAPI reads it
+    responses=ERRORS | {code: {"model": ErrorPublic} for code in (400, 413, 415)},
 )
 async def post_positions(session: SessionDep, body: PositionsIn, state: StateDep) -> Response:
     """Positions in metres (domains with a resolution): each reading is snapped to its cell; a
