@@ -64,7 +64,8 @@ run: run-venv
 ## Every benchmark under benchmarks/ (never part of `make test`): about 25 minutes on 2 quiet
 ## cores, more on busy ones; each rewrites its own section of docs/PERFORMANCE.md (bench_hostile
 ## its combined load's in docs/RELIABILITY.md; bench_minigrid docs/RESULTS.md; bench_scaling
-## and bench_service the curves in docs/figures/). bench_mqtt runs Debian's mosquitto.
+## and bench_service the curves in docs/figures/). bench_mqtt runs Debian's mosquitto;
+## bench_workers the machine's Redis.
 bench: venv wrk
 	$(BIN)/python benchmarks/bench_core.py --write docs/PERFORMANCE.md
 	$(BIN)/python benchmarks/bench_scaling.py --write docs/PERFORMANCE.md
@@ -76,6 +77,7 @@ bench: venv wrk
 	$(BIN)/python benchmarks/bench_minigrid.py --write docs/RESULTS.md
 	$(BIN)/python benchmarks/bench_buildings.py --write docs/PERFORMANCE.md
 	$(BIN)/python benchmarks/bench_hostile.py --only combined --write docs/RELIABILITY.md
+	$(BIN)/python benchmarks/bench_workers.py --write docs/PERFORMANCE.md
 	$(BIN)/python benchmarks/rest_inprocess.py
 	$(BIN)/python benchmarks/sessions_inprocess.py
 

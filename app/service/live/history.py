@@ -204,14 +204,24 @@ class AdviceLog:
             self._rows_out = np.full((size, 4), np.nan)
             self._done = self._count - min(self._count, size)
         new = range(max(self._done, self._count - size), self._count)
-        for i in new:  # one or two since the last call, as a rule
-            at = i % size
-            own = None if self._own is None else self._own[at]
-            if own is not None and own[0] == own[0]:  # not NaN: the advisor's own advice
-                self._rows_out[at] = own
-            else:
-                state, t = self._buf[size + at], self._buf[2 * size + at]
-                self._rows_out[at] = self._tables[t].theta[state]
+        if len(new) <= 4:  # one or two since the last call, as a rule: no index arrays
+            for i in new:
+                at = i % size
+                own = None if self._own is None else self._own[at]
+                if own is not None and own[0] == own[0]:  # not NaN: the advisor's own advice
+                    self._rows_out[at] = own
+                else:
+                    state, t = self._buf[size + at], self._buf[2 * size + at]
+                    self._rows_out[at] = self._tables[t].theta[state]
+        else:  # a batch's worth: the same, by arrays
+            slots = np.arange(new.start, new.stop) % size
+            out = np.full((len(slots), 4), np.nan) if self._own is None else self._own[slots]
+            theirs = np.isnan(out[:, 0])
+            which, states = self._rows()[2, slots], self._rows()[1, slots]
+            for t in np.unique(which[theirs]).tolist():
+                pick = theirs & (which == t)
+                out[pick] = self._tables[t].theta[states[pick]]
+            self._rows_out[slots] = out
         self._done = self._count
         order = self._order()
         rows = self._rows()[:, order]

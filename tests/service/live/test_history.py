@@ -65,3 +65,54 @@ def test_advice_log_keeps_what_a_bounded_deque_keeps(
         assert all(t is r for (_, _, t), (_, _, r) in zip(got, reference, strict=True))
         # tables no entry refers to are let go (each kept one has an entry, but the newest)
         assert len(log._tables) <= max(size + 1, 4)
+
+
+@given(
+    size=st.integers(1, 12),
+    seed=st.integers(0, 2**32 - 1),
+    ops=st.lists(
+        st.tuples(
+            st.sampled_from(["one", "batch", "tables", "forget", "written"]),
+            st.integers(1, 30),
+            st.booleans(),
+        ),
+        max_size=25,
+    ),
+)
+def test_an_advice_log_written_out_reads_back_as_it_was(
+    size: int, seed: int, ops: list[tuple[str, int, bool]]
+) -> None:
+    """Entries added one at a time and in batches, under changing tables, with the advisor's
+    own advice or theta_s, some forgotten: what ``written`` gives, read back, lists what
+    ``items`` lists, whenever it is asked (its cache of written-out rows included)."""
+    rng = np.random.default_rng(seed)
+
+    def tables() -> AdviceTables:
+        return AdviceTables.paper(rng.dirichlet(np.ones(4), 20))
+
+    log, t, step, when = AdviceLog(size), tables(), 0, 0
+    for op, n, own in ops:
+        if op == "tables":
+            t = tables()
+        elif op == "forget":
+            log.forget_before(when - n)
+        elif op == "one":
+            step, when = step + 1, when + 1
+            a, b, c, d = rng.dirichlet(np.ones(4)).tolist()
+            log.add(step, int(rng.integers(20)), t, (a, b, c, d) if own else None, when)
+        elif op == "batch":
+            steps = np.arange(step + 1, step + n + 1)
+            step, when = step + n, when + 1
+            rows = rng.dirichlet(np.ones(4), n) if own else None
+            log.extend(steps, rng.integers(0, 20, n), t, rows, when)
+        want = [(a, s, _row(src, s)) for a, s, src in log.items()]
+        back = AdviceLog.read(size, log.written(), t)
+        assert [(a, s, _row(src, s)) for a, s, src in back.items()] == want
+
+
+def _row(src: object, state: int) -> list[float]:
+    if isinstance(src, AdviceTables):
+        out: list[float] = src.theta[state].tolist()
+        return out
+    assert isinstance(src, tuple)
+    return [float(x) for x in src]
