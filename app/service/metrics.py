@@ -70,7 +70,9 @@ SESSIONS = Gauge(
     "advisor_live_sessions",
     "Live sessions, by domain.",
     ["domain"],
-    multiprocess_mode="livesum",
+    # several workers share their sessions through Redis, and each reports all of them: the
+    # largest of the workers' values (of those alive) is the count
+    multiprocess_mode="livemax",
 )
 DECISIONS = Counter(
     "advisor_decisions",

@@ -168,7 +168,8 @@ def test_a_live_server_counts_event_routes_instead_of_logging_them(tmp_path: Pat
 
 
 def test_metrics_add_up_the_workers_in_prometheus_multiprocess_mode(tmp_path: Path) -> None:
-    """Two worker processes count; a third answers /metrics with their sums."""
+    """Three worker processes count; a fourth answers /metrics with their sums (the live
+    sessions, which every worker counts whole when they share them: the largest of theirs)."""
     import os
     import subprocess
     import sys
@@ -178,15 +179,16 @@ def test_metrics_add_up_the_workers_in_prometheus_multiprocess_mode(tmp_path: Pa
         "from app.service.metrics import METRICS, SESSIONS\n"
         "METRICS.request('GET', '/health', 200, 0.002)\n"
         "METRICS.decisions('default', 'paper', 3, 1)\n"
-        "SESSIONS.labels('default').set(2)\n"
-        "import os; print(os.getpid())\n"
+        "import os, sys; SESSIONS.labels('default').set(int(sys.argv[1]))\n"
+        "print(os.getpid())\n"
     )
     pids = [
         subprocess.run(
-            [sys.executable, "-c", work], env=env, check=True, timeout=120, capture_output=True
+            [sys.executable, "-c", work, str(live)], env=env, check=True, timeout=120,
+            capture_output=True,
         ).stdout.split()[-1]
-        for _ in range(2)
-    ]
+        for live in (5, 2, 1)
+    ]  # fmt: skip
     # the first worker has exited (as a process manager reports to prometheus-client)
     show = (
         "from prometheus_client import multiprocess\n"
@@ -202,9 +204,9 @@ def test_metrics_add_up_the_workers_in_prometheus_multiprocess_mode(tmp_path: Pa
         for s in f.samples
     }
     health = (("method", "GET"), ("route", "/health"), ("status", "200"))
-    assert samples[("advisor_http_requests_total", health)] == 2
+    assert samples[("advisor_http_requests_total", health)] == 3
     paper = (("domain", "default"), ("strategy", "paper"))
-    assert samples[("advisor_decisions_total", paper)] == 6
-    assert samples[("advisor_advice_total", paper)] == 2
-    # live sessions: the sum over workers not reported dead
+    assert samples[("advisor_decisions_total", paper)] == 9
+    assert samples[("advisor_advice_total", paper)] == 3
+    # live sessions: the largest over workers not reported dead (the first, with 5, is dead)
     assert samples[("advisor_live_sessions", (("domain", "default"),))] == 2
