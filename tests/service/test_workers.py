@@ -20,6 +20,7 @@ from advisor_client.protocol import unpack
 from fastapi.testclient import TestClient
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from starlette.websockets import WebSocketDisconnect
 
 from app.advice.guide import GuideMap
 from app.advice.strategies import STRATEGIES, StrategyParams, make_advisor
@@ -216,3 +217,37 @@ def test_domains_made_or_deleted_by_one_worker_are_seen_by_the_other(workers: Wo
     assert b.get("/domains/hall").status_code == 404
     assert b.get(f"/sessions/{sid}", headers=auth).status_code == 404
     assert "hall" not in [d["name"] for d in b.get("/domains").json()]
+
+
+def test_redis_not_answering_is_503_and_nothing_applied(
+    workers: Workers, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from app.service.live.lanes import Lane, LaneError
+
+    (a, _), _ = workers
+    sid, auth, _ = open_session(a)
+    event = {"state": [28, 0], "action": "E", "step": 1}
+
+    async def down(self: Lane, *args: Any) -> Any:
+        raise LaneError("Redis closed the connection")
+
+    with monkeypatch.context() as m:
+        m.setattr(Lane, "call", down)
+        r = a.post(f"/sessions/{sid}/events", json=event, headers=auth)
+        assert r.status_code == 503 and "Redis, which does not answer" in r.json()["detail"]
+        token = auth["Authorization"].removeprefix("Bearer ")
+        with a.websocket_connect(f"/sessions/{sid}/stream?token={token}") as ws:
+            with pytest.raises(WebSocketDisconnect) as closed:  # the session not reachable
+                ws.receive_text()
+            assert closed.value.code == 1013
+    r = a.post(f"/sessions/{sid}/events", json=event, headers=auth)  # the retry, once it answers
+    assert r.status_code == 200 and r.json()["step"] == 1
+    with a.websocket_connect(f"/sessions/{sid}/stream?token={token}") as ws:  # mid-stream
+        frame = json.dumps([event | {"step": 2}])
+        with monkeypatch.context() as m:
+            m.setattr(Lane, "call", down)
+            ws.send_text(frame)
+            assert json.loads(ws.receive_text())["status"] == 503
+        ws.send_text(frame)  # the same frame again: applied once
+        assert [d["step"] for d in json.loads(ws.receive_text())] == [2]
+    assert a.get(f"/sessions/{sid}", headers=auth).json()["steps"] == 2

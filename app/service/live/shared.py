@@ -443,12 +443,16 @@ class SharedSessions(LocalSessions):
                 else:
                     out = await self.registry.observe_sliced(session, rest)
                     record = codec.replay_record(out)
-                got = await self._run(
-                    "commit", session_id, str(expected), str(adv.steps),
-                    codec.dump(session, replay=False), record, adv.steps - expected,
-                    session.domain.version, int(time.time() * 1000), self.replay_steps,
-                    _summary(session), self._ttl(), lane=session_id,
-                )  # fmt: skip
+                try:
+                    got = await self._run(
+                        "commit", session_id, str(expected), str(adv.steps),
+                        codec.dump(session, replay=False), record, adv.steps - expected,
+                        session.domain.version, int(time.time() * 1000), self.replay_steps,
+                        _summary(session), self._ttl(), lane=session_id,
+                    )  # fmt: skip
+                except BaseException:  # not written (or not known to be): this copy is ahead
+                    self.registry.forget(session_id)
+                    raise
                 verdict = got[0]
                 if verdict == b"ok":
                     if done is None:

@@ -45,6 +45,7 @@ CLOSE_REASONS = {  # a close reason holds at most 123 bytes
     4403: "this token does not belong to this session",
     4404: "no live session with this id (never created, ended or expired)",
     4422: "format must be json (the default) or binary",
+    1013: "the live sessions are kept in Redis, which does not answer now: connect again",
 }
 FORMATS = ("json", "binary")
 
@@ -97,6 +98,10 @@ async def _serve(websocket: WebSocket, session_id: str) -> None:
     except (AuthError, SessionNotFound) as exc:
         code = 4400 + exc.status % 100 if isinstance(exc, AuthError) else 4404
         await websocket.close(code, CLOSE_REASONS[code])
+        return
+    except STORE_DOWN as exc:  # 1013: try again later
+        log.warning("Redis does not answer: %s", exc)
+        await websocket.close(1013, CLOSE_REASONS[1013])
         return
     answer_format = websocket.query_params.get("format", "json")
     if answer_format not in FORMATS:
