@@ -34,7 +34,7 @@ from app.advice.priors import GoalPriors
 from app.advice.strategies import StrategyParams, guide_params
 from app.service.data.domains import DomainState
 from app.service.live.history import Advice, AdviceLog, Recent
-from app.service.live.replay import DEFAULT_STEPS, Replay, StepConflict
+from app.service.live.replay import DEFAULT_STEPS, Replay, retried
 from app.service.live.stream import StreamAdvisor, StreamGoalAware, StreamGuide, StreamRule
 from app.service.security import token_digest
 
@@ -439,35 +439,11 @@ class SessionRegistry:
         to apply): a retry is answered what it was answered, and nothing is applied twice.
         StepConflict when the first step is beyond the next one, was applied with another
         move, or was applied and its decision is no longer kept."""
-        adv = session.advisor
-        nxt = adv.steps + 1
-        if first_step is None or first_step == nxt:
-            return None, moves
-        if first_step > nxt:
-            raise StepConflict(
-                f"step {first_step} is not the next step of session {session.id}: it has "
-                f"applied {adv.steps} (the next is {nxt}); send the events in between first"
-            )
-        n = len(moves[0])
-        k = min(n, nxt - first_step)
-        got = session.replay.answer(first_step, k, adv.steps, adv.kappa)
-        if got is None:
-            kept = session.replay.kept
-            kept_text = f"steps {nxt - kept} to {adv.steps}" if kept else "none"
-            raise StepConflict(
-                f"step {first_step} was applied already (session {session.id} is at step "
-                f"{adv.steps}) and its decision is no longer kept for a retry (kept: "
-                f"{kept_text}); nothing was applied"
-            )
-        same = got.state == moves[2][:k]
-        if not same.all():
-            bad = first_step + int(np.argmin(same))
-            raise StepConflict(
-                f"step {bad} was applied already with another move; nothing was applied"
-            )
-        if k == n:
-            return got, None
-        return got, (moves[0][k:], moves[1][k:], moves[2][k:])
+        adv, replay = session.advisor, session.replay
+        return retried(
+            session.id, adv.steps, first_step, moves,
+            lambda first, n: replay.answer(first, n, adv.steps, adv.kappa), replay.kept,
+        )  # fmt: skip
 
     async def observe_sliced(
         self, session: LiveSession, moves: Moves, first_step: int | None = None

@@ -12,6 +12,8 @@ oldest row (the advisor adds them up one decision at a time, as ``np.add.accumul
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import numpy.typing as npt
 
@@ -21,6 +23,8 @@ ROW = np.dtype(
     [("state", "<i4"), ("advise", "u1"), ("kl", "<f8"), ("p", "<f8"), ("advice", "<f8", (4,))]
 )
 DEFAULT_STEPS = 500
+IntArray = npt.NDArray[np.int64]
+Moves = tuple[IntArray, IntArray, IntArray]
 
 
 class StepConflict(ValueError):
@@ -174,3 +178,40 @@ def part(b: DecisionBatch, lo: int, hi: int) -> DecisionBatch:
         int(b.advice_count[lo - 1]) if lo else b.count_before,
         float(b.benefit[lo - 1]) if lo else b.benefit_before, b.advised_from,
     )  # fmt: skip
+
+
+def retried(
+    session_id: str, steps: int, first_step: int | None, moves: Moves,
+    answered: Callable[[int, int], DecisionBatch | None], kept: int,
+) -> tuple[DecisionBatch | None, Moves | None]:  # fmt: skip
+    """(the decisions of the moves whose steps the session applied already, the moves still to
+    apply), for a session that has applied ``steps`` and keeps the decisions of its last
+    ``kept`` (``answered(first, n)``: those of steps first .. first + n - 1, or None). A retry
+    is answered what it was answered, and nothing is applied twice; StepConflict when the
+    first step is beyond the next one, was applied with another move, or was applied and its
+    decision is no longer kept."""
+    nxt = steps + 1
+    if first_step is None or first_step == nxt:
+        return None, moves
+    if first_step > nxt:
+        raise StepConflict(
+            f"step {first_step} is not the next step of session {session_id}: it has "
+            f"applied {steps} (the next is {nxt}); send the events in between first"
+        )
+    n = len(moves[0])
+    k = min(n, nxt - first_step)
+    got = answered(first_step, k)
+    if got is None:
+        kept_text = f"steps {nxt - kept} to {steps}" if kept else "none"
+        raise StepConflict(
+            f"step {first_step} was applied already (session {session_id} is at step "
+            f"{steps}) and its decision is no longer kept for a retry (kept: {kept_text}); "
+            "nothing was applied"
+        )
+    same = got.state == moves[2][:k]
+    if not same.all():
+        bad = first_step + int(np.argmin(same))
+        raise StepConflict(f"step {bad} was applied already with another move; nothing was applied")
+    if k == n:
+        return got, None
+    return got, (moves[0][k:], moves[1][k:], moves[2][k:])

@@ -56,7 +56,7 @@ from app.service.live.registry import (
     TooManySessions,
     joined,
 )
-from app.service.live.replay import StepConflict, part
+from app.service.live.replay import part, retried
 from app.service.live.sessions import LocalSessions
 
 log = logging.getLogger("advisor.shared")
@@ -475,35 +475,15 @@ class SharedSessions(LocalSessions):
             return session, None, moves
         session = await self._load(session.id)  # this copy may be behind: Redis decides
         steps = session.advisor.steps
-        if first_step == steps + 1:
-            return session, None, moves
-        if first_step > steps + 1:
-            raise StepConflict(
-                f"step {first_step} is not the next step of session {session.id}: it has "
-                f"applied {steps} (the next is {steps + 1}); send the events in between first"
-            )
-        n = len(moves[0])
-        k = min(n, steps + 1 - first_step)
-        records = await self.redis.lrange(f"{self.prefix}:r:{session.id}", 0, -1)  # type: ignore[misc]
-        batches = [codec.read_replay_record(r) for r in records]
-        got = _covering(batches, first_step, k)
-        if got is None:
-            kept = sum(len(b) for b in batches)
-            kept_text = f"steps {steps - kept + 1} to {steps}" if kept else "none"
-            raise StepConflict(
-                f"step {first_step} was applied already (session {session.id} is at step "
-                f"{steps}) and its decision is no longer kept for a retry (kept: "
-                f"{kept_text}); nothing was applied"
-            )
-        same = got.state == moves[2][:k]
-        if not same.all():
-            bad = first_step + int(np.argmin(same))
-            raise StepConflict(
-                f"step {bad} was applied already with another move; nothing was applied"
-            )
-        if k == n:
-            return session, got, None
-        return session, got, (moves[0][k:], moves[1][k:], moves[2][k:])
+        batches: list[DecisionBatch] = []
+        if first_step <= steps:  # a retry: the decisions Redis keeps
+            records = await self.redis.lrange(f"{self.prefix}:r:{session.id}", 0, -1)  # type: ignore[misc]
+            batches = [codec.read_replay_record(r) for r in records]
+        done, rest = retried(
+            session.id, steps, first_step, moves, lambda first, n: _covering(batches, first, n),
+            sum(len(b) for b in batches),
+        )  # fmt: skip
+        return session, done, rest
 
     async def describe(self, session: LiveSession) -> SessionSnapshot:
         fresh = await self._load(session.id)
