@@ -143,6 +143,15 @@ def clear(r: redis.Redis) -> None:
                 r.delete(*keys)
 
 
+def held(r: redis.Redis, prefix: str, sid: str) -> tuple[int, int]:
+    """Bytes Redis holds for session ``sid``: its state, its kept decisions (both strings)."""
+
+    def size(key: str) -> int:
+        return int(r.memory_usage(key) or 0)  # type: ignore[arg-type]
+
+    return size(f"{prefix}:s:{sid}"), size(f"{prefix}:r:{sid}") + size(f"{prefix}:r:{sid}:old")
+
+
 def bench(tmp: Path, seconds: float, repeats: int) -> dict[str, Any]:
     r = redis.Redis.from_url(REDIS_URL)
     clear(r)
@@ -193,11 +202,9 @@ def bench(tmp: Path, seconds: float, repeats: int) -> dict[str, Any]:
             prefix = cfg.get("ADVISOR_REDIS_PREFIX")
             if prefix:  # a websocket session after the load: its state and kept decisions
                 sid = streams[name][0].split("/sessions/")[1].split("/")[0]
-                state = r.memory_usage(f"{prefix}:s:{sid}") or 0
-                kept = r.memory_usage(f"{prefix}:r:{sid}") or 0
                 rest_sid = files[name].read_text().split()[0]
-                rest_state = r.memory_usage(f"{prefix}:s:{rest_sid}") or 0
-                rest_kept = r.memory_usage(f"{prefix}:r:{rest_sid}") or 0
+                state, kept = held(r, prefix, sid)
+                rest_state, rest_kept = held(r, prefix, rest_sid)
                 sizes[name] = (state, kept, rest_state, rest_kept)
     finally:
         for server in servers.values():

@@ -251,3 +251,46 @@ def test_redis_not_answering_is_503_and_nothing_applied(
         ws.send_text(frame)  # the same frame again: applied once
         assert [d["step"] for d in json.loads(ws.receive_text())] == [2]
     assert a.get(f"/sessions/{sid}", headers=auth).json()["steps"] == 2
+
+
+def test_a_retry_of_any_kept_step_is_answered_again_by_any_worker(tmp_path: Path) -> None:
+    """With 6 steps kept, requests of 1 to 4 events alternate between the workers; after each, a
+    retry of a random run of steps among the last 6 (the older of Redis' two records strings
+    included) through either worker gets the answers those steps got, and nothing is applied;
+    a step older than anything kept is refused with 409."""
+    clients, prefix = start_workers(tmp_path, 2, replay_steps=6)
+    try:
+        sid, auth, _ = open_session(clients[0])
+        grid = clients[0].app.state.service.catalog.get("default").domain  # type: ignore[attr-defined]
+        rng = np.random.default_rng(5)
+        s, step, answers = grid.start, 1, {}
+        events: dict[int, dict[str, Any]] = {}
+        for _ in range(40):
+            batch: list[dict[str, Any]] = []
+            for a in rng.integers(0, 4, int(rng.integers(1, 5))).tolist():
+                events[step + len(batch)] = {"state": grid.cell(s), "action": ACTIONS[a]}
+                batch.append(events[step + len(batch)])
+                s = int(grid.next_state[s, a])
+            c = clients[int(rng.integers(2))]
+            r = c.post(f"/sessions/{sid}/events", json=[batch[0] | {"step": step}, *batch[1:]],
+                       headers=auth)  # fmt: skip
+            assert r.status_code == 200, r.text
+            for d in r.json():
+                answers[d["step"]] = d
+            step += len(batch)
+            last = step - 1
+            lo = int(rng.integers(max(1, last - 5), last + 1))
+            hi = int(rng.integers(lo, last + 1))
+            again = [events[k] | {"step": k} for k in range(lo, hi + 1)]
+            r = clients[int(rng.integers(2))].post(
+                f"/sessions/{sid}/events", json=again, headers=auth
+            )
+            assert r.status_code == 200, r.text
+            assert r.json() == [answers[k] for k in range(lo, hi + 1)]
+        assert clients[1].get(f"/sessions/{sid}", headers=auth).json()["steps"] == step - 1
+        r = clients[0].post(f"/sessions/{sid}/events", json=events[1] | {"step": 1}, headers=auth)
+        assert r.status_code == 409 and "no longer kept" in r.json()["detail"]
+    finally:
+        for c in clients:
+            c.__exit__(None, None, None)
+        drop_redis_keys(prefix)

@@ -194,14 +194,15 @@ _I4, _F8, _ADVICE = struct.Struct("<i"), struct.Struct("<d"), struct.Struct("<4d
 
 
 def replay_record(b: DecisionBatch) -> bytes:
-    """One batch of decisions as bytes (what a retry of its steps is answered): its length in
-    10 digits (what Redis reads of it to keep the last steps), a head, then the columns that
-    the others follow from: the running advice count and benefit are the figures before it
-    plus, one decision at a time, what each advised one added (as the advisor adds them up:
-    ``np.add.accumulate`` gives the same bits)."""
+    """One batch of decisions as bytes (what a retry of its steps is answered): a head, then
+    the columns that the others follow from: the running advice count and benefit are the
+    figures before it plus, one decision at a time, what each advised one added (as the
+    advisor adds them up: ``np.add.accumulate`` gives the same bits). Records written one
+    after another are read back by :func:`read_replay_records` (each one's length follows
+    from its head and its advise column)."""
     n = len(b)
     return b"".join((
-        b"%010d" % n, _HEAD.pack(b.first_step, b.kappa, b.count_before, b.benefit_before, n),
+        _HEAD.pack(b.first_step, b.kappa, b.count_before, b.benefit_before, n),
         b.state.astype("<i4").tobytes(), b.advise.astype(np.uint8).tobytes(),
         b.kl.astype("<f8").tobytes(), b.p_normal.astype("<f8").tobytes(),
         b.advice.astype("<f8").tobytes(),
@@ -213,15 +214,18 @@ def decision_record(d: Decision, kappa: float, count_before: int, benefit_before
     path: numpy arrays of one cost more than the rest)."""
     advice = _ADVICE.pack(*d.advice) if d.advise and d.advice is not None else b""
     return b"".join((
-        b"%010d" % 1, _HEAD.pack(d.step, kappa, count_before, benefit_before, 1),
+        _HEAD.pack(d.step, kappa, count_before, benefit_before, 1),
         _I4.pack(d.state), b"\x01" if d.advise else b"\x00", _F8.pack(d.kl),
         _F8.pack(d.p_normal), advice,
     ))  # fmt: skip
 
 
-def read_replay_record(raw: bytes) -> DecisionBatch:
-    first, kappa, count_before, benefit_before, n = _HEAD.unpack_from(raw, 10)
-    at = 10 + _HEAD.size
+def _read_record(raw: bytes, at: int) -> tuple[DecisionBatch, int]:
+    """The record that starts at ``at`` of ``raw``, and where the next one starts."""
+    if len(raw) - at < _HEAD.size:
+        raise CodecError("a decision record cut short")
+    first, kappa, count_before, benefit_before, n = _HEAD.unpack_from(raw, at)
+    at += _HEAD.size
 
     def column(dtype: str, size: int) -> npt.NDArray[Any]:
         nonlocal at
@@ -229,16 +233,37 @@ def read_replay_record(raw: bytes) -> DecisionBatch:
         at += out.nbytes
         return out
 
-    state = column("<i4", n).astype(np.int64)
-    advise = column("u1", n).astype(np.bool_)
-    kl, p = column("<f8", n), column("<f8", n)
-    advice = column("<f8", 4 * int(np.count_nonzero(advise))).reshape(-1, 4)
+    try:
+        state = column("<i4", n).astype(np.int64)
+        advise = column("u1", n).astype(np.bool_)
+        kl, p = column("<f8", n), column("<f8", n)
+        advice = column("<f8", 4 * int(np.count_nonzero(advise))).reshape(-1, 4)
+    except ValueError as exc:  # frombuffer past the end
+        raise CodecError("a decision record cut short") from exc
     count = count_before + np.cumsum(advise, dtype=np.int64)
     gains = np.concatenate([[benefit_before], np.where(advise, kl, 0.0)])
-    return DecisionBatch(
+    batch = DecisionBatch(
         first, state, advise, kl, p, count, np.add.accumulate(gains)[1:], advice, kappa,
         count_before, benefit_before, None,
     )  # fmt: skip
+    return batch, at
+
+
+def read_replay_record(raw: bytes) -> DecisionBatch:
+    """The batch :func:`replay_record` (or :func:`decision_record`) wrote."""
+    batch, end = _read_record(raw, 0)
+    if end != len(raw):
+        raise CodecError("bytes after a decision record")
+    return batch
+
+
+def read_replay_records(raw: bytes) -> list[DecisionBatch]:
+    """The batches of records written one after another, in their order."""
+    out, at = [], 0
+    while at < len(raw):
+        batch, at = _read_record(raw, at)
+        out.append(batch)
+    return out
 
 
 def dump(session: LiveSession, replay: bool = True) -> bytes:

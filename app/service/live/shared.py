@@ -15,13 +15,16 @@ worker from the next event on.
 The limits are global: the same script admits a new session against the live count, the
 memory all sessions reserve, and the client's quota (one hash per client); the live sessions
 are a sorted set by last activity, and the idle ones expire through it (any worker's sweep).
-The decisions of each request are kept (a list per session, trimmed to the last
-``replay_steps`` steps) so that a retry is answered again, from any worker.
+The decisions of each request are kept (their records appended to a string per session; when
+it alone holds ``replay_steps`` steps it becomes the older one, replacing the one before: the
+two hold at least the last ``replay_steps`` steps, and fewer than twice as many plus one
+request's) so that a retry is answered again, from any worker.
 
-Keys (``P`` the prefix, ``ADVISOR_REDIS_PREFIX``): ``P:s:<id>`` the session, ``P:r:<id>`` its
-kept decisions, ``P:live`` (sorted set), ``P:mem``, ``P:c:<client>``, ``P:dom:<domain>`` (set),
-``P:sum`` (hash: figures per session for the aggregates), ``P:v:<domain>`` (the data version
-of its prior, from the database), ``P:catalog`` (goes up when a domain is made or deleted).
+Keys (``P`` the prefix, ``ADVISOR_REDIS_PREFIX``): ``P:s:<id>`` the session, ``P:r:<id>`` and
+``P:r:<id>:old`` its kept decisions, ``P:live`` (sorted set), ``P:mem``, ``P:c:<client>``,
+``P:dom:<domain>`` (set), ``P:sum`` (hash: figures per session for the aggregates),
+``P:v:<domain>`` (the data version of its prior, from the database), ``P:catalog`` (goes up
+when a domain is made or deleted).
 The script reaches keys it derives from its arguments: this is for one Redis server (or
 Sentinel), not Redis Cluster as it stands (docs/SCALING.md).
 """
@@ -82,7 +85,7 @@ local function drop(id)
   redis.call('ZREM', p .. ':live', id)
   redis.call('HDEL', p .. ':sum', id)
   if not h[1] then return 0 end
-  redis.call('DEL', k, rkey(id))
+  redis.call('DEL', k, rkey(id), rkey(id) .. ':old')
   redis.call('SREM', p .. ':dom:' .. h[1], id)
   local r = tonumber(h[3]) or 0
   redis.call('DECRBY', p .. ':mem', r)
@@ -154,22 +157,19 @@ elseif cmd == 'commit' then
   redis.call('ZADD', p .. ':live', now, id)
   redis.call('HSET', p .. ':sum', id, summary)
   if n > 0 and keep > 0 then
+    -- the records go into two strings, appended to (a list's RPUSH of a batch's record costs
+    -- Redis several times more): when the newer alone holds ``keep`` steps it becomes the
+    -- older one, and the older one goes; together they always hold the last ``keep`` steps
     local r = rkey(id)
-    redis.call('RPUSH', r, record)
-    redis.call('PEXPIRE', r, ttl)
+    redis.call('APPEND', r, record)
     local kept = redis.call('HINCRBY', k, 'kept', n)
-    -- trimmed once the list holds a quarter more than it keeps (a few commands an event
-    -- fewer): the oldest records go while the rest still hold at least ``keep`` steps
-    if kept >= keep + math.max(64, math.floor(keep / 4)) then
-      while true do
-        local oldest = redis.call('LINDEX', r, 0)
-        local m = tonumber(string.sub(oldest, 1, 10))
-        if kept - m < keep then break end
-        redis.call('LPOP', r)
-        kept = kept - m
-      end
-      redis.call('HSET', k, 'kept', kept)
+    if kept >= keep then
+      redis.call('RENAME', r, r .. ':old')
+      redis.call('HSET', k, 'kept', '0')
+    else
+      redis.call('PEXPIRE', r, ttl)
     end
+    redis.call('PEXPIRE', r .. ':old', ttl)
   end
   return {'ok'}
 elseif cmd == 'end' then
@@ -477,8 +477,9 @@ class SharedSessions(LocalSessions):
         steps = session.advisor.steps
         batches: list[DecisionBatch] = []
         if first_step <= steps:  # a retry: the decisions Redis keeps
-            records = await self.redis.lrange(f"{self.prefix}:r:{session.id}", 0, -1)  # type: ignore[misc]
-            batches = [codec.read_replay_record(r) for r in records]
+            key = f"{self.prefix}:r:{session.id}"
+            older, newer = await self.redis.mget(key + ":old", key)
+            batches = codec.read_replay_records((older or b"") + (newer or b""))
         done, rest = retried(
             session.id, steps, first_step, moves, lambda first, n: _covering(batches, first, n),
             sum(len(b) for b in batches),

@@ -22,6 +22,7 @@ from app.service.live.codec import (
     load,
     peek,
     read_replay_record,
+    read_replay_records,
     replay_record,
 )
 from app.service.live.registry import Limits, LiveSession, SessionRegistry
@@ -176,3 +177,24 @@ def test_a_decisions_record_reads_back_as_its_batch_does(domain: DomainState) ->
         batch = read_replay_record(replay_record(DecisionBatch.of([d], adv.kappa, *before)))
         assert columns(one) == columns(batch)
         assert one.decisions() == [d]
+
+
+def test_records_written_one_after_another_read_back_in_order(domain: DomainState) -> None:
+    """Batches of any length, advised or not, one after another in one string (as Redis keeps
+    them): each reads back whole, and a string cut anywhere inside a record is refused."""
+    reg = SessionRegistry(Limits(10), 3600.0)
+    session, _ = reg.create(domain, 0.0, 30, None, domain.domain.start, "paper")
+    rng = np.random.default_rng(3)
+    written, raw = [], b""
+    for n in (1, 7, 0, 120, 3):
+        if n == 0:
+            continue
+        moves = walk(domain, session.position, n, rng)
+        batch = reg.observe_batch(session, moves)
+        written.append(columns(batch))
+        raw += replay_record(batch)
+    assert [columns(b) for b in read_replay_records(raw)] == written
+    assert read_replay_records(b"") == []
+    for cut in (1, len(raw) // 2, len(raw) - 1):
+        with pytest.raises(CodecError):
+            read_replay_records(raw[:cut])
