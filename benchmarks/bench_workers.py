@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import statistics
 import sys
 import tempfile
@@ -29,6 +30,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from app.domain.grid import ACTIONS, GridDomain
 from app.domain.maps import DEFAULT_MAP
+from app.service.live.shared import SCRIPT
 from benchmarks._load import (
     EVENTS_LUA,
     Server,
@@ -125,9 +127,7 @@ def redis_calls(r: redis.Redis) -> int:
     """Round trips to Redis so far: the commands clients sent (a script is one; the commands
     a script runs inside are not counted)."""
     stats = r.info("commandstats")
-    inside = {"hset", "hmget", "hget", "get", "set", "pexpire", "zadd", "rpush", "lindex",
-              "lpop", "hincrby", "zcard", "incrby", "decrby", "sadd", "srem", "del", "zrem",
-              "hdel", "zrangebyscore", "smembers"}  # fmt: skip
+    inside = {c.lower() for c in re.findall(r"redis\.call\('([A-Z]+)'", SCRIPT)}
     return sum(
         int(v["calls"]) for k, v in stats.items()
         if k.removeprefix("cmdstat_") not in inside and k != "cmdstat_info"

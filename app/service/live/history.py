@@ -215,12 +215,19 @@ class AdviceLog:
                     self._rows_out[at] = self._tables[t].theta[state]
         else:  # a batch's worth: the same, by arrays
             slots = np.arange(new.start, new.stop) % size
-            out = np.full((len(slots), 4), np.nan) if self._own is None else self._own[slots]
-            theirs = np.isnan(out[:, 0])
-            which, states = self._rows()[2, slots], self._rows()[1, slots]
-            for t in np.unique(which[theirs]).tolist():
-                pick = theirs & (which == t)
-                out[pick] = self._tables[t].theta[states[pick]]
+            rows = self._rows()
+            which, states = rows[2, slots], rows[1, slots]
+            if which[0] == which[-1]:  # one table, as a rule (indices only grow along the ring)
+                out = self._tables[int(which[0])].theta[states]
+            else:
+                out = np.empty((len(slots), 4))
+                for t in np.unique(which).tolist():
+                    pick = which == t
+                    out[pick] = self._tables[t].theta[states[pick]]
+            if self._own is not None:  # the advisor's own advice where it gave it
+                own = self._own[slots]
+                mine = ~np.isnan(own[:, 0])
+                out[mine] = own[mine]
             self._rows_out[slots] = out
         self._done = self._count
         order = self._order()

@@ -164,7 +164,14 @@ elseif cmd == 'commit' then
     redis.call('APPEND', r, record)
     local kept = redis.call('HINCRBY', k, 'kept', n)
     if kept >= keep then
-      redis.call('RENAME', r, r .. ':old')
+      -- renamed when written in one piece, else copied: the copy keeps none of the room
+      -- APPEND made for growing (up to as much again)
+      if kept == n then
+        redis.call('RENAME', r, r .. ':old')
+      else
+        redis.call('SET', r .. ':old', redis.call('GET', r))
+        redis.call('DEL', r)
+      end
       redis.call('HSET', k, 'kept', '0')
     else
       redis.call('PEXPIRE', r, ttl)
