@@ -73,7 +73,7 @@ import numpy.typing as npt
 from app.advice.advisor import DEFAULT_KAPPA, DEFAULT_WINDOW, Advisor, Decision
 from app.advice.models import AdviceTables
 from app.advice.priors import GoalPriors
-from app.domain.grid import N_ACTIONS, GridDomain, compass_detours
+from app.domain.grid import N_ACTIONS, GridDomain, compass_detours_each
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -125,7 +125,7 @@ class GuideMap:
             np.ascontiguousarray(domain.open_moves.sum(axis=1), dtype=np.int64),
             np.ascontiguousarray(domain.cells, dtype=np.int64),
             np.ascontiguousarray(domain.goal_distances, dtype=np.int64),
-            np.stack([compass_detours(domain.next_state, domain.cells, g) for g in goals]),
+            compass_detours_each(domain.next_state, domain.cells, goals),
             of_state,
             np.zeros((len(goals), s * N_ACTIONS)),
             goals,

@@ -50,7 +50,7 @@ from app.agents.experts import train_goal_priors
 from app.agents.explorers import FIXED_EXPLORERS
 from app.agents.simulate import Simulator
 from app.domain.generate import generate_building_domain
-from app.domain.grid import GridDomain, compass_detours
+from app.domain.grid import GridDomain, compass_detours_each
 from app.domain.maps import DEFAULT_MAP
 from app.experiments.common import CommonArgs, LearningArgs, rng_for, wilson
 from app.experiments.output import RunDir, header, markdown_table
@@ -469,10 +469,9 @@ def bug_floor(world: World) -> float:
     with fewest of them (``compass_detours``), over the BFS distance. An advised bug walking
     about as far as the shortest way cannot get less advice per 100 steps than this."""
     d = world.domain
+    detours = compass_detours_each(d.next_state, d.cells, d.goals)[:, d.start]
     floors = {
-        g: 100.0
-        * compass_detours(d.next_state, d.cells, g)[d.start]
-        / max(1, int(d.goal_distances[i, d.start]))
+        g: 100.0 * int(detours[i]) / max(1, int(d.goal_distances[i, d.start]))
         for i, g in enumerate(d.goals)
     }
     return float(np.mean([floors[g] for g in world.goals]))

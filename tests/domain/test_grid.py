@@ -16,6 +16,7 @@ from app.domain.grid import (
     MapError,
     action_index,
     compass_detours,
+    compass_detours_each,
     compass_moves,
     validate_map,
 )
@@ -83,10 +84,12 @@ def test_grid_transition_table_matches_slow_version(rows: list[str]) -> None:
 @given(maps)
 def test_grid_bfs_distances_match_slow_version(rows: list[str]) -> None:
     d = GridDomain.from_strings(rows)
-    for g in d.goals:
+    for i, g in enumerate(d.goals):
         slow = slow_bfs(rows, d.cell(g))
         fast = d.distances_to(g)
+        together = d.goal_distances[i]  # every goal's search at once
         assert all(fast[s] == slow[d.cell(s)] for s in range(d.n_states))
+        assert all(together[s] == slow[d.cell(s)] for s in range(d.n_states))
 
 
 def slow_compass_moves(rows: list[str], r: int, c: int, target: tuple[int, int]) -> set[int]:
@@ -133,10 +136,16 @@ buildings = st.builds(
 )
 
 
-@given(st.one_of(maps, buildings))
-def test_compass_moves_and_detours_match_slow_versions(rows: list[str]) -> None:
+@given(st.one_of(maps, buildings), st.data())
+def test_compass_moves_and_detours_match_slow_versions(
+    rows: list[str], data: st.DataObject
+) -> None:
     d = GridDomain.from_strings(rows)
-    for g in d.goals:
+    # every goal, and any free cells as targets, several at once (repeats allowed)
+    extra = data.draw(st.lists(st.integers(0, d.n_states - 1), max_size=4))
+    targets = [*d.goals, *extra]
+    together = compass_detours_each(d.next_state, d.cells, targets)
+    for i, g in enumerate(targets):
         target = d.cell(g)
         own = compass_moves(d.next_state, d.cells, g)
         slow = slow_detours(rows, target)
@@ -144,6 +153,7 @@ def test_compass_moves_and_detours_match_slow_versions(rows: list[str]) -> None:
         for s in range(d.n_states):
             assert set(np.flatnonzero(own[s])) == slow_compass_moves(rows, *d.cell(s), target)
             assert fast[s] == slow[d.cell(s)]
+            assert together[i, s] == slow[d.cell(s)]
 
 
 @given(maps)

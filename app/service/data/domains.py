@@ -74,6 +74,9 @@ class DomainState:
     created_at: datetime
     updated_at: datetime
     lock: threading.Lock = field(default_factory=threading.Lock)
+    # held while the guide map's distances are computed (seconds on a map with many
+    # destinations), so that ingestion, which takes ``lock``, does not wait for them
+    guide_lock: threading.Lock = field(default_factory=threading.Lock)
     view: PriorView = field(init=False)
     # per-goal counts for goal-aware sessions: built from the stored trajectories when the
     # first such session starts, then kept up to date (replaced whole, never changed)
@@ -180,11 +183,14 @@ class DomainCatalog:
     def guide_map(self, state: DomainState) -> GuideMap:
         """*Worker thread* the first time: the goal priors (:meth:`goal_priors`) and a BFS
         from every destination. :class:`GuideError` says why a map cannot be guided."""
-        goals = self.goal_priors(state)
-        with state.lock:
-            if state.guide_map is None:
-                state.guide_map = GuideMap.of(state.domain, goals)
-            return state.guide_map
+        self.goal_priors(state)
+        with state.guide_lock:  # one build at a time; ingestion goes on meanwhile
+            plain = None if state.guide_map is not None else GuideMap.of(state.domain)
+            with state.lock:  # the counts as they are now (ingestion may have added)
+                if state.guide_map is None:
+                    assert plain is not None and state.goal_priors is not None
+                    state.guide_map = plain.replace_counts(state.goal_priors)
+                return state.guide_map
 
     def delete(self, name: str) -> None:
         with self._lock:
