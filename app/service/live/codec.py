@@ -25,6 +25,7 @@ from array import array
 from datetime import datetime
 from typing import Any
 
+import lz4.block
 import msgspec
 import numpy as np
 import numpy.typing as npt
@@ -263,6 +264,63 @@ def read_replay_records(raw: bytes) -> list[DecisionBatch]:
     while at < len(raw):
         batch, at = _read_record(raw, at)
         out.append(batch)
+    return out
+
+
+#: packed data: a first byte saying how the rest is written
+_PLAIN, _LZ4 = b"\x00", b"\x01"
+#: shorter data is not worth compressing (a one-event record, about 90 bytes)
+_PACK_FROM = 256
+_FRAME = struct.Struct("<I")
+
+
+def packed(data: bytes) -> bytes:
+    """``data`` as Redis keeps it: LZ4-compressed behind a byte that says so (short data as it
+    is). A session's state and its decisions repeat the few values of a map's tables: a
+    window-300 state of 11 kB and a 500-decision record of 27 kB become about 2 kB each, in
+    about 10 us, so a commit sends Redis a tenth of the bytes."""
+    if len(data) < _PACK_FROM:
+        return _PLAIN + data
+    out: bytes = lz4.block.compress(data, store_size=True)
+    return _LZ4 + out
+
+
+def unpacked(raw: bytes) -> bytes:
+    """The data :func:`packed` wrote (a state written before packing, plain MessagePack, as it
+    is)."""
+    head = raw[:1]
+    if head == _LZ4:
+        try:
+            out: bytes = lz4.block.decompress(raw[1:])
+        except lz4.block.LZ4BlockError as exc:
+            raise CodecError("packed data that does not decompress") from exc
+        return out
+    if head == _PLAIN:
+        return raw[1:]
+    if head and head[0] >= 0x80:  # a MessagePack map: a session state from before packing
+        return raw
+    raise CodecError("not packed data of this format")
+
+
+def packed_record(record: bytes) -> bytes:
+    """A decisions record (:func:`replay_record`) as Redis appends it to the session's others:
+    :func:`packed`, behind its length."""
+    data = packed(record)
+    return _FRAME.pack(len(data)) + data
+
+
+def read_packed_records(raw: bytes) -> list[DecisionBatch]:
+    """The batches of records :func:`packed_record` wrote one after another, in their order."""
+    out, at = [], 0
+    while at < len(raw):
+        if len(raw) - at < _FRAME.size:
+            raise CodecError("a decision record cut short")
+        (n,) = _FRAME.unpack_from(raw, at)
+        at += _FRAME.size
+        if len(raw) - at < n:
+            raise CodecError("a decision record cut short")
+        out.extend(read_replay_records(unpacked(raw[at : at + n])))
+        at += n
     return out
 
 

@@ -15,10 +15,11 @@ worker from the next event on.
 The limits are global: the same script admits a new session against the live count, the
 memory all sessions reserve, and the client's quota (one hash per client); the live sessions
 are a sorted set by last activity, and the idle ones expire through it (any worker's sweep).
-The decisions of each request are kept (their records appended to a string per session; when
-it alone holds ``replay_steps`` steps it becomes the older one, replacing the one before: the
-two hold at least the last ``replay_steps`` steps, and fewer than twice as many plus one
-request's) so that a retry is answered again, from any worker.
+The decisions of each request are kept (their records appended to a string per session;
+when it alone holds ``replay_steps`` steps it becomes the older one, replacing the one
+before: the two hold at least the last ``replay_steps`` steps, and fewer than twice as many
+plus one request's) so that a retry is answered again, from any worker. States and records
+go to Redis packed (LZ4: :func:`app.service.live.codec.packed`), about a tenth of the bytes.
 
 Keys (``P`` the prefix, ``ADVISOR_REDIS_PREFIX``): ``P:s:<id>`` the session, ``P:r:<id>`` and
 ``P:r:<id>:old`` its kept decisions, ``P:live`` (sorted set), ``P:mem``, ``P:c:<client>``,
@@ -365,7 +366,7 @@ class SharedSessions(LocalSessions):
             )
             now = int(time.time() * 1000)
             got = await self._run(
-                "create", session.id, codec.dump(session, replay=False), domain.name,
+                "create", session.id, codec.packed(codec.dump(session, replay=False)), domain.name,
                 client or "", session.reserved, now, int(self.registry.idle_seconds * 1000),
                 *self.limits, _summary(session), domain.version, self._ttl(),
             )  # fmt: skip
@@ -401,7 +402,7 @@ class SharedSessions(LocalSessions):
     async def _adopt(self, blob: bytes, version: int) -> LiveSession:
         """This worker's copy of the session Redis holds as ``blob`` (``version``: the data
         version of its domain's prior there)."""
-        v = codec.peek(blob)
+        v = codec.peek(codec.unpacked(blob))
         try:
             domain = await self._at_version(v["domain"], version)
         except DomainNotFound:
@@ -450,10 +451,12 @@ class SharedSessions(LocalSessions):
                 else:
                     out = await self.registry.observe_sliced(session, rest)
                     record = codec.replay_record(out)
+                record = codec.packed_record(record)
+                state = codec.packed(codec.dump(session, replay=False))
                 try:
                     got = await self._run(
                         "commit", session_id, str(expected), str(adv.steps),
-                        codec.dump(session, replay=False), record, adv.steps - expected,
+                        state, record, adv.steps - expected,
                         session.domain.version, int(time.time() * 1000), self.replay_steps,
                         _summary(session), self._ttl(), lane=session_id,
                     )  # fmt: skip
@@ -486,7 +489,7 @@ class SharedSessions(LocalSessions):
         if first_step <= steps:  # a retry: the decisions Redis keeps
             key = f"{self.prefix}:r:{session.id}"
             older, newer = await self.redis.mget(key + ":old", key)
-            batches = codec.read_replay_records((older or b"") + (newer or b""))
+            batches = codec.read_packed_records((older or b"") + (newer or b""))
         done, rest = retried(
             session.id, steps, first_step, moves, lambda first, n: _covering(batches, first, n),
             sum(len(b) for b in batches),
@@ -523,7 +526,7 @@ class SharedSessions(LocalSessions):
             for sid in ids:
                 pipe.hget(f"{self.prefix}:s:{sid.decode()}", "blob")
             blobs = [b for b in await pipe.execute() if b is not None]  # None: ended meanwhile
-        peeked = [codec.peek(b) for b in blobs]
+        peeked = [codec.peek(codec.unpacked(b)) for b in blobs]
         ready: dict[tuple[str, str], DomainState | None] = {}
         for v in peeked:  # what their strategies read of their domains, built
             key = (v["domain"], v["advisor"]["strategy"])

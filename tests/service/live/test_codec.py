@@ -20,10 +20,14 @@ from app.service.live.codec import (
     decision_record,
     dump,
     load,
+    packed,
+    packed_record,
     peek,
+    read_packed_records,
     read_replay_record,
     read_replay_records,
     replay_record,
+    unpacked,
 )
 from app.service.live.registry import Limits, LiveSession, SessionRegistry
 from app.service.security import token_digest
@@ -198,3 +202,44 @@ def test_records_written_one_after_another_read_back_in_order(domain: DomainStat
     for cut in (1, len(raw) // 2, len(raw) - 1):
         with pytest.raises(CodecError):
             read_replay_records(raw[:cut])
+
+
+def test_packed_records_read_back_in_order_and_cut_ones_are_refused(domain: DomainState) -> None:
+    """As Redis keeps them: each record packed (compressed when long enough) behind its
+    length, one after another; they read back as written, and a string cut anywhere is
+    refused rather than misread."""
+    reg = SessionRegistry(Limits(10), 3600.0)
+    session, _ = reg.create(domain, 0.0, 30, None, domain.domain.start, "paper")
+    rng = np.random.default_rng(4)
+    written, raw = [], b""
+    for n in (1, 500, 2, 37):
+        batch = reg.observe_batch(session, walk(domain, session.position, n, rng))
+        written.append(columns(batch))
+        raw += packed_record(replay_record(batch))
+    assert [columns(b) for b in read_packed_records(raw)] == written
+    assert read_packed_records(b"") == []
+    for cut in (1, 5, len(raw) // 2, len(raw) - 1):
+        with pytest.raises(CodecError):
+            read_packed_records(raw[:cut])
+
+
+@given(st.binary(max_size=2000))
+def test_packed_data_unpacks_to_itself(data: bytes) -> None:
+    assert unpacked(packed(data)) == data
+
+
+def test_a_packed_state_loads_as_the_plain_one_and_a_plain_one_still_loads(
+    domain: DomainState,
+) -> None:
+    reg = SessionRegistry(Limits(10), 3600.0)
+    session, _ = reg.create(domain, 0.5, 300, None, domain.domain.start, "paper")
+    reg.observe_batch(session, walk(domain, session.position, 400, np.random.default_rng(5)))
+    raw = dump(session, replay=False)
+    small = packed(raw)
+    assert len(small) < len(raw) // 2  # a window of the few values a map's tables hold
+    assert unpacked(small) == raw
+    assert unpacked(raw) == raw  # a state written before states were packed
+    with pytest.raises(CodecError):
+        unpacked(b"\x01not lz4")
+    with pytest.raises(CodecError):
+        unpacked(b"\x07")
