@@ -12,12 +12,13 @@ nothing but the service.
     python benchmarks/bench_hostile.py --only combined --write docs/RELIABILITY.md
 
 Sections: ``reads`` (``/health`` latency while two clients read a 400 x 400 prior, and while
-clients read ``/overview?limit=1000`` and ``/domains``), ``batches`` (one client's single-event
-latency while another session streams 5,000-event batches), ``attacks`` (a 48 MB header, a 64
-KiB one, 300 slow sockets), ``throughput`` (wrk: ``/health`` and one-event requests),
+clients read ``/overview?limit=1000``, and ``/domains`` with a map of 1,447 goals present),
+``batches`` (one client's single-event latency while another session streams 5,000-event
+batches), ``attacks`` (a 48 MB header, a 64 KiB one, 300 slow sockets), ``throughput`` (wrk:
+``/health`` and one-event requests),
 ``memory`` (150 goal_aware sessions at window 10,000), ``combined`` (90 s of warm-up, then 60 s:
 200 explorers at 10 events a second each, 5 ingesting writers, a watched viewer, two readers of
-the largest prior, a 400 x 400 domain's).
+the largest prior, a 500 x 500 domain's, the largest map the service takes).
 """
 
 from __future__ import annotations
@@ -103,14 +104,22 @@ def poll_latency(url: str, seconds: float, every: float = 0.02) -> list[float]:
     return out
 
 
-def reader(url: str, headers: dict[str, str], seconds: float, counts: Any) -> None:
-    """A process reading ``url`` over and over (bytes, never parsed) for ``seconds``."""
+def reader(
+    url: str, headers: dict[str, str], seconds: float, counts: Any, errors: Any = None
+) -> None:
+    """A process reading ``url`` over and over (bytes, never parsed) for ``seconds``; an answer
+    other than 200, or a failed request, counts in ``errors``."""
     with httpx.Client(timeout=120, headers=headers) as http:
         deadline = time.monotonic() + seconds
         while time.monotonic() < deadline:
-            r = http.get(url)
-            if r.status_code == 200:
+            try:
+                ok = http.get(url).status_code == 200
+            except httpx.HTTPError:
+                ok = False
+            if ok:
                 counts.value += 1
+            elif errors is not None:
+                errors.value += 1
 
 
 @contextmanager
@@ -148,7 +157,9 @@ def bench_reads(root: Path, workdir: Path, seconds: float) -> Rows:
         baseline = percentiles(poll_latency(srv.url + "/health", 3))
         rows.append(("/health p99, idle", baseline[1], "ms"))
         count = mp.Value("i", 0)
-        prior = [(srv.url + "/domains/big/prior", {}, seconds, count) for _ in range(2)]
+        prior: list[tuple[Any, ...]] = [
+            (srv.url + "/domains/big/prior", {}, seconds, count) for _ in range(2)
+        ]
         with processes(reader, prior):
             time.sleep(1)
             lat = percentiles(poll_latency(srv.url + "/health", seconds - 2))
@@ -174,6 +185,28 @@ def bench_reads(root: Path, workdir: Path, seconds: float) -> Rows:
             time.sleep(1)
             lat = percentiles(poll_latency(srv.url + "/health", seconds - 2))
         rows.append(("/health p99, two clients reading /overview?limit=1000", lat[1], "ms"))
+        # GET /domains lists every goal: a map of 249,999 goals is refused now (goals x cells
+        # over ADVISOR_MAX_GOAL_CELLS); the most goals a map may have, 1,447, in a corridor
+        goals = ["G" * 500 for _ in range(500)]
+        goals[0] = "S" + goals[0][1:]
+        r = http.put("/domains/goals", json={"map": goals}, headers=ADMIN)
+        rows.append(("PUT of a map of 249,999 goals: status", r.status_code, ""))
+        corridor = ["#" * 1451, "#S" + "G" * 1447 + ".#", "#" * 1451]
+        r = http.put("/domains/goals", json={"map": corridor}, headers=ADMIN)
+        assert r.status_code in (200, 201), r.text
+        t = time.perf_counter()
+        http.get("/domains")
+        rows.append(
+            ("GET /domains, a 1,447-goal map present", 1000 * (time.perf_counter() - t), "ms")
+        )
+        count = mp.Value("i", 0)
+        listing: list[tuple[Any, ...]] = [
+            (srv.url + "/domains", {}, seconds, count) for _ in range(2)
+        ]
+        with processes(reader, listing):
+            time.sleep(1)
+            lat = percentiles(poll_latency(srv.url + "/health", seconds - 2))
+        rows.append(("/health p99, two clients reading /domains", lat[1], "ms"))
     return rows
 
 
@@ -373,8 +406,14 @@ def explorers(ws_url: str, created: list[tuple[str, str, list[int]]], seconds: f
                 i += 1
                 await asyncio.sleep(max(0.0, 0.1 - (time.perf_counter() - t)))
 
+    async def counted(sid: str, token: str, start: list[int]) -> None:
+        try:
+            await one(sid, token, start)
+        except Exception:  # a closed socket, a refused handshake: an error, not a crash
+            errors.value += 1
+
     async def run() -> None:
-        await asyncio.gather(*(one(*c) for c in created))
+        await asyncio.gather(*(counted(*c) for c in created))
 
     asyncio.run(run())
 
@@ -386,15 +425,26 @@ def writer(url: str, seconds: float, count: Any, errors: Any) -> None:
     with httpx.Client(base_url=url, timeout=60, headers=ADMIN) as http:
         deadline = time.monotonic() + seconds
         while time.monotonic() < deadline:
-            r = http.post("/domains/default/trajectories", json=body)
+            try:
+                ok = http.post("/domains/default/trajectories", json=body).status_code == 201
+            except httpx.HTTPError:
+                ok = False
             count.value += 1
-            if r.status_code != 201:
+            if not ok:
                 errors.value += 1
             time.sleep(0.05)
 
 
-def watcher(port: int, seconds: float) -> None:
-    """A browser on the viewer, as viser's web client connects (reads all it is sent)."""
+def watcher(port: int, seconds: float, errors: Any) -> None:
+    """A browser on the viewer, as viser's web client connects (reads all it is sent); the
+    connection failing counts in ``errors``."""
+    try:
+        _watch(port, seconds)
+    except Exception:
+        errors.value += 1
+
+
+def _watch(port: int, seconds: float) -> None:
     import msgspec
     import viser
     from viser import _messages
@@ -419,7 +469,8 @@ def bench_combined(root: Path, workdir: Path, seconds: float) -> Rows:
         service(root, workdir, viewer=True) as srv,
         httpx.Client(base_url=srv.url, timeout=120) as http,
     ):
-        r = http.put("/domains/big", json={"map": open_map(400, 400)}, headers=ADMIN)
+        # the largest prior the service holds: a map of ADVISOR_MAX_MAP_CELLS (250,000) cells
+        r = http.put("/domains/big", json={"map": open_map(500, 500)}, headers=ADMIN)
         assert r.status_code in (200, 201), r.text
         viewer_port = http.get("/viewer").json()["port"]
         created = []
@@ -436,9 +487,9 @@ def bench_combined(root: Path, workdir: Path, seconds: float) -> Rows:
         procs += [mp.Process(target=writer, args=(srv.url, seconds, writes, errors))
                   for _ in range(5)]  # fmt: skip
         prior = srv.url + "/domains/big/prior"
-        procs += [mp.Process(target=reader, args=(prior, {}, seconds, reads))
+        procs += [mp.Process(target=reader, args=(prior, {}, seconds, reads, errors))
                   for _ in range(2)]  # fmt: skip
-        procs.append(mp.Process(target=watcher, args=(viewer_port, seconds)))
+        procs.append(mp.Process(target=watcher, args=(viewer_port, seconds, errors)))
         for p in procs:
             p.start()
         rss = []
@@ -448,6 +499,7 @@ def bench_combined(root: Path, workdir: Path, seconds: float) -> Rows:
             time.sleep(5)
         for p in procs:
             p.join(timeout=60)
+        crashed = sum(p.exitcode != 0 for p in procs)  # a load process that died: an error too
         health = http.get("/health").json()
         print("RSS (s, MiB):", ", ".join(f"{t:.0f}: {m:.0f}" for t, m in rss), file=sys.stderr)
     count = int(rtts[0])
@@ -455,7 +507,12 @@ def bench_combined(root: Path, workdir: Path, seconds: float) -> Rows:
     warm = [m for t, m in rss if t >= WARM_UP]
     return [
         ("combined: events answered", count, "events"),
-        ("combined: errors (error answers and failed ingests)", errors.value, ""),
+        (
+            "combined: errors (error answers, failed requests, ingests, reads or connections, "
+            "load processes that died)",
+            errors.value + crashed,
+            "",
+        ),
         ("combined: trajectories ingested", writes.value, ""),
         ("combined: prior reads answered", reads.value, ""),
         ("combined: single-event p50", lat[0], "ms"),
