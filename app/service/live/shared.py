@@ -20,6 +20,10 @@ it alone holds ``replay_steps`` steps it becomes the older one, replacing the on
 two hold at least the last ``replay_steps`` steps, and fewer than twice as many plus one
 request's) so that a retry is answered again, from any worker.
 
+Where an explorer was is written without the cells older than the retention
+(``ADVISOR_PATH_RETENTION_SECONDS``); a session that stays still keeps them in Redis until its
+next event or its expiry, and every read (a worker's copy made from Redis) drops them.
+
 Keys (``P`` the prefix, ``ADVISOR_REDIS_PREFIX``): ``P:s:<id>`` the session, ``P:r:<id>`` and
 ``P:r:<id>:old`` its kept decisions, ``P:live`` (sorted set), ``P:mem``, ``P:c:<client>``,
 ``P:dom:<domain>`` (set), ``P:sum`` (hash: figures per session for the aggregates),
@@ -451,9 +455,10 @@ class SharedSessions(LocalSessions):
                     out = await self.registry.observe_sliced(session, rest)
                     record = codec.replay_record(out)
                 try:
+                    blob = self.registry.write(session, lambda s: codec.dump(s, replay=False))
                     got = await self._run(
                         "commit", session_id, str(expected), str(adv.steps),
-                        codec.dump(session, replay=False), record, adv.steps - expected,
+                        blob, record, adv.steps - expected,
                         session.domain.version, int(time.time() * 1000), self.replay_steps,
                         _summary(session), self._ttl(), lane=session_id,
                     )  # fmt: skip
