@@ -22,6 +22,21 @@ MiB = 1024 * 1024
 CLIENT_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}")
 
 
+ORIGIN = re.compile(r"https?://(\[[0-9a-f:.]+\]|[a-z0-9.-]+)(:\d{1,5})?")
+
+
+def page_origin(text: str) -> str:
+    """An origin as a browser sends it (``Origin``): scheme, host and port, lower case, no
+    path; ValueError for what is not one."""
+    origin = text.strip().rstrip("/").lower()
+    if not ORIGIN.fullmatch(origin):
+        raise ValueError(
+            f"{text!r} is not the origin of a page: scheme://host[:port], e.g. "
+            "http://127.0.0.1:8080 (no path)"
+        )
+    return origin
+
+
 class Settings(BaseSettings):
     """How the advice service runs. Defaults suit one machine; override with ``ADVISOR_*``."""
 
@@ -77,6 +92,13 @@ class Settings(BaseSettings):
         "127.0.0.1",
         description="Interface of the viewer: loopback unless set (it shows where explorers "
         "are and were, and asks no key of a browser).",
+    )
+    viewer_origins: list[str] = Field(
+        default_factory=list,
+        description="Origins of pages (scheme://host:port) a browser may open the viewer from "
+        "beyond its own address's (loopback ones when it listens on loopback or 0.0.0.0), as "
+        'JSON: e.g. ["http://127.0.0.1:9090"] when Docker publishes it on port 9090. '
+        "Pages of any other origin are refused (403).",
     )
     static_dir: Path = Field(REPO_ROOT / "static", description="Pages served at / and /static.")
     bootstrap_experts: Literal["start", "anywhere"] = Field(
@@ -208,6 +230,11 @@ class Settings(BaseSettings):
                 raise ValueError(f"the key of client {name!r} is another client's too")
             seen.add(secret)
         return keys
+
+    @field_validator("viewer_origins")
+    @classmethod
+    def _origins(cls, entries: list[str]) -> list[str]:
+        return [page_origin(e) for e in entries]
 
     @field_validator("trusted_proxies")
     @classmethod
