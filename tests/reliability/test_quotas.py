@@ -132,6 +132,38 @@ def test_counts_that_would_pass_int32_are_refused_and_nothing_is_stored(
         assert state.store.counts("tiny")["*"].n_trajectories == COUNT_MAX
 
 
+def test_a_cell_count_that_would_pass_int32_is_refused_and_nothing_is_stored(
+    tmp_path: Path,
+) -> None:
+    """Each (state, action) count goes through the same check as the number of trajectories:
+    one count at 2^31 - 1 and one more expert through that cell is refused whole, 409."""
+    with TestClient(create_app(make_settings(tmp_path / "data"))) as http:
+        state = http.app.state.service  # type: ignore[attr-defined]
+        admin = {"X-API-Key": state.admin_key}
+        assert http.put("/domains/tiny", json={"map": TINY}, headers=admin).status_code == 201
+        body = {"trajectories": [{"steps": [{"state": [5, 1], "action": "E"}]}]}
+        assert http.post("/domains/tiny/trajectories", json=body, headers=admin).status_code == 201
+        grid = state.catalog.get("tiny").domain
+        s, east = grid.state(5, 1), 1
+        stored = state.store.counts("tiny")["*"]
+        assert stored.counts[s, east] == 1 and stored.n_trajectories == 1
+        full = stored.counts.copy()
+        full[s, east] = COUNT_MAX  # as if 2^31 - 1 experts had gone east there
+        with state.store.engine.begin() as conn:
+            conn.execute(sa.text("UPDATE prior_counts SET counts = :c"),
+                         {"c": full.astype("<i4").tobytes()})  # fmt: skip
+        # an expert through another cell is stored; through the full one, refused
+        other = {"trajectories": [{"steps": [{"state": [5, 2], "action": "E"}]}]}
+        assert http.post("/domains/tiny/trajectories", json=other, headers=admin).status_code == 201
+        r = http.post("/domains/tiny/trajectories", json=body, headers=admin)
+        assert r.status_code == 409, r.text
+        assert "2147483647" in r.json()["detail"] and "nothing was stored" in r.json()["detail"]
+        assert len(state.store.trajectories("tiny")) == 2
+        after = state.store.counts("tiny")["*"]
+        assert after.counts[s, east] == COUNT_MAX and after.n_trajectories == 2
+        assert int(after.counts.sum()) == COUNT_MAX + 1  # nothing wrapped round, nothing added
+
+
 @pytest.mark.parametrize("entry", ["not-an-address", "10.0.0.0/33"])
 def test_a_trusted_proxy_that_is_no_address_is_refused_at_start(tmp_path: Path, entry: str) -> None:
     with pytest.raises(ValueError, match="is not an IP address or network"):
