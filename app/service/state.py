@@ -41,7 +41,8 @@ class ServiceState:
 
 def open_state(settings: Settings) -> tuple[ServiceState, list[str]]:
     """Open the store, load domains, create the default one on first start. Returns the state
-    and messages for the operator (shown once)."""
+    and messages for the operator (logged once; they name where new keys are kept, never the
+    keys)."""
     settings.data_dir.mkdir(parents=True, exist_ok=True)
     admin_key, key_message = load_admin_key(settings)
     operator_key, operator_message = load_operator_key(settings)
