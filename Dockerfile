@@ -2,7 +2,10 @@
 #   -v advisor-data:/data advisor`  (API on 8000). The viser viewer (its own process, port 8080)
 # listens on the container's loopback only: it shows where explorers are and asks a browser for
 # no key. To reach it from the host, add `-e ADVISOR_VIEWER_HOST=0.0.0.0 -p 127.0.0.1:8080:8080`
-# (publish it on the host's loopback, as here, never on a public interface).
+# (publish it on the host's loopback, as here, never on a public interface) and open
+# http://127.0.0.1:8080/ or http://localhost:8080/ (on 0.0.0.0 it takes pages of the loopback
+# names at its port; a page of any other origin is refused). Published on another host port,
+# name that page's origin: `-p 127.0.0.1:9090:8080 -e ADVISOR_VIEWER_ORIGINS='["http://127.0.0.1:9090"]'`.
 FROM python:3.11-slim
 
 ENV PYTHONDONTWRITEBYTECODE=1 \

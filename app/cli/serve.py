@@ -112,6 +112,8 @@ def start_viewer(settings: Settings) -> subprocess.Popen[bytes]:
         sys.executable, "-m", "app", "viewer", "--api", api, "--host", settings.viewer_host,
         "--port", str(settings.viewer_port), "--parent", str(os.getpid()),
     ]  # fmt: skip
+    for origin in settings.viewer_origins:
+        cmd += ["--origin", origin]
     return subprocess.Popen(cmd, env=os.environ | {"ADVISOR_OPERATOR_KEY": key})
 
 

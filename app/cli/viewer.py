@@ -33,13 +33,28 @@ def viewer(
     parent: Annotated[
         int | None, typer.Option(help="Exit when this process (the service) is gone.")
     ] = None,
+    origin: Annotated[
+        list[str] | None,
+        typer.Option(
+            help="Origin of a page a browser may open the viewer from, beyond its own "
+            "address's (loopback ones for a loopback or 0.0.0.0 host), e.g. "
+            "http://127.0.0.1:9090; repeat for more (ADVISOR_VIEWER_ORIGINS when serve "
+            "starts it)."
+        ),
+    ] = None,
 ) -> None:
     """Serve the live 3D viewer of a running service (read with the operator key)."""
     import httpx
 
+    from app.service.config import page_origin
     from app.viewer.remote import RemoteFeed
     from app.viewer.viewer import Viewer
 
+    try:
+        origins = tuple(page_origin(o) for o in origin or ())
+    except ValueError as exc:
+        typer.echo(f"error: --origin: {exc}", err=True)
+        raise typer.Exit(code=2) from None
     key = key_file.read_text(encoding="utf-8").strip() if key_file else os.environ.get(KEY_ENV)
     if not key:
         typer.echo(f"error: no operator key: set {KEY_ENV} or give --key-file", err=True)
@@ -47,7 +62,7 @@ def viewer(
     logging.basicConfig(level=logging.INFO, format="viewer: %(message)s")
     http = httpx.Client(base_url=api, timeout=30.0)
     feed = RemoteFeed(http, key)
-    view = Viewer(feed, host=host, port=port, on_tick=feed.report_tick)
+    view = Viewer(feed, host=host, port=port, on_tick=feed.report_tick, origins=origins)
     view.start()
     if view.port != port:
         view.stop()

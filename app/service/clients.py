@@ -1,17 +1,21 @@
 """Who a request comes from, for per-client session quotas (docs/ACCESS.md).
 
-A client is the key it sends, where it is one the service knows, else its address: the peer's
-address, or, for a request from a proxy the operator trusts (``ADVISOR_TRUSTED_PROXIES``), the
-last address of ``X-Forwarded-For`` that is not such a proxy (each proxy appends the address it
-got the request from, so the addresses left of the first untrusted one are whatever the client
-wrote). uvicorn's own reading of forwarded headers is off (``serve``): it would trust any
+A client is the key it sends (``X-API-Key``), where it is one the service knows: the operator
+key, or one of ``ADVISOR_CLIENT_KEYS`` (:class:`ClientKeys`). Otherwise (no key, or a key the
+service does not know: anyone could invent keys) it is its address: the peer's address, or, for
+a request from a proxy the operator trusts (``ADVISOR_TRUSTED_PROXIES``), the last address of
+``X-Forwarded-For`` that is not such a proxy (each proxy appends the address it got the request
+from, so the addresses left of the first untrusted one are whatever the client wrote).
+uvicorn's own reading of forwarded headers is off (``serve``): it would trust any
 ``X-Forwarded-For`` from 127.0.0.1.
 """
 
 from __future__ import annotations
 
+import hashlib
+import hmac
 import ipaddress
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 
 from starlette.requests import HTTPConnection
 
@@ -47,3 +51,32 @@ def client_address(conn: HTTPConnection, trusted: Sequence[Network]) -> str:
         if hop and not _trusted(hop, trusted):
             return hop
     return peer
+
+
+OPERATOR = "operator key"
+
+
+def _digest(key: str) -> bytes:
+    return hashlib.sha256(key.encode()).digest()
+
+
+class ClientKeys:
+    """The keys that make a client of their own for the quotas, each with the name the quotas
+    know it by (``"operator key"``, ``"key <name>"``): what Redis, the registry and a 429's
+    detail hold is that name, never the key. Only the keys' SHA-256 digests are kept."""
+
+    def __init__(self, named: Iterable[tuple[str, str]] = ()):
+        self._entries = tuple((who, _digest(key)) for who, key in named)
+
+    def __len__(self) -> int:
+        return len(self._entries)
+
+    def client(self, given: str) -> str | None:
+        """The name of the client whose key ``given`` is (None: no known key). Every key is
+        compared, in constant time, whichever matches."""
+        got = _digest(given)
+        found = None
+        for who, digest in self._entries:
+            if hmac.compare_digest(got, digest) and found is None:
+                found = who
+        return found

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Literal
@@ -17,12 +18,32 @@ try:
 except PackageNotFoundError:  # running from a source tree that was not installed
     VERSION = "0+unknown"
 MiB = 1024 * 1024
+#: What a client of ADVISOR_CLIENT_KEYS may be called (it names a Redis key and a 429's detail).
+CLIENT_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}")
+
+
+ORIGIN = re.compile(r"https?://(\[[0-9a-f:.]+\]|[a-z0-9.-]+)(:\d{1,5})?")
+
+
+def page_origin(text: str) -> str:
+    """An origin as a browser sends it (``Origin``): scheme, host and port, lower case, no
+    path; ValueError for what is not one."""
+    origin = text.strip().rstrip("/").lower()
+    if not ORIGIN.fullmatch(origin):
+        raise ValueError(
+            f"{text!r} is not the origin of a page: scheme://host[:port], e.g. "
+            "http://127.0.0.1:8080 (no path)"
+        )
+    return origin
 
 
 class Settings(BaseSettings):
     """How the advice service runs. Defaults suit one machine; override with ``ADVISOR_*``."""
 
-    model_config = SettingsConfigDict(env_prefix="ADVISOR_", extra="ignore")
+    # errors never show the values given: some are secrets (keys)
+    model_config = SettingsConfigDict(
+        env_prefix="ADVISOR_", extra="ignore", hide_input_in_errors=True
+    )
 
     host: str = Field("127.0.0.1", description="Interface to listen on.")
     port: int = Field(8000, ge=0, le=65535, description="HTTP port of the API.")
@@ -71,6 +92,13 @@ class Settings(BaseSettings):
         "127.0.0.1",
         description="Interface of the viewer: loopback unless set (it shows where explorers "
         "are and were, and asks no key of a browser).",
+    )
+    viewer_origins: list[str] = Field(
+        default_factory=list,
+        description="Origins of pages (scheme://host:port) a browser may open the viewer from "
+        "beyond its own address's (loopback ones when it listens on loopback or 0.0.0.0), as "
+        'JSON: e.g. ["http://127.0.0.1:9090"] when Docker publishes it on port 9090. '
+        "Pages of any other origin are refused (403).",
     )
     static_dir: Path = Field(REPO_ROOT / "static", description="Pages served at / and /static.")
     bootstrap_experts: Literal["start", "anywhere"] = Field(
@@ -122,10 +150,20 @@ class Settings(BaseSettings):
         "state can take (its window, its goals); beyond it new sessions get 503.",
     )  # fmt: skip
     client_max_sessions: int = Field(
-        1000, ge=1, description="Live sessions one client (key or address) may hold (then 429)."
-    )
+        1000, ge=1,
+        description="Live sessions one client may hold (then 429). A client is the key it "
+        "sends, if the service knows it (the operator key, ADVISOR_CLIENT_KEYS), else its "
+        "address; the admin key's sessions count against no client.",
+    )  # fmt: skip
     client_max_session_memory: int = Field(
         256 * MiB, ge=MiB, description="Session memory one client may reserve (then 429)."
+    )
+    client_keys: dict[str, SecretStr] = Field(
+        default_factory=dict,
+        description="Keys (X-API-Key) that make a client of their own for the quotas, as JSON "
+        '{"name": "key"}: e.g. the positioning gateway of a building, whose explorers would '
+        "otherwise share its address's quota. Sessions made with one count against its name "
+        "(never the key); they give no other right. Keys of at least 16 characters.",
     )
     trusted_proxies: list[str] = Field(
         default_factory=list,
@@ -175,6 +213,28 @@ class Settings(BaseSettings):
                 "sessions through Redis (one worker runs without it)"
             )
         return self
+
+    @field_validator("client_keys")
+    @classmethod
+    def _client_keys(cls, keys: dict[str, SecretStr]) -> dict[str, SecretStr]:
+        seen: set[str] = set()
+        for name, key in keys.items():
+            if not CLIENT_NAME.fullmatch(name):
+                raise ValueError(
+                    f"client name {name!r}: letters, digits, '_', '.', '-', at most 64"
+                )
+            secret = key.get_secret_value()
+            if len(secret) < 16:  # the key is never named: a message may be logged
+                raise ValueError(f"the key of client {name!r} is shorter than 16 characters")
+            if secret in seen:
+                raise ValueError(f"the key of client {name!r} is another client's too")
+            seen.add(secret)
+        return keys
+
+    @field_validator("viewer_origins")
+    @classmethod
+    def _origins(cls, entries: list[str]) -> list[str]:
+        return [page_origin(e) for e in entries]
 
     @field_validator("trusted_proxies")
     @classmethod

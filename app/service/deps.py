@@ -141,10 +141,17 @@ async def get_session_or_operator(
 
 def client_of(conn: HTTPConnection, state: ServiceState) -> str | None:
     """Whom a new session's quota counts against: None for the admin key (no per-client
-    quota), else the client's address (:func:`app.service.clients.client_address`)."""
+    quota); the name of a key the service knows (``"operator key"``, ``"key <name>"`` of
+    ADVISOR_CLIENT_KEYS); else the client's address
+    (:func:`app.service.clients.client_address`), also for a key the service does not know
+    (anyone could invent keys to get a quota of their own)."""
     key = conn.headers.get("x-api-key")
-    if key and same_secret(key, state.admin_key):
-        return None
+    if key:
+        if same_secret(key, state.admin_key):
+            return None
+        named = state.client_keys.client(key)
+        if named is not None:
+            return named
     return "address " + client_address(conn, state.trusted)
 
 

@@ -2,7 +2,9 @@
 bearer tokens.
 
 Each key comes from settings, else from ``<data_dir>/admin_key`` (``operator_key``); if neither
-exists one is generated, written with mode 0600 and shown once. Comparisons are constant-time.
+exists one is generated and written there with mode 0600, and the log says where it is kept,
+never the key itself (logs are read by more people than keys should be). Comparisons are
+constant-time.
 """
 
 from __future__ import annotations
@@ -42,7 +44,8 @@ def same_secret(given: str, expected: str) -> bool:
 
 
 def load_admin_key(settings: Settings) -> tuple[str, str | None]:
-    """(key, message to show once or None). Creates the key file on first start."""
+    """(key, message saying where a new one is kept, or None). Creates the key file on first
+    start."""
     return load_key(settings.admin_key, settings.data_dir / ADMIN_KEY_FILE, "the admin key")
 
 
@@ -54,7 +57,7 @@ def load_operator_key(settings: Settings) -> tuple[str, str | None]:
 
 def load_key(given: SecretStr | None, path: Path, what: str) -> tuple[str, str | None]:
     """``given``, else the key kept in ``path``, else a new one written there (mode 0600):
-    (key, message to show once or None)."""
+    (key, a message saying where it is kept, never the key, or None)."""
     if given is not None:
         return given.get_secret_value(), None
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -66,8 +69,8 @@ def load_key(given: SecretStr | None, path: Path, what: str) -> tuple[str, str |
     with os.fdopen(fd, "w", encoding="utf-8") as f:
         f.write(key + "\n")
     return key, (
-        f"Generated {what} (send it as X-API-Key); stored in {path} (mode 0600), "
-        f"shown only now: {key}"
+        f"Generated {what} (send it as X-API-Key): kept in {path} (mode 0600, readable by "
+        f"this user only); read it with: cat {path}"
     )
 
 

@@ -7,7 +7,7 @@ import time
 from dataclasses import dataclass, field
 
 from app.service.answers import Fresh
-from app.service.clients import Network, networks
+from app.service.clients import OPERATOR, ClientKeys, Network, networks
 from app.service.config import Settings
 from app.service.data.bootstrap import bootstrap
 from app.service.data.domains import DomainCatalog, DomainState
@@ -27,6 +27,7 @@ class ServiceState:
     operator_key: str = ""
     started: float = field(default_factory=time.monotonic)
     trusted: tuple[Network, ...] = ()  # proxies whose X-Forwarded-For is believed
+    client_keys: ClientKeys = field(default_factory=ClientKeys)  # keys that are clients
     fresh: Fresh = field(default_factory=Fresh)  # answers made at most once a second
     sessions: LocalSessions = None  # type: ignore[assignment]  # the live sessions (below)
 
@@ -40,10 +41,12 @@ class ServiceState:
 
 def open_state(settings: Settings) -> tuple[ServiceState, list[str]]:
     """Open the store, load domains, create the default one on first start. Returns the state
-    and messages for the operator (shown once)."""
+    and messages for the operator (logged once; they name where new keys are kept, never the
+    keys)."""
     settings.data_dir.mkdir(parents=True, exist_ok=True)
     admin_key, key_message = load_admin_key(settings)
     operator_key, operator_message = load_operator_key(settings)
+    client_keys = quota_keys(settings, admin_key, operator_key)  # before anything is opened
     store = Store(settings.db_url)
     store.create_schema()
     catalog = DomainCatalog(store, settings.max_map_cells)
@@ -82,13 +85,29 @@ def open_state(settings: Settings) -> tuple[ServiceState, list[str]]:
         )  # fmt: skip
     state = ServiceState(
         settings, store, catalog, registry, admin_key, operator_key, trusted=trusted,
-        sessions=sessions,  # type: ignore[arg-type]
+        client_keys=client_keys, sessions=sessions,  # type: ignore[arg-type]
     )  # fmt: skip
     if not state.sessions.shared:
         kept = state.sessions.restore(store, catalog.get, lambda d, s: prepare(catalog, d, s))
         if kept:
             messages.append(f"Restored {kept} live sessions kept at the last shutdown")
     return state, messages
+
+
+def quota_keys(settings: Settings, admin_key: str, operator_key: str) -> ClientKeys:
+    """The keys that are clients of their own for the quotas: the operator key and those of
+    ``ADVISOR_CLIENT_KEYS`` (ValueError for one that is the admin or the operator key: it
+    would be that key, with its rights, not a client)."""
+    named = [(OPERATOR, operator_key)] if operator_key else []
+    for name, secret in settings.client_keys.items():
+        key = secret.get_secret_value()
+        if key in (admin_key, operator_key):
+            raise ValueError(
+                f"ADVISOR_CLIENT_KEYS: the key of client {name!r} is the admin or the operator "
+                "key; give it a key of its own"
+            )
+        named.append((f"key {name}", key))
+    return ClientKeys(named)
 
 
 def prepare(catalog: DomainCatalog, domain: DomainState, strategy: str) -> None:

@@ -37,14 +37,25 @@ UPLOADS = (_messages.FileTransferStartUpload, _messages.FileTransferPart)
 _patching = threading.Lock()
 
 
+LOOPBACK = ("127.0.0.1", "localhost", "::1")
+#: hosts that listen on every interface, loopback included
+WILDCARD = ("0.0.0.0", "::", "")
+
+
 def origins(host: str, port: int, extra: tuple[str, ...] = ()) -> list[str | None]:
-    """The Origins a page of this viewer has (its own address; localhost for a loopback host),
-    ``extra`` ones, and none (a program, not a page)."""
-    names = {host}
-    if host in ("127.0.0.1", "localhost", "::1"):
-        names |= {"127.0.0.1", "localhost"}
+    """The Origins a page of this viewer has, ``extra`` ones (``ADVISOR_VIEWER_ORIGINS``:
+    another name or port it is reached by, e.g. a port Docker publishes it on), and none (a
+    program, not a page). Its own: the address it listens on, and the loopback names when it
+    listens on loopback or on every interface (``0.0.0.0``, ``::``: a page at
+    ``http://127.0.0.1:<port>`` is then this viewer's own, as Docker publishes it on the
+    host's loopback). A page of any other origin is refused (403)."""
+    names = set()
+    if host in LOOPBACK or host in WILDCARD:
+        names |= {"127.0.0.1", "localhost", "[::1]"}
+    if host not in WILDCARD:
+        names.add(f"[{host}]" if ":" in host else host)
     own = [f"http://{name}:{port}" for name in sorted(names)]
-    return [*own, *extra, None]
+    return [*own, *(o for o in extra if o not in own), None]
 
 
 @contextmanager

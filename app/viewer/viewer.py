@@ -137,8 +137,9 @@ class Viewer:
     """Serve the scene on ``host:port`` and keep every browser's view in step with ``feed``.
 
     The web server is viser's, with the bounds of :mod:`app.viewer.guard` (message sizes, the
-    page's origin, the number of browsers, no uploads). Each browser gets a :class:`ClientView`
-    when it connects."""
+    page's origin, the number of browsers, no uploads); ``origins``: page origins allowed
+    beyond its own (:func:`app.viewer.guard.origins`). Each browser gets a
+    :class:`ClientView` when it connects."""
 
     def __init__(
         self,
@@ -150,6 +151,7 @@ class Viewer:
         max_share: float = MAX_SHARE,
         max_clients: int = MAX_CLIENTS,
         on_tick: Callable[[float], None] | None = None,
+        origins: tuple[str, ...] = (),
     ):
         for name, value in (("rate_hz", rate_hz), ("idle_rate_hz", idle_rate_hz)):
             if not value > 0:
@@ -163,6 +165,7 @@ class Viewer:
         self.idle_period = 1.0 / idle_rate_hz
         self.max_share = max_share
         self.max_clients = max_clients
+        self.origins = origins  # page origins allowed beyond its own (guard.origins)
         self.on_tick = on_tick  # called with each tick's duration in seconds (metrics)
         self.server: viser.ViserServer | None = None
         self.views: dict[int, ClientView] = {}
@@ -175,7 +178,10 @@ class Viewer:
     # ---- lifecycle -----------------------------------------------------------------------
     def start(self, pump: bool = True) -> None:
         """Start the web server (and, unless ``pump`` is false, the pump thread)."""
-        server = bounded_server(self.host, self.requested_port, max_clients=self.max_clients)
+        server = bounded_server(
+            self.host, self.requested_port, max_clients=self.max_clients,
+            extra_origins=self.origins,
+        )  # fmt: skip
         server.gui.configure_theme(
             titlebar_content=None, control_width="medium", show_share_button=False
         )

@@ -54,10 +54,15 @@ def test_simulate_explains_bad_options_and_unreachable_servers() -> None:
     assert run.returncode == 2 and "cannot reach the advisor at http://127.0.0.1:9" in run.stderr
 
 
-def test_serve_prints_the_generated_admin_key_once(tmp_path: Path) -> None:
+def test_serve_says_where_a_generated_key_is_kept_and_never_logs_it(tmp_path: Path) -> None:
     first = start_server(tmp_path / "data")
     _, err = stop_server(first)
-    assert first.admin_key in err and "shown only now" in err
+    operator_key = (tmp_path / "data" / "operator_key").read_text().strip()
+    assert first.admin_key not in err and operator_key not in err
+    for name in ("admin_key", "operator_key"):
+        path = tmp_path / "data" / name
+        assert f"kept in {path} (mode 0600" in err and f"cat {path}" in err
+        assert path.stat().st_mode & 0o777 == 0o600
     assert "Created domain 'default'" in err
     second = start_server(tmp_path / "data")
     _, err = stop_server(second)

@@ -6,6 +6,7 @@
 from __future__ import annotations
 
 import json
+import math
 from typing import Any
 
 import httpx
@@ -13,6 +14,7 @@ import pytest
 from pydantic import BaseModel
 from websockets.sync.client import connect
 
+from app.advice.strategies import STRATEGIES
 from app.domain.grid import GridDomain
 from app.service.schemas import (
     DecisionPublic,
@@ -24,6 +26,7 @@ from app.service.schemas import (
     SessionList,
     SessionPublic,
 )
+from app.service.viewer_feed import ViewerSnapshot
 from tests.reliability.conftest import Live
 from tests.reliability.test_memory import walk
 
@@ -53,15 +56,18 @@ def checked(r: httpx.Response, model: type[BaseModel] | None, status: int = 200)
 
 def test_every_answer_is_strict_json_at_the_largest_kappa(live: Live) -> None:
     """kappa 1e6 (the largest allowed: a larger one is refused at creation, since a total cost
-    of kappa x advice count must stay finite), advice at every step, 5,000 events in a batch:
-    every figure finite on every route that answers them."""
+    of kappa x advice count must stay finite), advice at every step, 5,000 events in a batch,
+    every strategy: every figure finite on every route that answers them, the sessions' own
+    read with the operator key (``/overview``, ``/viewer/snapshot``)."""
     with httpx.Client(base_url=live.url, timeout=60) as http:
         grid = GridDomain.from_strings(http.get("/domains/default").json()["map"])
         events = walk(grid, 5000, 3)
-        for strategy in ("always", "paper", "goal_aware", "guide", "importance", "early"):
+        made: dict[str, str] = {}
+        for strategy in STRATEGIES:
             r = http.post("/domains/default/sessions", json={"kappa": 1e6, "strategy": strategy})
             created = checked(r, SessionCreated, 201)
             sid = created["session_id"]
+            made[sid] = strategy
             auth = {"Authorization": f"Bearer {created['token']}"}
             checked(http.post(f"/sessions/{sid}/events", json=events[0], headers=auth),
                     DecisionPublic)  # fmt: skip
@@ -77,7 +83,19 @@ def test_every_answer_is_strict_json_at_the_largest_kappa(live: Live) -> None:
                 assert created["kappa"] == 1e6
                 total = http.get(f"/sessions/{sid}", headers=auth).json()["total_cost"]
                 assert total == 1e6 * 5501  # every decision advised, at 1e6 each
-        checked(http.get("/overview", params={"limit": 1000}), Overview)
+        checked(http.get("/overview", params={"limit": 1000}), Overview)  # figures only
+        # the sessions' own figures, as the operator key reads them (the dashboard, the viewer)
+        operator = {"X-API-Key": (live.data_dir / "operator_key").read_text().strip()}
+        r = http.get("/overview", params={"limit": 1000}, headers=operator)
+        listed = {s["session_id"]: s for s in checked(r, Overview)["sessions"]}
+        snap = checked(http.get("/viewer/snapshot", headers=operator), ViewerSnapshot)
+        drawn = {s["session_id"]: s for s in snap["sessions"]}
+        for sid, strategy in made.items():
+            for shown in (listed[sid], drawn[sid]):
+                assert shown["strategy"] == strategy and shown["kappa"] == 1e6
+                assert shown["steps"] == 5500 and math.isfinite(shown["total_cost"])
+                if strategy == "always":
+                    assert shown["total_cost"] == 1e6 * 5501
         checked(http.get("/sessions", headers=live.admin), SessionList)
         checked(http.get("/domains"), DomainPublic)
         checked(http.get("/domains/default/prior"), PriorPublic)

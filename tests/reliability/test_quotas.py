@@ -2,13 +2,17 @@
 anonymous client could hold all 20,000 for the 30-minute idle timeout), and stored counts
 cannot wrap round (they are int32: the issue found no overflow check).
 
-Over the real server: a client is its address (127.0.0.1 and 127.0.0.2 are two clients on
-this machine's loopback), or the key it sends; behind a proxy the operator trusts, the
-forwarded address; X-Forwarded-For from anyone else is not believed."""
+Over the real server: a client is the key it sends where the service knows it (the operator
+key, ``ADVISOR_CLIENT_KEYS``), else its address (127.0.0.1 and 127.0.0.2 are two clients on
+this machine's loopback), also when it sends a key nobody gave it; behind a proxy the operator
+trusts, the forwarded address; X-Forwarded-For from anyone else is not believed. With workers,
+the same through Redis."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
+from typing import cast
 
 import httpx
 import pytest
@@ -18,9 +22,17 @@ from fastapi.testclient import TestClient
 from app.service.data.store import COUNT_MAX
 from app.service.main import create_app
 from tests.reliability.conftest import server_errors, start, stop
-from tests.service.conftest import TINY, make_settings
+from tests.service.conftest import (
+    REDIS_URL,
+    TINY,
+    drop_redis_keys,
+    make_settings,
+    redis_prefix,
+    redis_problem,
+)
 
 QUOTA = 5
+GATEWAY_KEY = "gateway-key-of-this-test-0123456789"
 
 
 def client(url: str, address: str = "127.0.0.1") -> httpx.Client:
@@ -120,7 +132,165 @@ def test_counts_that_would_pass_int32_are_refused_and_nothing_is_stored(
         assert state.store.counts("tiny")["*"].n_trajectories == COUNT_MAX
 
 
+def test_a_cell_count_that_would_pass_int32_is_refused_and_nothing_is_stored(
+    tmp_path: Path,
+) -> None:
+    """Each (state, action) count goes through the same check as the number of trajectories:
+    one count at 2^31 - 1 and one more expert through that cell is refused whole, 409."""
+    with TestClient(create_app(make_settings(tmp_path / "data"))) as http:
+        state = http.app.state.service  # type: ignore[attr-defined]
+        admin = {"X-API-Key": state.admin_key}
+        assert http.put("/domains/tiny", json={"map": TINY}, headers=admin).status_code == 201
+        body = {"trajectories": [{"steps": [{"state": [5, 1], "action": "E"}]}]}
+        assert http.post("/domains/tiny/trajectories", json=body, headers=admin).status_code == 201
+        grid = state.catalog.get("tiny").domain
+        s, east = grid.state(5, 1), 1
+        stored = state.store.counts("tiny")["*"]
+        assert stored.counts[s, east] == 1 and stored.n_trajectories == 1
+        full = stored.counts.copy()
+        full[s, east] = COUNT_MAX  # as if 2^31 - 1 experts had gone east there
+        with state.store.engine.begin() as conn:
+            conn.execute(sa.text("UPDATE prior_counts SET counts = :c"),
+                         {"c": full.astype("<i4").tobytes()})  # fmt: skip
+        # an expert through another cell is stored; through the full one, refused
+        other = {"trajectories": [{"steps": [{"state": [5, 2], "action": "E"}]}]}
+        assert http.post("/domains/tiny/trajectories", json=other, headers=admin).status_code == 201
+        r = http.post("/domains/tiny/trajectories", json=body, headers=admin)
+        assert r.status_code == 409, r.text
+        assert "2147483647" in r.json()["detail"] and "nothing was stored" in r.json()["detail"]
+        assert len(state.store.trajectories("tiny")) == 2
+        after = state.store.counts("tiny")["*"]
+        assert after.counts[s, east] == COUNT_MAX and after.n_trajectories == 2
+        assert int(after.counts.sum()) == COUNT_MAX + 1  # nothing wrapped round, nothing added
+
+
 @pytest.mark.parametrize("entry", ["not-an-address", "10.0.0.0/33"])
 def test_a_trusted_proxy_that_is_no_address_is_refused_at_start(tmp_path: Path, entry: str) -> None:
     with pytest.raises(ValueError, match="is not an IP address or network"):
         make_settings(tmp_path, trusted_proxies=[entry])
+
+
+def test_a_known_key_is_one_client_from_any_address_and_an_invented_one_is_its_address(
+    tmp_path: Path,
+) -> None:
+    """A positioning gateway with a key of ADVISOR_CLIENT_KEYS has its quota wherever its
+    requests come from; a key the service does not know makes no client of its own (it would
+    be a fresh quota for anyone who invents one): it is counted by its address."""
+    keys = json.dumps({"gateway": GATEWAY_KEY})
+    live = start(tmp_path / "data", log_level="info", ADVISOR_CLIENT_MAX_SESSIONS="3",
+                 ADVISOR_CLIENT_KEYS=keys)  # fmt: skip
+    gateway = {"X-API-Key": GATEWAY_KEY}
+    operator = {"X-API-Key": (live.data_dir / "operator_key").read_text().strip()}
+    try:
+        with client(live.url) as one, client(live.url, "127.0.0.2") as two:
+
+            def create(http: httpx.Client, headers: dict[str, str]) -> httpx.Response:
+                return http.post("/domains/default/sessions", json={}, headers=headers)
+
+            # the same key from two addresses: one quota of 3
+            made = [create(http, gateway) for http in (one, two, one)]
+            assert [r.status_code for r in made] == [201, 201, 201]
+            for http in (one, two):
+                refused = create(http, gateway)
+                assert refused.status_code == 429, refused.text
+                detail = refused.json()["detail"]
+                assert "(key gateway)" in detail and "3 live sessions" in detail
+                assert GATEWAY_KEY not in refused.text
+            # the addresses' own quotas are untouched by the key's sessions
+            assert create(two, {}).status_code == 201
+            # invented keys: each counted against its address, which they share with no key
+            invented = [create(one, {"X-API-Key": f"made-up-key-{i}"}) for i in range(4)]
+            assert [r.status_code for r in invented] == [201, 201, 201, 429]
+            assert "(address 127.0.0.1)" in invented[-1].json()["detail"]
+            assert create(one, {}).status_code == 429  # the same client as the invented keys
+            # the operator key is one client too, from either address
+            codes = [create(http, operator).status_code for http in (one, two, two, one)]
+            assert codes == [201, 201, 201, 429]
+            assert len(one.get("/sessions", headers=live.admin).json()["sessions"]) == 10
+            # ending one of the key's sessions frees a place for the key, from anywhere
+            ended = made[0].json()["session_id"]
+            assert one.delete(f"/sessions/{ended}", headers=live.admin).status_code == 200
+            assert create(two, gateway).status_code == 201
+            assert create(one, gateway).status_code == 429
+    finally:
+        stop(live)
+    assert server_errors(live) == []
+    assert GATEWAY_KEY not in live.log.read_text(errors="replace")  # never logged
+
+
+def test_client_keys_that_cannot_work_are_refused_at_start(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="shorter than 16 characters"):
+        make_settings(tmp_path, client_keys={"gw": "short"})
+    with pytest.raises(ValueError, match="client name 'a b'"):
+        make_settings(tmp_path, client_keys={"a b": GATEWAY_KEY})
+    with pytest.raises(ValueError, match="is another client's too"):
+        make_settings(tmp_path, client_keys={"a": GATEWAY_KEY, "b": GATEWAY_KEY})
+    with pytest.raises(ValueError) as refused:  # the message never holds the key
+        make_settings(tmp_path, client_keys={"gw": "short"})
+    assert "short'" not in str(refused.value).replace("'**********'", "")
+    # a client key that is the admin key would be the admin: refused when the service starts
+    settings = make_settings(tmp_path / "data", admin_key=GATEWAY_KEY,
+                             client_keys={"gw": GATEWAY_KEY})  # fmt: skip
+    refused_at_start = "the key of client 'gw' is the admin or the operator"
+    with pytest.raises(ValueError, match=refused_at_start), TestClient(create_app(settings)):
+        pass
+
+
+REDIS_PROBLEM = redis_problem()
+
+
+@pytest.mark.skipif(REDIS_PROBLEM is not None, reason=f"Redis at {REDIS_URL}: {REDIS_PROBLEM}")
+def test_with_workers_a_known_key_is_one_client_across_workers_and_addresses(
+    tmp_path: Path,
+) -> None:
+    """Three workers sharing Redis, reached from two addresses: the key's sessions count
+    against one quota whichever worker and address made them; an invented key against its
+    address, through any worker; Redis holds the key's name, never the key."""
+    import redis
+
+    prefix = redis_prefix()
+    url = f"sqlite:///{tmp_path / 'advisor.db'}"
+    settings = make_settings(
+        tmp_path, database_url=url, redis_url=REDIS_URL, redis_prefix=prefix,
+        client_max_sessions=2, client_keys={"gateway": GATEWAY_KEY},
+    )  # fmt: skip
+    apps = [create_app(settings) for _ in range(3)]
+    gateway = {"X-API-Key": GATEWAY_KEY}
+    a = TestClient(apps[0], client=("10.0.0.1", 40000))
+    b = TestClient(apps[1], client=("10.0.0.2", 40000))
+    c = TestClient(apps[2], client=("10.0.0.1", 40001))  # a's address, through a third worker
+    try:
+        for http in (a, b, c):
+            http.__enter__()
+
+        def create(http: TestClient, headers: dict[str, str]) -> int:
+            return int(http.post("/domains/default/sessions", json={}, headers=headers).status_code)
+
+        assert [create(a, gateway), create(b, gateway)] == [201, 201]
+        for http in (a, b):
+            r = http.post("/domains/default/sessions", json={}, headers=gateway)
+            assert r.status_code == 429 and "(key gateway)" in r.json()["detail"], r.text
+        # an invented key is its address, whichever worker: 10.0.0.1 has two places
+        invented = [
+            create(a, {"X-API-Key": "x" * 40}),
+            create(c, {}),
+            create(c, {"X-API-Key": "z" * 40}),
+        ]
+        assert invented == [201, 201, 429]
+        assert create(b, {"X-API-Key": "y" * 40}) == 201  # 10.0.0.2's first
+        store = redis.Redis.from_url(REDIS_URL)
+        try:
+            names = [k.decode() for k in store.scan_iter(f"{prefix}:*", count=1000)]
+            assert f"{prefix}:c:key gateway" in names
+            assert int(cast(bytes, store.hget(f"{prefix}:c:key gateway", "n"))) == 2
+            for name in names:
+                assert GATEWAY_KEY not in name
+                if store.type(name) == b"hash":
+                    values = cast(list[bytes], store.hvals(name))
+                    assert all(GATEWAY_KEY.encode() not in v for v in values)
+        finally:
+            store.close()
+    finally:
+        for http in (a, b, c):
+            http.__exit__(None, None, None)
+        drop_redis_keys(prefix)

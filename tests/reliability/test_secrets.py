@@ -36,7 +36,7 @@ def test_the_filter_rewrites_uvicorn_s_access_record() -> None:
 
 
 def test_a_live_server_logs_no_session_token_nor_admin_key(tmp_path: Path) -> None:
-    # a configured admin key (a generated one is shown once, at first start, by design)
+    # a configured admin key (a generated one: the next test)
     key = "configured-admin-key-for-this-test"
     # event routes logged too (by default they are counted, not logged)
     live = start(
@@ -73,3 +73,19 @@ def test_a_live_server_logs_no_session_token_nor_admin_key(tmp_path: Path) -> No
     assert text.count(f"/sessions/{sid}/stream") >= 3
     assert token not in text
     assert key not in text
+
+
+def test_generated_keys_are_never_logged_only_where_they_are_kept(tmp_path: Path) -> None:
+    """At first start the service generates the admin and operator keys; its log (uvicorn's,
+    at info, and what ``serve`` writes itself) says where each is kept, not the key."""
+    live = start(tmp_path / "data", log_level="info")
+    try:
+        with httpx.Client(base_url=live.url, timeout=10) as http:
+            assert http.get("/domains", headers=live.admin).status_code == 200
+    finally:
+        stop(live)
+    text = live.log.read_text(errors="replace")
+    for name in ("admin_key", "operator_key"):
+        path = live.data_dir / name
+        assert f"kept in {path} (mode 0600" in text, text[-2000:]
+        assert path.read_text().strip() not in text

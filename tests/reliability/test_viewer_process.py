@@ -39,7 +39,9 @@ def children(pid: int) -> list[tuple[int, str]]:
 
 def test_serve_runs_the_viewer_apart_and_a_browser_cannot_reach_the_api(tmp_path: Path) -> None:
     viewer_port = free_port()
-    live = start(tmp_path / "data", viewer_port=viewer_port)
+    published = "http://viewer.example:9090"  # a name and port the viewer is reached by
+    live = start(tmp_path / "data", viewer_port=viewer_port,
+                 ADVISOR_VIEWER_ORIGINS=f'["{published}"]')  # fmt: skip
     try:
         viewers = [p for p, cmd in children(live.pid()) if " app viewer " in cmd]
         assert len(viewers) == 1, children(live.pid())
@@ -51,6 +53,9 @@ def test_serve_runs_the_viewer_apart_and_a_browser_cannot_reach_the_api(tmp_path
         with pytest.raises(InvalidStatus) as refused:
             Browser(viewer_port, origin="https://evil.example")
         assert refused.value.response.status_code == 403
+        # pages of its own address, and of the origins the settings add, are let in
+        for page in (f"http://127.0.0.1:{viewer_port}", published):
+            Browser(viewer_port, origin=page).close()
         # 10 messages of 16 MiB: the first closes the connection, none is held anywhere
         api_before, viewer_before = rss_mib(live.pid()), rss_mib(viewer)
         for _ in range(10):

@@ -17,8 +17,9 @@ from viser import _messages
 from websockets.exceptions import ConnectionClosed, InvalidStatus
 
 from app.domain.grid import GridDomain
+from app.service.config import Settings
 from app.viewer.controls import NONE
-from app.viewer.guard import MAX_CLIENTS, MAX_MESSAGE
+from app.viewer.guard import MAX_CLIENTS, MAX_MESSAGE, origins
 from app.viewer.scene import DETAIL_CELLS
 from app.viewer.state import DomainView, Snapshot
 from app.viewer.viewer import ClientView, Viewer
@@ -144,3 +145,43 @@ def test_a_500_by_500_domain_is_sent_in_a_bounded_form(bare: Viewer, feed: FakeF
     print(f"\na 500 x 500 domain: {sent / 1e6:.2f} MB sent to a browser")
     assert sent < 3_000_000  # 55 MB before: four arrows and a tile per cell
     browser.close()
+
+
+def test_with_the_docker_settings_loopback_pages_are_let_in_and_others_refused(
+    feed: FakeFeed,
+) -> None:
+    """The Docker recipe: the viewer on 0.0.0.0 in the container, published on the host's
+    127.0.0.1 (the issue: it allowed only pages of http://0.0.0.0:<port>, so the browser's page
+    at http://127.0.0.1:8080 was refused). Origins of ADVISOR_VIEWER_ORIGINS are let in too;
+    any other page is still refused."""
+    assert {"http://127.0.0.1:8080", "http://localhost:8080"} <= set(origins("0.0.0.0", 8080))
+    assert "http://localhost:8080" in origins("::", 8080)
+    assert "http://127.0.0.1:8080" not in origins("192.0.2.7", 8080)  # a host of its own
+    assert origins("192.0.2.7", 8080, ("http://viewer.example",))[:2] == [
+        "http://192.0.2.7:8080", "http://viewer.example",
+    ]  # fmt: skip
+    v = Viewer(feed, host="0.0.0.0", port=free_port(), origins=("http://127.0.0.1:9090",))
+    v.start(pump=False)
+    try:
+        for page in (f"http://127.0.0.1:{v.port}", f"http://localhost:{v.port}",
+                     "http://127.0.0.1:9090"):  # fmt: skip
+            before = set(v.views)
+            browser = Browser(v.port, origin=page)
+            view_of(v, before)
+            browser.close()
+        for page in ("https://evil.example", f"http://0.0.0.0.evil.example:{v.port}",
+                     f"http://192.0.2.7:{v.port}", "http://127.0.0.1:9091"):  # fmt: skip
+            with pytest.raises(InvalidStatus) as refused:
+                Browser(v.port, origin=page)
+            assert refused.value.response.status_code == 403, page
+    finally:
+        v.stop()
+
+
+@pytest.mark.parametrize("bad", ["http://x.example/viewer", "ftp://x.example", "*", "x.example"])
+def test_a_viewer_origin_that_is_no_origin_is_refused_in_the_settings(bad: str) -> None:
+    with pytest.raises(ValueError, match="is not the origin of a page"):
+        Settings(viewer_origins=[bad])
+    assert Settings(viewer_origins=["HTTP://Viewer.Example:9090/"]).viewer_origins == [
+        "http://viewer.example:9090"
+    ]

@@ -61,6 +61,11 @@ class Recent:
         view[: m - first] = tail[first:]
         self._count += k
 
+    def oldest(self) -> Any:
+        """The oldest number kept (no copy: for a check made at every write)."""
+        size = len(self._buf)
+        return self._buf[(self._count - min(self._count, size)) % size]
+
     def tolist(self) -> list[Any]:
         out: list[Any] = self.array().tolist()
         return out
@@ -177,6 +182,13 @@ class AdviceLog:
         size = len(self._buf) // ROWS
         m = min(self._count, size)
         return np.arange(self._count - m, self._count) % size
+
+    def oldest_when(self) -> int | None:
+        """When the oldest entry was logged (ms; None: no entry), without index arrays."""
+        if not self._count:
+            return None
+        size = len(self._buf) // ROWS
+        return int(self._buf[3 * size + (self._count - min(self._count, size)) % size])
 
     def forget_before(self, when: int) -> int:
         """Drop the entries logged before ``when`` (ms): how many are left."""

@@ -147,19 +147,23 @@ class LiveSession:
         """Forget the cells it was at (recent path, where it was advised) more than
         ``retention`` seconds ago; its current cell stays (advice needs it)."""
         cutoff = now - self.born - retention
-        if self.path is not None and self.path_times is not None:
-            times = self.path_times.array()
+        path, path_times = self.path, self.path_times
+        # the oldest first, without copies: this runs at every write of a session to Redis
+        if path is not None and path_times is not None and path_times.oldest() < cutoff:
+            times = path_times.array()
             keep = int(np.count_nonzero(times >= cutoff))  # times only grow along the ring
             if keep == 0:
                 self.path = self.path_times = None
             elif keep < len(times):
-                cells = self.path.array()[-keep:]
+                cells = path.array()[-keep:]
                 self.path = Recent(self.sizes[0], np.int32, int(cells[0]))
                 self.path.extend(cells[1:])
                 self.path_times = Recent(self.sizes[0], np.float32, float(times[-keep]))
                 self.path_times.extend(times[len(times) - keep + 1 :])
-        if self.advice_log is not None and not self.advice_log.forget_before(int(cutoff * 1000)):
-            self.advice_log = None
+        if self.advice_log is not None:
+            when, oldest = int(cutoff * 1000), self.advice_log.oldest_when()
+            if (oldest is None or oldest < when) and not self.advice_log.forget_before(when):
+                self.advice_log = None
 
     def _log(self) -> AdviceLog:
         """The advice log, made at the first piece of advice."""
@@ -540,9 +544,25 @@ class SessionRegistry:
 
     def written(self, write: Callable[[LiveSession], bytes]) -> list[tuple[str, bytes]]:
         """(id, ``write(session)``) of every live session, each written under the lock (so
-        between events, and between the slices of a batch still running)."""
+        between events, and between the slices of a batch still running), without the cells
+        older than the retention."""
+        now = time.monotonic()
         with self.lock:
-            return [(s.id, write(s)) for s in self._sessions.values()]
+            out = []
+            for s in self._sessions.values():
+                if self.retention is not None:
+                    s.forget(now, self.retention)
+                out.append((s.id, write(s)))
+            return out
+
+    def write(self, session: LiveSession, write: Callable[[LiveSession], bytes]) -> bytes:
+        """``write(session)`` under the lock, without the cells older than the retention
+        (what is stored elsewhere, Redis, keeps no more of where an explorer was than an
+        answer shows)."""
+        with self.lock:
+            if self.retention is not None:
+                session.forget(time.monotonic(), self.retention)
+            return write(session)
 
     def count_by_domain(self) -> dict[str, int]:
         with self.lock:

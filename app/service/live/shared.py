@@ -21,6 +21,10 @@ before: the two hold at least the last ``replay_steps`` steps, and fewer than tw
 plus one request's) so that a retry is answered again, from any worker. States and records
 go to Redis packed (LZ4: :func:`app.service.live.codec.packed`), about a tenth of the bytes.
 
+Where an explorer was is written without the cells older than the retention
+(``ADVISOR_PATH_RETENTION_SECONDS``); a session that stays still keeps them in Redis until its
+next event or its expiry, and every read (a worker's copy made from Redis) drops them.
+
 Keys (``P`` the prefix, ``ADVISOR_REDIS_PREFIX``): ``P:s:<id>`` the session, ``P:r:<id>`` and
 ``P:r:<id>:old`` its kept decisions, ``P:live`` (sorted set), ``P:mem``, ``P:c:<client>``,
 ``P:dom:<domain>`` (set), ``P:sum`` (hash: figures per session for the aggregates),
@@ -452,11 +456,13 @@ class SharedSessions(LocalSessions):
                     out = await self.registry.observe_sliced(session, rest)
                     record = codec.replay_record(out)
                 record = codec.packed_record(record)
-                state = codec.packed(codec.dump(session, replay=False))
                 try:
+                    blob = codec.packed(
+                        self.registry.write(session, lambda s: codec.dump(s, replay=False))
+                    )
                     got = await self._run(
                         "commit", session_id, str(expected), str(adv.steps),
-                        state, record, adv.steps - expected,
+                        blob, record, adv.steps - expected,
                         session.domain.version, int(time.time() * 1000), self.replay_steps,
                         _summary(session), self._ttl(), lane=session_id,
                     )  # fmt: skip
