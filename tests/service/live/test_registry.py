@@ -27,7 +27,7 @@ from app.service.live.registry import (
 from app.service.state import ServiceState
 
 WINDOW = Settings.model_fields["max_window"].default  # the largest a session may ask: 10,000
-PER_STRATEGY = 12
+PER_STRATEGY = 4
 
 
 def _moves(domain: DomainState, n: int, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
