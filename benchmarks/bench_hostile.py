@@ -370,10 +370,31 @@ def bench_memory(root: Path, workdir: Path, seconds: float) -> Rows:
         for c in made:
             fill(c)
         after = srv.rss_bytes()
+        rows = [("RSS of the service with the default domain, after those sessions ended", 0.0, "")]
+        for c in [warm, *made]:
+            http.delete(f"/sessions/{c['session_id']}", headers=ADMIN)
+        rows[0] = (rows[0][0], srv.rss_bytes() / MiB, "MiB")
+        # what one domain at the goals x cells cap costs (the per-goal tables of goal_aware and
+        # guide, made by their first session): the most goals, and the largest map
+        corridor = ["#" * 1451, "#S" + "G" * 1447 + ".#", "#" * 1451]
+        wide = open_map(500, 500)
+        wide[1] = "#S" + "G" * 7 + wide[1][9:]  # 8 goals x 250,000 cells
+        for name, rows_of in (("1,447 goals x 1,449 cells", corridor),
+                              ("8 goals x 250,000 cells", wide)):  # fmt: skip
+            start = srv.rss_bytes()
+            r = http.put("/domains/cap", json={"map": rows_of}, headers=ADMIN)
+            assert r.status_code in (200, 201), r.text
+            for strategy in ("goal_aware", "guide"):
+                c = http.post("/domains/cap/sessions", json={"strategy": strategy})
+                assert c.status_code == 201, c.text
+            rows.append((f"RSS of a domain of {name} with its per-goal tables",
+                         (srv.rss_bytes() - start) / MiB, "MiB"))  # fmt: skip
+            assert http.delete("/domains/cap", headers=ADMIN).status_code == 204
     label = "RSS of 150 goal_aware sessions, window 10,000"
     return [
         (f"{label}, just created", (created - before) / MiB, "MiB"),
         (f"{label}, windows full", (after - before) / MiB, "MiB"),
+        *rows,
     ]
 
 
