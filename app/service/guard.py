@@ -13,7 +13,8 @@ accepts every connection. :func:`guarded_http` makes its protocol class with:
   of the headers: 408, and the connection closes;
 * a cap on open connections (``max_connections``, websockets included): a connection beyond it
   is answered 503 and closed at once;
-* malformed HTTP answered as every other client error is: a JSON body ``{"detail": ...}``.
+* malformed HTTP answered as every other client error is: a JSON body ``{"detail": ...}``;
+  so are websocket handshakes that are not valid (:class:`JsonWebSocket`, uvicorn's ``ws``).
 
 httptools stays the parser (uvicorn's h11 bounds headers too, but parses several times slower
 in pure Python; docs/PERFORMANCE.md). ``make run`` still needs only Python.
@@ -22,6 +23,7 @@ in pure Python; docs/PERFORMANCE.md). ``make run`` still needs only Python.
 from __future__ import annotations
 
 import asyncio
+import email.utils
 import http
 import json
 import logging
@@ -29,7 +31,15 @@ import sys
 from typing import Any
 
 import httptools
+from uvicorn.config import Config
 from uvicorn.protocols.http.httptools_impl import HttpToolsProtocol
+from uvicorn.protocols.websockets.websockets_sansio_impl import WebSocketsSansIOProtocol
+from uvicorn.server import ServerState
+from websockets.datastructures import Headers
+from websockets.exceptions import SecurityError
+from websockets.http11 import MAX_LINE_LENGTH, MAX_NUM_HEADERS, Response
+from websockets.server import ServerProtocol
+from websockets.typing import StatusLike
 
 log = logging.getLogger("uvicorn.error")
 
@@ -178,6 +188,78 @@ def guarded_http(
         "max_connections": max_connections,
     }
     return type("GuardedHttp", (GuardedHttpTools,), attrs)
+
+
+# ---- websocket handshakes ----------------------------------------------------------------------
+class _JsonRefusals(ServerProtocol):
+    """websockets' server side of the handshake, refusing with a JSON body ``{"detail": ...}``
+    that says what was wrong (websockets writes text/plain "Failed to open a WebSocket
+    connection: ...")."""
+
+    def reject(self, status: StatusLike, text: str) -> Response:
+        status = http.HTTPStatus(status)
+        body = json.dumps({"detail": self.refusal(status)}).encode()
+        headers = Headers(
+            [
+                ("Date", email.utils.formatdate(usegmt=True)),
+                ("Connection", "close"),
+                ("Content-Length", str(len(body))),
+                ("Content-Type", "application/json"),
+            ]
+        )
+        return Response(status.value, status.phrase, headers, body)
+
+    def refusal(self, status: http.HTTPStatus) -> str:
+        exc: BaseException | None = self.handshake_exc
+        if exc is None:  # the application closed before accepting, or failed
+            if status == http.HTTPStatus.FORBIDDEN:
+                return "the service refused the websocket before opening it"
+            return "the service could not open the websocket"
+        if isinstance(exc.__cause__, SecurityError):  # websockets' bounds on what it reads
+            return (
+                f"the websocket handshake's headers are too large ({exc.__cause__}): at most "
+                f"{MAX_NUM_HEADERS} headers of {MAX_LINE_LENGTH} bytes a line"
+            )
+        reasons = [str(exc)]
+        while exc.__cause__ is not None:
+            exc = exc.__cause__
+            reasons.append(str(exc))
+        return "the websocket handshake is invalid: " + "; ".join(r for r in reasons if r)
+
+
+class JsonWebSocket(WebSocketsSansIOProtocol):
+    """uvicorn's websocket protocol (websockets' sans-I/O implementation, uvicorn's default)
+    whose refusals of a handshake are JSON 4xx answers: 400 for a handshake that is not valid
+    (no ``Sec-WebSocket-Key``, a key that is not 16 bytes of base64, a version other than 13,
+    a request websockets cannot read), 431 for headers over websockets' limits (a line over
+    8 KiB, more than 128 headers). Valid handshakes go to the application as before.
+    uvicorn's ``ws`` option."""
+
+    def __init__(
+        self,
+        config: Config,
+        server_state: ServerState,
+        app_state: dict[str, Any],
+        _loop: asyncio.AbstractEventLoop | None = None,
+    ) -> None:
+        super().__init__(config, server_state, app_state, _loop)
+        self.conn = _JsonRefusals(
+            extensions=self.conn.available_extensions,
+            max_size=config.ws_max_size,
+            logger=logging.getLogger("uvicorn.error"),
+        )
+
+    def handle_handshake_exception(self) -> None:
+        # websockets could not read the request (uvicorn answers 400 "invalid request", or
+        # sends what websockets queued): say why
+        self.handshake_complete = True
+        self.close_sent = True
+        self.conn.data_to_send()  # whatever websockets queued: not sent
+        exc = self.conn.handshake_exc
+        too_large = exc is not None and isinstance(exc.__cause__, SecurityError)
+        response = self.conn.reject(431 if too_large else 400, "")
+        self.transport.write(response.serialize())
+        self.transport.close()
 
 
 def connection_cap(wanted: int) -> int:
