@@ -1,6 +1,7 @@
-"""Caps on open connections, over the real server: one client (one address) may hold only its
-share, so that one slow client cannot take every place (a slow loris from one address filled
-the whole cap, and every other client got 503 until the header timeout).
+"""Caps on open connections, over the real server: the cap in all follows the process's
+open-files limit, and one client (one address) may hold only its share, so that one slow client
+cannot take every place (a slow loris from one address filled the whole cap, and every other
+client got 503 until the header timeout).
 
 Connections are raw sockets, bound to a loopback address of their own where a test plays
 several clients (Linux's loopback answers all of 127.0.0.0/8). Waits are for conditions with
@@ -10,11 +11,13 @@ from __future__ import annotations
 
 import contextlib
 import json
+import resource
 import select
 import socket
 import threading
 import time
 from collections.abc import Iterator
+from pathlib import Path
 
 import httpx
 import pytest
@@ -22,7 +25,8 @@ from websockets.sync.client import connect as ws_connect
 
 from tests.reliability.conftest import Live, server_errors, start, stop
 
-CLIENT_CAP = 4  # connections one client may hold
+FILES = 96  # the open-files limit of the first test's server: its cap is this less 64
+CLIENT_CAP = 4  # connections one client may hold, in the other tests' server
 HEALTH = b"GET /health HTTP/1.1\r\nHost: x\r\n\r\n"
 
 
@@ -81,6 +85,39 @@ def served_again(live: Live, address: str = "127.0.0.1", limit: float = 20.0) ->
                     return True
             time.sleep(0.05)
     return False
+
+
+def few_files() -> None:
+    """In the server's process before it starts: at most ``FILES`` open files."""
+    _, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    resource.setrlimit(resource.RLIMIT_NOFILE, (FILES, hard))
+
+
+def test_the_connection_cap_is_lowered_to_the_open_files_limit(tmp_path: Path) -> None:
+    cap, extra = FILES - 64, 4
+    live = start(tmp_path / "data", preexec_fn=few_files, ADVISOR_HEADER_TIMEOUT="60")
+    socks: list[socket.socket] = []
+    try:
+        assert f"max_connections 1000 lowered to {cap} (open files limit {FILES})" in (
+            live.log.read_text()
+        )
+        socks = [connect_from(live) for _ in range(cap + extra)]
+        refused = answered(socks, extra)
+        assert len(refused) == extra
+        for sock in refused:
+            status, detail = refusal(sock)
+            assert status == 503
+            assert detail == f"the service holds its maximum of {cap} connections"
+        held = [s for s in socks if s not in refused]
+        assert [status_of(s) for s in held] == [200] * cap  # every one within the cap served
+        for sock in held:
+            sock.close()
+        assert served_again(live)  # the server still answers once they close
+    finally:
+        for sock in socks:
+            sock.close()
+        stop(live)
+    assert server_errors(live) == []
 
 
 @pytest.fixture(scope="module")
