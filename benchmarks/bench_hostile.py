@@ -14,11 +14,13 @@ nothing but the service.
 Sections: ``reads`` (``/health`` latency while two clients read a 400 x 400 prior, and while
 clients read ``/overview?limit=1000``, and ``/domains`` with a map of 1,447 goals present),
 ``batches`` (one client's single-event latency while another session streams 5,000-event
-batches), ``attacks`` (a 48 MB header, a 64 KiB one, 300 slow sockets), ``throughput`` (wrk:
-``/health`` and one-event requests),
-``memory`` (150 goal_aware sessions at window 10,000), ``combined`` (90 s of warm-up, then 60 s:
-200 explorers at 10 events a second each, 5 ingesting writers, a watched viewer, two readers of
-the largest prior, a 500 x 500 domain's, the largest map the service takes).
+batches), ``attacks`` (a 48 MB header, a 64 KiB one, 300 slow sockets), ``hogs`` (one client
+opening as many slow sockets as the service takes connections, while another asks
+``/health``), ``throughput`` (wrk: ``/health`` and one-event requests), ``memory`` (150
+goal_aware sessions at window 10,000; the service and a domain at the goals x cells cap),
+``combined`` (90 s of warm-up, then 60 s: 200 explorers at 10 events a second each, 5
+ingesting writers, a watched viewer, two readers of the largest prior, a 500 x 500 domain's,
+the largest map the service takes).
 """
 
 from __future__ import annotations
@@ -325,6 +327,45 @@ def bench_attacks(root: Path, workdir: Path, seconds: float) -> Rows:
     return rows
 
 
+# ---- one client taking every connection ----------------------------------------------------------
+HOG_SOCKETS = 1000  # ADVISOR_MAX_CONNECTIONS' default: every place the service has
+
+
+def bench_hogs(root: Path, workdir: Path, seconds: float) -> Rows:
+    """One client (127.0.0.1) opens as many slow sockets as the service takes connections and
+    trickles a header byte a second on each; another client (127.0.0.2) asks ``/health`` once
+    a second meanwhile (``seconds`` under the 10 s header timeout)."""
+    with service(root, workdir) as srv:
+        hog = [socket.create_connection(("127.0.0.1", srv.port)) for _ in range(HOG_SOCKETS)]
+        answers: list[int] = []
+        transport = httpx.HTTPTransport(local_address="127.0.0.2")
+        with httpx.Client(timeout=30, transport=transport) as other:
+            for k in range(max(1, int(seconds))):
+                for s in hog:
+                    with suppress(OSError):
+                        s.send(b"GET /health HTTP/1.1\r\nX: "[k : k + 1] or b"a")
+                try:
+                    answers.append(other.get(srv.url + "/health").status_code)
+                except httpx.TransportError:
+                    answers.append(0)  # reset before an answer
+                time.sleep(1.0)
+        refused = 0
+        for s in hog:
+            s.setblocking(False)
+            try:
+                refused += bool(s.recv(1))  # answered (429 or 503) before its headers were in
+            except BlockingIOError:
+                pass  # still held
+            except OSError:
+                refused += 1
+            s.close()
+    return [
+        (f"one client's {HOG_SOCKETS} slow sockets: another client's /health answered 200",
+         100 * answers.count(200) / len(answers), "%"),
+        (f"one client's {HOG_SOCKETS} slow sockets: refused at once", refused, "sockets"),
+    ]  # fmt: skip
+
+
 # ---- throughput ----------------------------------------------------------------------------------
 def bench_throughput(root: Path, workdir: Path, seconds: float) -> Rows:
     rows: Rows = []
@@ -558,6 +599,7 @@ SECTIONS: dict[str, tuple[Callable[[Path, Path, float], Rows], float]] = {
     "reads": (bench_reads, 15.0),
     "batches": (bench_batches, 15.0),
     "attacks": (bench_attacks, 20.0),
+    "hogs": (bench_hogs, 5.0),
     "throughput": (bench_throughput, 10.0),
     "memory": (bench_memory, 0.0),
     "combined": (bench_combined, 150.0),

@@ -149,15 +149,12 @@ def port_taken(host: str, port: int) -> str | None:
 
 def uvicorn_options(settings: Settings, log_level: str = "info") -> dict[str, Any]:
     """How ``serve`` runs uvicorn (one worker); the benchmarks' baseline apps run the same.
-    HTTP goes through :mod:`app.service.guard` (bounded headers, read deadlines, a cap on
-    connections); uvicorn's reading of X-Forwarded-For is off (it would trust any from
-    127.0.0.1): :mod:`app.service.clients` reads it from the proxies the settings trust."""
-    from app.service.guard import connection_cap, guarded_http
+    HTTP goes through :mod:`app.service.guard` (bounded headers, read deadlines, caps on
+    connections, in all and per client), and so do websocket handshakes (refusals as JSON);
+    uvicorn's reading of X-Forwarded-For is off (it would trust any from 127.0.0.1):
+    :mod:`app.service.clients` reads it from the proxies the settings trust."""
+    from app.service.guard import JsonWebSocket, guarded_http_of
 
-    http = guarded_http(
-        settings.max_header_bytes, settings.header_timeout, settings.body_timeout,
-        connection_cap(settings.max_connections),
-    )  # fmt: skip
     options: dict[str, Any] = {
         "host": settings.host,
         "port": settings.port,
@@ -165,7 +162,8 @@ def uvicorn_options(settings: Settings, log_level: str = "info") -> dict[str, An
         "ws_max_size": settings.max_body_bytes + 1024,
         "ws_per_message_deflate": False,  # compressing 100 kB frames costs more than it saves
         "proxy_headers": False,
-        "http": http,
+        "http": guarded_http_of(settings),
+        "ws": JsonWebSocket,
     }
     if settings.log_format == "json":
         from app.service.logs import json_log_config

@@ -33,22 +33,25 @@ def networks(entries: Sequence[str]) -> tuple[Network, ...]:
     return tuple(out)
 
 
-def _trusted(address: str, trusted: Sequence[Network]) -> bool:
+def trusted(address: str, among: Sequence[Network]) -> bool:
+    """Whether ``address`` is in one of the networks ``among`` (not if it is no address)."""
+    if not among:
+        return False
     try:
         ip = ipaddress.ip_address(address)
     except ValueError:
         return False
-    return any(ip in net for net in trusted)
+    return any(ip in net for net in among)
 
 
-def client_address(conn: HTTPConnection, trusted: Sequence[Network]) -> str:
+def client_address(conn: HTTPConnection, proxies: Sequence[Network]) -> str:
     """The client's address: the peer's, or behind trusted proxies the forwarded one."""
     peer = conn.client.host if conn.client else "unknown"
-    if not trusted or not _trusted(peer, trusted):
+    if not proxies or not trusted(peer, proxies):
         return peer
     hops = [h.strip() for v in conn.headers.getlist("x-forwarded-for") for h in v.split(",")]
     for hop in reversed(hops):
-        if hop and not _trusted(hop, trusted):
+        if hop and not trusted(hop, proxies):
             return hop
     return peer
 

@@ -204,6 +204,11 @@ class Settings(BaseSettings):
         description="Open connections at most, websockets included (then 503 and closed); "
         "lowered to the process's file descriptor limit less 64 if that is lower.",
     )  # fmt: skip
+    client_max_connections: int = Field(
+        256, ge=1,
+        description="Open connections one client (the peer's address) may hold, websockets "
+        "included (then 429 and closed); proxies in ADVISOR_TRUSTED_PROXIES are not capped.",
+    )  # fmt: skip
 
     @model_validator(mode="after")
     def _workers_share(self) -> Settings:

@@ -4,7 +4,8 @@
 * our own checks (:class:`BadInput`), unknown domains/sessions, credentials: their status;
 * bodies over the limit: 413 from :class:`BodyLimit` before the app reads them, bodies that say
   they are not JSON (a ``Content-Type`` other than ``application/json``): 415;
-* JSON nested too deeply for the parser: 400 (instead of the RecursionError's 500).
+* JSON nested too deeply for the parser: 400 (instead of the RecursionError's 500);
+* a websocket to a path without a websocket route: 404 (:class:`NoWebSocketRoute`).
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from redis.exceptions import ConnectionError as RedisConnectionError
 from redis.exceptions import TimeoutError as RedisTimeoutError
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.requests import ClientDisconnect
+from starlette.routing import WebSocketRoute
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from app.service.data.domains import DomainChanged, DomainNotFound
@@ -246,3 +248,35 @@ class BodyLimit:
         else:
             response = _json(400, "the Content-Length header is not a number")
         await response(scope, receive, send)
+
+
+class NoWebSocketRoute:
+    """A websocket to a path that no websocket route serves is answered 404
+    ``{"detail": "no websocket route at /path"}``. Starlette's router (and its static files)
+    close it before accepting, which uvicorn sends as 403 with an empty body; this answers
+    such a close with HTTP instead, where the server can (the ASGI "websocket.http.response"
+    extension, which uvicorn has). A close before accepting from a websocket route stands."""
+
+    def __init__(self, app: ASGIApp) -> None:
+        self.app = app
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "websocket" or "websocket.http.response" not in scope.get(
+            "extensions", {}
+        ):
+            await self.app(scope, receive, send)
+            return
+        first = True
+
+        async def answer(message: Message) -> None:
+            nonlocal first
+            if first:
+                first = False
+                routed = isinstance(scope.get("route"), WebSocketRoute)
+                if message["type"] == "websocket.close" and not routed:
+                    detail = f"no websocket route at {scope['path']}"
+                    await _json(404, detail)(scope, receive, send)
+                    return
+            await send(message)
+
+        await self.app(scope, receive, answer)

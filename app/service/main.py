@@ -15,7 +15,7 @@ from starlette.concurrency import run_in_threadpool
 
 from app.service import apidocs, metrics, viewer_feed
 from app.service.config import VERSION, Settings
-from app.service.errors import BodyLimit, install_error_handlers
+from app.service.errors import BodyLimit, NoWebSocketRoute, install_error_handlers
 from app.service.logs import quiet_event_routes
 from app.service.openapi import install_openapi
 from app.service.ops import warm_up
@@ -100,6 +100,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.settings = settings
     install_error_handlers(app)
     app.add_middleware(BodyLimit, max_bytes=settings.max_body_bytes)
+    app.add_middleware(NoWebSocketRoute)
     if settings.metrics_enabled:
         request_ids = settings.log_format == "json"
         app.add_middleware(metrics.MetricsMiddleware, request_ids=request_ids)

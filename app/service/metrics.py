@@ -57,7 +57,8 @@ GAUGE_SECONDS = 5.0
 REQUESTS = Counter(
     "advisor_http_requests",
     "HTTP requests answered and websocket connections opened, by method, route template and "
-    "status (websockets: 101 accepted, else the close code sent before accepting).",
+    "status (websockets: 101 accepted, else the close code sent before accepting, or the "
+    "HTTP status of a refusal).",
     ["method", "route", "status"],
 )
 LATENCY = Histogram(
@@ -248,6 +249,8 @@ class MetricsMiddleware:
                     status = 101
                 elif message["type"] == "websocket.close":
                     status = int(message.get("code", 1000))
+                elif message["type"] == "websocket.http.response.start":
+                    status = int(message["status"])  # refused with an HTTP answer
             await send(message)
 
         try:

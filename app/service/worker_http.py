@@ -5,9 +5,6 @@ read from the ``ADVISOR_*`` settings the workers inherit. Imported by the worker
 from __future__ import annotations
 
 from app.service.config import Settings
-from app.service.guard import connection_cap, guarded_http
+from app.service.guard import guarded_http_of
 
-_s = Settings()
-WorkerHttp = guarded_http(
-    _s.max_header_bytes, _s.header_timeout, _s.body_timeout, connection_cap(_s.max_connections)
-)
+WorkerHttp = guarded_http_of(Settings())

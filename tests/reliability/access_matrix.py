@@ -248,6 +248,12 @@ RULES = [
     "most `ADVISOR_MAX_SESSIONS` (20,000) sessions reserving `ADVISOR_MAX_SESSION_MEMORY`",
     "(1 GiB) live at once (503 beyond).",
     "",
+    "**Connections.** One client may hold at most `ADVISOR_CLIENT_MAX_CONNECTIONS` (256) open",
+    "connections, websockets included (429 beyond, and the connection closes); here a client is",
+    "the peer's address, since nothing has been read yet, and trusted proxies are not capped",
+    "(many clients share them). In all, at most `ADVISOR_MAX_CONNECTIONS` (1,000; fewer if the",
+    "process's open-files limit less 64 is lower) are open at once (503 beyond).",
+    "",
 ]
 
 

@@ -9,7 +9,7 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -43,11 +43,12 @@ class Live:
 
 def start(
     data_dir: Path, port: int | None = None, timeout: float = 60.0, log_level: str = "warning",
-    viewer_port: int | None = None, **env: str,
+    viewer_port: int | None = None, preexec_fn: Callable[[], None] | None = None, **env: str,
 ) -> Live:  # fmt: skip
     """Start the service on 127.0.0.1 and wait until ``/health`` answers (or fail, showing its
     log). ``env``: extra settings, e.g. ``ADVISOR_MAX_SESSIONS="5"``; ``log_level`` "info"
-    writes uvicorn's access log too; ``viewer_port``: with its viewer there (else none)."""
+    writes uvicorn's access log too; ``viewer_port``: with its viewer there (else none);
+    ``preexec_fn``: run in the server's process before it starts (e.g. to lower a limit)."""
     port = port or free_port()
     data_dir.mkdir(parents=True, exist_ok=True)
     log = data_dir.parent / f"server-{port}.log"
@@ -59,7 +60,9 @@ def start(
     else:
         environ = environ | {"ADVISOR_VIEWER_PORT": str(viewer_port)}
     with log.open("ab") as out:
-        proc = subprocess.Popen(cmd, cwd=REPO, env=environ, stdout=out, stderr=out)
+        proc = subprocess.Popen(
+            cmd, cwd=REPO, env=environ, stdout=out, stderr=out, preexec_fn=preexec_fn
+        )
     url = f"http://127.0.0.1:{port}"
     deadline = time.monotonic() + timeout
     with httpx.Client(timeout=2.0) as http:
