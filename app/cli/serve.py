@@ -13,7 +13,11 @@ from typing import Annotated, Any
 import typer
 from pydantic import ValidationError
 
+from app.cli.options import choice
 from app.service.config import Settings
+
+#: uvicorn's log levels (``uvicorn.config.LOG_LEVELS``), checked before anything is created
+LOG_LEVELS = ("critical", "error", "warning", "info", "debug", "trace")
 
 
 def serve(
@@ -34,7 +38,7 @@ def serve(
         str | None,
         typer.Option(help="Redis for live sessions, e.g. redis://127.0.0.1:6379/0 (workers)."),
     ] = None,
-    log_level: Annotated[str, typer.Option(help="uvicorn log level.")] = "info",
+    log_level: Annotated[str, choice(LOG_LEVELS, help="uvicorn's log level.")] = "info",
 ) -> None:
     """Run the advice service (settings also from ADVISOR_* environment variables)."""
     import uvicorn
