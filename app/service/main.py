@@ -62,7 +62,10 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
     gc.collect()
     gc.freeze()
     sweeper = asyncio.create_task(_expire_idle(state))
-    gauges = asyncio.create_task(metrics.keep_gauges(state)) if settings.metrics_enabled else None
+    gauges = None
+    if settings.metrics_enabled:
+        metrics.forget_dead_workers()  # a worker that takes a killed one's place
+        gauges = asyncio.create_task(metrics.keep_gauges(state))
     stops = await start_background(app, settings)
     try:
         yield
