@@ -25,7 +25,6 @@ import asyncio
 import http
 import json
 import logging
-import sys
 from typing import Any
 
 import httptools
@@ -180,14 +179,16 @@ def guarded_http(
     return type("GuardedHttp", (GuardedHttpTools,), attrs)
 
 
-def connection_cap(wanted: int) -> int:
+def connection_cap(wanted: int, log_format: str = "text") -> int:
     """``wanted``, or fewer if the process may not open that many files (each connection is
     one; 64 are kept for the database, logs and the rest)."""
     import resource
 
+    from app.service.logs import announce
+
     soft, _ = resource.getrlimit(resource.RLIMIT_NOFILE)
     if soft != resource.RLIM_INFINITY and soft - 64 < wanted:
-        print(f"max_connections {wanted} lowered to {soft - 64} (open files limit {soft})",
-              file=sys.stderr, flush=True)  # fmt: skip
+        note = f"max_connections {wanted} lowered to {soft - 64} (open files limit {soft})"
+        announce(note, log_format, logging.WARNING)
         return max(soft - 64, 1)
     return wanted

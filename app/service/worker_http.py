@@ -9,5 +9,6 @@ from app.service.guard import connection_cap, guarded_http
 
 _s = Settings()
 WorkerHttp = guarded_http(
-    _s.max_header_bytes, _s.header_timeout, _s.body_timeout, connection_cap(_s.max_connections)
-)
+    _s.max_header_bytes, _s.header_timeout, _s.body_timeout,
+    connection_cap(_s.max_connections, _s.log_format),
+)  # fmt: skip

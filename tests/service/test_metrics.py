@@ -288,3 +288,51 @@ def test_the_live_sessions_gauge_is_right_after_a_worker_is_killed(tmp_path: Pat
     finally:
         stop(live)
         drop_redis_keys(prefix)
+
+
+def json_lines(text: str) -> list[dict[str, Any]]:
+    """Every line of a log as a JSON object (fails, showing the line, on any other)."""
+    out = []
+    for line in text.splitlines():
+        if not line.strip():
+            continue
+        try:
+            record = json.loads(line)
+        except ValueError:
+            raise AssertionError(f"a log line that is not JSON: {line!r}") from None
+        assert isinstance(record, dict), line
+        assert {"time", "level", "logger", "message"} <= record.keys(), line
+        out.append(record)
+    return out
+
+
+def test_json_logs_are_json_from_the_first_start_to_the_last_line(tmp_path: Path) -> None:
+    """``ADVISOR_LOG_FORMAT=json``, a first start (keys made, the default domain created) with
+    the viewer, requests, a graceful stop keeping a session: every line of stdout and stderr
+    (the server's and its viewer's) is a JSON object."""
+    import time
+
+    from tests.client.conftest import free_port
+    from tests.reliability.conftest import start, stop
+
+    viewer_port = free_port()
+    live = start(tmp_path / "data", log_level="info", viewer_port=viewer_port,
+                 ADVISOR_LOG_FORMAT="json")  # fmt: skip
+    try:
+        with httpx.Client(base_url=live.url, timeout=10) as http:
+            assert http.get("/domains/nowhere").status_code == 404
+            assert http.post("/domains/default/sessions", json={}).status_code == 201
+        deadline = time.monotonic() + 60
+        while "viewer on http" not in live.log.read_text(errors="replace"):
+            assert time.monotonic() < deadline, live.log.read_text(errors="replace")
+            time.sleep(0.05)
+    finally:
+        stop(live)
+    records = json_lines(live.log.read_text(errors="replace"))
+    messages = [r["message"] for r in records]
+    assert any(m.startswith("Generated the admin key") for m in messages)
+    assert any(m.startswith("Generated the read-only operator key") for m in messages)
+    assert any(m.startswith("Created domain 'default'") for m in messages)
+    assert any(m.startswith("viewer on http://127.0.0.1:") for m in messages)
+    assert any(r["logger"] == "uvicorn.access" and r.get("status") == 404 for r in records)
+    assert "Kept 1 live sessions for the next start" in messages
