@@ -3,6 +3,7 @@ from __future__ import annotations
 import json
 import socket
 from pathlib import Path
+from typing import Any
 
 from typer.testing import CliRunner
 
@@ -136,3 +137,59 @@ def test_cli_serve_refuses_workers_without_redis(tmp_path: Path) -> None:
     assert result.exit_code == 2
     assert "error: bad setting: workers 2 needs ADVISOR_REDIS_URL" in result.output
     assert not data.exists()
+
+
+def test_cli_serve_refuses_an_unknown_log_level_before_creating_anything(
+    tmp_path: Path,
+) -> None:
+    data = tmp_path / "data"
+    wide = {"COLUMNS": "200"}
+    result = runner.invoke(cli, ["serve", "--log-level", "foo", "--data-dir", str(data)], env=wide)
+    assert result.exit_code == 2
+    assert "'foo' is not one of 'critical', 'error', 'warning', 'info', 'debug', 'trace'" in (
+        result.output
+    )
+    assert result.exception is None or isinstance(result.exception, SystemExit)  # no traceback
+    assert not data.exists()  # no data directory, no keys
+    shown = runner.invoke(cli, ["serve", "--help"], env=wide).output
+    assert "<critical|error|warning|info|debug|trace>" in shown
+
+
+def test_cli_log_levels_are_uvicorns() -> None:
+    from uvicorn.config import LOG_LEVELS as UVICORN
+
+    from app.cli.serve import LOG_LEVELS
+
+    assert set(LOG_LEVELS) == set(UVICORN)
+
+
+def command_paths() -> list[list[str]]:
+    """Every command and subcommand of the command line, as the words that name it."""
+    import typer
+
+    paths: list[list[str]] = []
+
+    def walk(command: Any, path: list[str]) -> None:  # typer's click command or group
+        paths.append(path)
+        if hasattr(command, "list_commands"):  # a group (experiment's are made when asked)
+            for name in command.list_commands(None):
+                walk(command.get_command(None, name), [*path, name])
+
+    walk(typer.main.get_command(cli), [])
+    return paths
+
+
+def test_every_help_reads_whole_at_80_columns() -> None:
+    """No default (a URL, a path) is cut with an ellipsis: long ones wrap onto the next line."""
+    paths = command_paths()
+    assert ["serve"] in paths and ["maze", "generate"] in paths and ["experiment", "all"] in paths
+    for path in paths:
+        result = runner.invoke(cli, [*path, "--help"], env={"COLUMNS": "80"})
+        assert result.exit_code == 0, (path, result.output)
+        assert "…" not in result.output, (path, result.output)
+        assert max(len(line) for line in result.output.splitlines()) <= 80, path
+    simulate = runner.invoke(cli, ["simulate", "--help"], env={"COLUMNS": "80"}).output
+    assert "http://127.0.0.1:8000" in simulate
+    train = runner.invoke(cli, ["train", "--help"], env={"COLUMNS": "80"}).output
+    column = "".join(line[50:].strip(" │") for line in train.splitlines() if "│" in line)
+    assert "(app/domain/maps/default.txt)" in column

@@ -4,6 +4,9 @@
 * Options with a fixed set of values list them (``<random|left|...>``) and refuse another
   value saying which are allowed; :func:`choice` makes such an option. (Typer checks a
   ``Literal`` or an ``Enum`` itself, but words the refusal "Value error, ...".)
+* A default too long for its column (a URL, a path, at 80 columns) is wrapped onto the next
+  lines, not cut with "…": rich crops a table cell's words with an ellipsis unless the text
+  says ``overflow="fold"``, and typer makes the ``[default: ...]`` text without it.
 """
 
 from __future__ import annotations
@@ -13,6 +16,8 @@ from typing import Any
 
 import typer
 import typer.core
+import typer.rich_utils
+from rich.text import Text
 
 _type_column = typer.core.TyperOption.display_type_rich
 
@@ -22,6 +27,20 @@ def _flag_type(self: typer.core.TyperOption, ctx: Any) -> str | None:
 
 
 typer.core.TyperOption.display_type_rich = _flag_type  # type: ignore[method-assign]
+
+_parameter_help = typer.rich_utils._get_parameter_help
+
+
+def _folded_help(**kwargs: Any) -> Any:
+    """An option's help, its default and the rest folded onto more lines, never cropped."""
+    columns = _parameter_help(**kwargs)
+    for item in columns.renderables:
+        if isinstance(item, Text):
+            item.overflow = "fold"
+    return columns
+
+
+typer.rich_utils._get_parameter_help = _folded_help
 
 
 def check_choice(choices: Sequence[str]) -> Callable[[Any], Any]:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import errno
+import logging
 import os
 import socket
 import subprocess
@@ -13,7 +14,12 @@ from typing import Annotated, Any
 import typer
 from pydantic import ValidationError
 
+from app.cli.options import choice
 from app.service.config import Settings
+from app.service.logs import announce
+
+#: uvicorn's log levels (``uvicorn.config.LOG_LEVELS``), checked before anything is created
+LOG_LEVELS = ("critical", "error", "warning", "info", "debug", "trace")
 
 
 def serve(
@@ -34,7 +40,7 @@ def serve(
         str | None,
         typer.Option(help="Redis for live sessions, e.g. redis://127.0.0.1:6379/0 (workers)."),
     ] = None,
-    log_level: Annotated[str, typer.Option(help="uvicorn log level.")] = "info",
+    log_level: Annotated[str, choice(LOG_LEVELS, help="uvicorn's log level.")] = "info",
 ) -> None:
     """Run the advice service (settings also from ADVISOR_* environment variables)."""
     import uvicorn
@@ -51,11 +57,12 @@ def serve(
     try:
         settings = Settings(**overrides)
     except ValidationError as exc:
-        typer.echo(f"error: bad setting: {setting_errors(exc)}", err=True)
+        wanted = os.environ.get("ADVISOR_LOG_FORMAT", "text").lower()  # if valid itself
+        announce(f"error: bad setting: {setting_errors(exc)}", wanted, logging.ERROR)
         raise typer.Exit(code=2) from None
     busy = port_taken(settings.host, settings.port)
     if busy:  # before anything is created (the data directory, a new admin key)
-        typer.echo(f"error: {busy}", err=True)
+        announce(f"error: {busy}", settings.log_format, logging.ERROR)
         raise typer.Exit(code=2)
     viewer = start_viewer(settings) if settings.viewer_enabled else None
     try:
@@ -88,7 +95,7 @@ def run_workers(settings: Settings, overrides: dict[str, Any], log_level: str) -
     state, messages = open_state(settings)  # made once: the workers find it all there
     state.close()
     for message in messages:
-        typer.echo(message, err=True)
+        announce(message, settings.log_format)
     if settings.metrics_enabled and "PROMETHEUS_MULTIPROC_DIR" not in os.environ:
         # prometheus-client's multiprocess mode: each worker writes its samples there,
         # /metrics sums them (a fresh directory for every start)
@@ -106,7 +113,7 @@ def start_viewer(settings: Settings) -> subprocess.Popen[bytes]:
 
     key, message = load_operator_key(settings)  # made here if new: the service reads it too
     if message:
-        typer.echo(message, err=True)
+        announce(message, settings.log_format)
     api = f"http://127.0.0.1:{settings.port}"
     cmd = [
         sys.executable, "-m", "app", "viewer", "--api", api, "--host", settings.viewer_host,
@@ -114,7 +121,8 @@ def start_viewer(settings: Settings) -> subprocess.Popen[bytes]:
     ]  # fmt: skip
     for origin in settings.viewer_origins:
         cmd += ["--origin", origin]
-    return subprocess.Popen(cmd, env=os.environ | {"ADVISOR_OPERATOR_KEY": key})
+    env = {"ADVISOR_OPERATOR_KEY": key, "ADVISOR_LOG_FORMAT": settings.log_format}  # its lines
+    return subprocess.Popen(cmd, env=os.environ | env)
 
 
 def setting_errors(exc: ValidationError) -> str:

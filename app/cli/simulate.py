@@ -106,7 +106,7 @@ def line(o: Outcome) -> str:
     return (
         f"episode {o.episode} (explorer {o.explorer}): goal {list(o.goal)} "
         f"{'reached' if o.success else 'not reached'} in {o.steps} steps, "
-        f"{o.advice_count} advice, p_normal {o.p_normal:.3f}"
+        f"{o.advice_count} advice, P(M1|H) {o.p_normal:.3f}"
     )
 
 

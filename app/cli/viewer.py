@@ -47,33 +47,47 @@ def viewer(
     import httpx
 
     from app.service.config import page_origin
+    from app.service.logs import announce, json_logging
     from app.viewer.remote import RemoteFeed
     from app.viewer.viewer import Viewer
+
+    log_format = os.environ.get("ADVISOR_LOG_FORMAT", "text").lower()  # as the service's
+
+    def say(message: str, level: int = logging.INFO) -> None:
+        announce(message, log_format, level, logger="app.viewer")
 
     try:
         origins = tuple(page_origin(o) for o in origin or ())
     except ValueError as exc:
-        typer.echo(f"error: --origin: {exc}", err=True)
+        say(f"error: --origin: {exc}", logging.ERROR)
         raise typer.Exit(code=2) from None
     key = key_file.read_text(encoding="utf-8").strip() if key_file else os.environ.get(KEY_ENV)
     if not key:
-        typer.echo(f"error: no operator key: set {KEY_ENV} or give --key-file", err=True)
+        say(f"error: no operator key: set {KEY_ENV} or give --key-file", logging.ERROR)
         raise typer.Exit(code=2)
-    logging.basicConfig(level=logging.INFO, format="viewer: %(message)s")
+    if log_format == "json":
+        json_logging()
+        import rich
+
+        # viser prints a banner and "Server stopped" with rich on stdout, whatever its
+        # ``verbose``: not JSON, and the viewer's own lines say as much
+        rich.reconfigure(file=open(os.devnull, "w"))  # noqa: SIM115  (for the process's life)
+    else:
+        logging.basicConfig(level=logging.INFO, format="viewer: %(message)s")
     http = httpx.Client(base_url=api, timeout=30.0)
     feed = RemoteFeed(http, key)
     view = Viewer(feed, host=host, port=port, on_tick=feed.report_tick, origins=origins)
     view.start()
     if view.port != port:
         view.stop()
-        typer.echo(f"error: the viewer's port {port} is busy", err=True)
+        say(f"error: the viewer's port {port} is busy", logging.ERROR)
         raise typer.Exit(code=1)
     where = (
         "loopback only: it shows where explorers are and asks no key of a browser"
         if host in LOOPBACK
         else "NOT loopback: anyone who reaches this port sees where explorers are"
     )
-    typer.echo(f"viewer on http://{host}:{view.port}/ ({where})", err=True)
+    say(f"viewer on http://{host}:{view.port}/ ({where})")
     done = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: done.set())

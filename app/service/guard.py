@@ -30,7 +30,6 @@ import email.utils
 import http
 import json
 import logging
-import sys
 from collections import Counter
 from collections.abc import Callable
 from typing import Any, ClassVar
@@ -248,7 +247,8 @@ def guarded_http_of(settings: Settings) -> type[GuardedHttpTools]:
     :func:`connection_cap` lowers it)."""
     return guarded_http(
         settings.max_header_bytes, settings.header_timeout, settings.body_timeout,
-        connection_cap(settings.max_connections), settings.client_max_connections,
+        connection_cap(settings.max_connections, settings.log_format),
+        settings.client_max_connections,
         settings.trusted_proxies,
     )  # fmt: skip
 
@@ -333,14 +333,16 @@ class JsonWebSocket(WebSocketsSansIOProtocol):
             self.release = None
 
 
-def connection_cap(wanted: int) -> int:
+def connection_cap(wanted: int, log_format: str = "text") -> int:
     """``wanted``, or fewer if the process may not open that many files (each connection is
     one; 64 are kept for the database, logs and the rest)."""
     import resource
 
+    from app.service.logs import announce
+
     soft, _ = resource.getrlimit(resource.RLIMIT_NOFILE)
     if soft != resource.RLIM_INFINITY and soft - 64 < wanted:
-        print(f"max_connections {wanted} lowered to {soft - 64} (open files limit {soft})",
-              file=sys.stderr, flush=True)  # fmt: skip
+        note = f"max_connections {wanted} lowered to {soft - 64} (open files limit {soft})"
+        announce(note, log_format, logging.WARNING)
         return max(soft - 64, 1)
     return wanted

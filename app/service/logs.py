@@ -1,9 +1,11 @@
 """Logs: optional JSON lines with a request id, and the event routes kept out of the access log.
 
-``ADVISOR_LOG_FORMAT=json`` writes every log line (uvicorn's, the access log's, the service's)
-as one JSON object: ``time``, ``level``, ``logger``, ``message``, the ``request_id`` of the
-request being answered (given by the client as ``X-Request-ID`` or made here, and echoed in the
-answer's header), and for access lines ``method``, ``path``, ``status``, ``client``.
+``ADVISOR_LOG_FORMAT=json`` writes every log line (uvicorn's, the access log's, the service's,
+the viewer's, and the lines for the operator such as a key made at first start, through
+:func:`announce`) as one JSON object: ``time``, ``level``, ``logger``, ``message``, the
+``request_id`` of the request being answered (given by the client as ``X-Request-ID`` or made
+here, and echoed in the answer's header), and for access lines ``method``, ``path``,
+``status``, ``client``.
 
 A line per request costs a small endpoint about a third of its throughput (docs/PERFORMANCE.md,
 "Metrics and access log"), so by default the event routes (``POST /sessions/{id}/events`` and
@@ -17,6 +19,7 @@ import json
 import logging
 import re
 import secrets
+import sys
 import time
 from contextvars import ContextVar
 from typing import Any
@@ -51,6 +54,27 @@ class JsonFormatter(logging.Formatter):
         if record.exc_info:
             line["exception"] = self.formatException(record.exc_info)
         return json.dumps(line, default=str)
+
+
+def announce(
+    message: str, log_format: str = "text", level: int = logging.INFO, logger: str = "advisor"
+) -> None:
+    """A line for the operator on stderr (a key made, the default domain created, sessions
+    kept...), written whether or not logging is set up yet: as it is, or with ``log_format``
+    "json" as one JSON object like every other line."""
+    if log_format == "json":
+        record = logging.LogRecord(logger, level, __file__, 0, message, None, None)
+        message = JsonFormatter().format(record)
+    print(message, file=sys.stderr, flush=True)
+
+
+def json_logging(level: int = logging.INFO) -> None:
+    """The root logger writes JSON lines to stderr, and Python's warnings go through it (for a
+    process that does not run uvicorn: the viewer)."""
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(JsonFormatter())
+    logging.basicConfig(level=level, handlers=[handler], force=True)
+    logging.captureWarnings(True)
 
 
 class SkipEventRoutes(logging.Filter):

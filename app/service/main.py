@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import asyncio
 import gc
-import sys
 from collections.abc import AsyncIterator, Awaitable, Callable
 from contextlib import asynccontextmanager
 
@@ -16,7 +15,7 @@ from starlette.concurrency import run_in_threadpool
 from app.service import apidocs, metrics, viewer_feed
 from app.service.config import VERSION, Settings
 from app.service.errors import BodyLimit, NoWebSocketRoute, install_error_handlers
-from app.service.logs import quiet_event_routes
+from app.service.logs import announce, quiet_event_routes
 from app.service.openapi import install_openapi
 from app.service.ops import warm_up
 from app.service.routes import ROUTERS
@@ -53,7 +52,7 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         quiet_event_routes()
     state, messages = await run_in_threadpool(open_state, settings)
     for message in messages:
-        print(message, file=sys.stderr, flush=True)
+        announce(message, settings.log_format)
     await run_in_threadpool(warm_up)
     await state.sessions.start()
     app.state.service = state
@@ -62,7 +61,10 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
     gc.collect()
     gc.freeze()
     sweeper = asyncio.create_task(_expire_idle(state))
-    gauges = asyncio.create_task(metrics.keep_gauges(state)) if settings.metrics_enabled else None
+    gauges = None
+    if settings.metrics_enabled:
+        metrics.forget_dead_workers()  # a worker that takes a killed one's place
+        gauges = asyncio.create_task(metrics.keep_gauges(state))
     stops = await start_background(app, settings)
     try:
         yield
@@ -76,7 +78,7 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         if not state.sessions.shared:  # a graceful restart keeps the live sessions
             kept = await run_in_threadpool(state.sessions.save, state.store)
             if kept:
-                print(f"Kept {kept} live sessions for the next start", file=sys.stderr, flush=True)
+                announce(f"Kept {kept} live sessions for the next start", settings.log_format)
         await run_in_threadpool(state.close)
 
 

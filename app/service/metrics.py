@@ -12,9 +12,13 @@ log", measures the difference).
 
 Several worker processes: set ``PROMETHEUS_MULTIPROC_DIR`` (an empty directory, before the
 workers start), as prometheus-client's multiprocess mode asks; ``/metrics`` then sums the
-workers' files, and the live-sessions gauge is the sum over live workers (``livesum``: a
-worker that exits is reported with ``multiprocess.mark_process_dead(pid)``), each worker
-refreshing its own value at every scrape it answers and every few seconds.
+workers' counters and histograms. The live-sessions gauge is not a sum: workers share their
+sessions through Redis and each counts all of them, so every worker sets it from that global
+count, at every scrape it answers (just before it reads the files) and every few seconds, and
+``/metrics`` reports the value set last, whoever set it (``livemostrecent``). A worker killed
+(SIGKILL) leaves its file behind; its value is older than the scraping worker's, so it does
+not count, and the worker uvicorn starts in its place removes the files of processes that no
+longer run (``multiprocess.mark_process_dead``, :func:`forget_dead_workers`).
 """
 
 from __future__ import annotations
@@ -24,6 +28,7 @@ import contextlib
 import os
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 from fastapi import APIRouter, Response
@@ -71,9 +76,9 @@ SESSIONS = Gauge(
     "advisor_live_sessions",
     "Live sessions, by domain.",
     ["domain"],
-    # several workers share their sessions through Redis, and each reports all of them: the
-    # largest of the workers' values (of those alive) is the count
-    multiprocess_mode="livemax",
+    # several workers share their sessions through Redis, and each counts all of them: the
+    # value set last (at the scrape being answered) is the count, a dead worker's never is
+    multiprocess_mode="livemostrecent",
 )
 DECISIONS = Counter(
     "advisor_decisions",
@@ -178,6 +183,33 @@ async def keep_gauges(state: ServiceState) -> None:
     while True:
         await refresh_sessions(state)
         await asyncio.sleep(GAUGE_SECONDS)
+
+
+def forget_dead_workers() -> list[int]:
+    """In multiprocess mode, mark dead every process whose live-gauge files are in
+    ``PROMETHEUS_MULTIPROC_DIR`` but which no longer runs (a worker killed, whose supervisor
+    started this one); their pids. Their counters stay: what they counted happened."""
+    path = os.environ.get("PROMETHEUS_MULTIPROC_DIR")
+    if not path:
+        return []
+    gone: set[int] = set()
+    for f in Path(path).glob("gauge_live*_*.db"):
+        digits = f.stem.rsplit("_", 1)[-1]
+        if digits.isdigit() and int(digits) != os.getpid() and not _running(int(digits)):
+            gone.add(int(digits))
+    for pid in gone:
+        mp.mark_process_dead(pid, path)  # type: ignore[no-untyped-call]
+    return sorted(gone)
+
+
+def _running(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process: it runs
+        return True
+    return True
 
 
 def exposition() -> bytes:

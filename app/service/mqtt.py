@@ -14,17 +14,29 @@ for TLS). With ``P`` the prefix (``ADVISOR_MQTT_PREFIX``, ``advisor``):
 * ``P/<domain>/<explorer>/errors``: ``{"detail", "status"}`` for a message refused (bad JSON,
   unknown domain, a wall...), as the websocket's error frames; nothing changed.
 
-Explorer ids follow the rule of domain names. QoS 1 both ways: the bridge handles one message
-at a time, acknowledges it, and takes the next only once the broker has acknowledged every
-decision of the one before; decisions not acknowledged when the connection drops are published
-again after it reconnects (at least once, as QoS 1 is). It reconnects with a backoff of up to
-10 s, and keeps its broker session for a minute (MQTT v5 session expiry) so that what was
-published meanwhile waits for it.
+Explorer ids follow the rule of domain names (a message of another id is answered on its
+``errors`` topic and opens no session). QoS 1 both ways: the bridge handles one message at a
+time, publishes its decisions, and acknowledges the message only once the broker has
+acknowledged every one of them, so a message whose decisions did not all reach the broker
+(the connection dropped, the process died) is sent again by the broker; decisions not
+acknowledged when the connection drops are published again after it reconnects (at least
+once, as QoS 1 is). It reconnects with a backoff of up to 10 s, under the same client id (made
+of the host and the data directory), and keeps its broker session for a minute (MQTT v5
+session expiry) so that what was published meanwhile waits for it, for this bridge or the one
+that takes over.
+
+Sent again, a message is not applied twice when it can be told apart: one this bridge handled
+but had not acknowledged (the same packet id, topic and payload, while the broker kept the
+bridge's session) is acknowledged without being handled again; events that carry ``step`` are
+answered again, not applied twice, as on REST. A message whose acknowledgement was lost with
+the connection cannot be told from a new one: without steps, its events are applied again. A
+bridge that takes over from a process that died gets the messages it had not acknowledged, but
+not its explorers' sessions (they lived in that process): their events open new sessions.
 
 Memory is bounded whatever is published: a message larger than ``ADVISOR_MAX_BODY_BYTES`` is
-refused; each message is acknowledged once handled, and the broker sends at most
-``ADVISOR_MQTT_QUEUE`` unacknowledged ones (the connection's Receive Maximum), so what a fast
-publisher sends waits at the broker, not here (Mosquitto keeps up to its
+refused; each message is acknowledged once its decisions are published, and the broker sends
+at most ``ADVISOR_MQTT_QUEUE`` unacknowledged ones (the connection's Receive Maximum), so what a
+fast publisher sends waits at the broker, not here (Mosquitto keeps up to its
 ``max_queued_messages`` per client, 1000 by default, and drops what comes beyond); the bridge
 keeps sessions and configs for ``ADVISOR_MQTT_MAX_EXPLORERS`` explorers at most (the least
 recently heard from go first, their sessions ended).
@@ -40,8 +52,8 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import fcntl
+import hashlib
 import logging
-import os
 import re
 import socket
 import ssl
@@ -119,9 +131,15 @@ class Bridge:
         self.sessions: OrderedDict[Key, LiveSession] = OrderedDict()
         self.configs: OrderedDict[Key, SessionCreate] = OrderedDict()
         self.pending: list[tuple[str, bytes]] = []  # decisions not yet acknowledged
+        # messages handled whose acknowledgement the broker has not had: packet id -> digest
+        self.unacked: OrderedDict[int, bytes] = OrderedDict()
         self.connected = asyncio.Event()
         self.handled = 0  # messages handled (for tests and logs)
-        self.identifier = f"{self.prefix}-bridge-{socket.gethostname()}-{os.getpid()}-{id(self)}"
+        # the same for every bridge of this data directory on this host, so that the one that
+        # takes over (a new process, another worker) resumes the broker session and gets what
+        # was not acknowledged
+        place = hashlib.sha256(str(self.lock_path.resolve()).encode()).hexdigest()[:12]
+        self.identifier = f"{self.prefix}-bridge-{socket.gethostname()}-{place}"
         self._lock: IO[str] | None = None
 
     # ---- topics ---------------------------------------------------------------------------
@@ -142,9 +160,11 @@ class Bridge:
         backoff = 0.5
         while True:
             connection = self._client()
-            # acknowledged once handled: the broker sends at most ``queue`` unacknowledged
-            # messages (the connection's Receive Maximum), so none waits beyond that here
+            # acknowledged once its decisions are published: the broker sends at most ``queue``
+            # unacknowledged messages (the connection's Receive Maximum), so none waits beyond
+            # that here
             connection._client.manual_ack_set(True)
+            self._watch_session(connection)
             try:
                 async with connection as client:
                     backoff = 0.5
@@ -154,15 +174,44 @@ class Bridge:
                     self.connected.set()
                     log.info("MQTT bridge connected to %s:%d", self.broker.host, self.broker.port)
                     async for message in client.messages:
-                        await self.handle(str(message.topic), _bytes(message.payload))
-                        if message.qos:
-                            client._client.ack(message.mid, message.qos)
-                        await self._flush(client)
+                        await self.take(client, message)
             except aiomqtt.MqttError as exc:
                 self.connected.clear()
                 log.warning("MQTT bridge: %s; reconnecting in %.1f s", exc, backoff)
                 await asyncio.sleep(backoff)
                 backoff = min(backoff * 2, 10.0)
+
+    async def take(self, client: aiomqtt.Client, message: aiomqtt.Message) -> None:
+        """One message: handled (unless it is one handled already, sent again), its decisions
+        published and acknowledged by the broker, then the message acknowledged. A dropped
+        connection (:class:`aiomqtt.MqttError`) leaves it unacknowledged: the broker sends it
+        again."""
+        topic, payload = str(message.topic), _bytes(message.payload)
+        digest = hashlib.sha256(topic.encode() + b"\0" + payload).digest()
+        if not (message.qos and self.unacked.get(message.mid) == digest):
+            await self.handle(topic, payload)
+            if message.qos:
+                self.unacked[message.mid] = digest
+                while len(self.unacked) > self.queue:
+                    self.unacked.popitem(last=False)
+        await self._flush(client)
+        if message.qos:
+            client._client.ack(message.mid, message.qos)
+            self.unacked.pop(message.mid, None)
+
+    def _watch_session(self, connection: aiomqtt.Client) -> None:
+        """Forget the messages handled but not acknowledged when the broker kept no session
+        for the bridge (it will not send them again, and their packet ids are reused)."""
+        paho = connection._client
+        on_connect = paho.on_connect
+
+        def connected(client: Any, userdata: Any, flags: Any, *rest: Any) -> None:
+            if not getattr(flags, "session_present", False):
+                self.unacked.clear()
+            if on_connect is not None:
+                on_connect(client, userdata, flags, *rest)
+
+        paho.on_connect = connected
 
     def _take_lock(self) -> bool:
         if self._lock is not None:
@@ -201,9 +250,21 @@ class Bridge:
         if not self.pending:
             return
         todo, self.pending = self.pending, []
-        results = await asyncio.gather(
-            *(client.publish(t, p, qos=1) for t, p in todo), return_exceptions=True
-        )
+        tasks = [asyncio.ensure_future(client.publish(t, p, qos=1)) for t, p in todo]
+        everything = asyncio.gather(*tasks, return_exceptions=True)
+        # aiomqtt's publish waits for the broker's acknowledgement up to its timeout even when
+        # the connection has dropped: stop waiting then (aiomqtt's future of the disconnection)
+        gone = getattr(client, "_disconnected", None)
+        try:
+            if gone is not None:
+                await asyncio.wait([everything, gone], return_when=asyncio.FIRST_COMPLETED)
+                for task in tasks:
+                    task.cancel()  # those the broker has not acknowledged: kept below
+            results = await everything
+        except asyncio.CancelledError:  # the bridge stops
+            for task in tasks:
+                task.cancel()
+            raise
         self.pending = [m for m, r in zip(todo, results, strict=True) if r is not None]
         failed = next((r for r in results if isinstance(r, BaseException)), None)
         if failed is not None:

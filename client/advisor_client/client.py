@@ -12,7 +12,7 @@ from __future__ import annotations
 import asyncio
 import json
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Awaitable, Callable, Mapping, Sequence
 from types import TracebackType
 from typing import Any, Self, cast
 
@@ -43,6 +43,14 @@ RETRY_STATUSES = frozenset({502, 503, 504})
 #: failures in which nothing reached the service: any call may be sent again
 NOT_SENT = (httpx.ConnectError, httpx.ConnectTimeout, httpx.PoolTimeout)
 MAX_DELAY = 4.0
+
+
+def _lost(exc: ConnectionClosed) -> bool:
+    """Whether a closed stream is worth a new one: it went (a worker killed, the service
+    restarting, its Redis not answering) rather than being refused by the service (4401-4422:
+    no token, another session's token, no such session, a bad format)."""
+    frame = exc.rcvd
+    return not (frame is not None and 4000 <= frame.code < 5000)
 
 
 def _closed(exc: ConnectionClosed) -> AdvisorError:
@@ -123,23 +131,47 @@ class _Base:
 
 class Stream:
     """A session's websocket: :meth:`send` events, get their decisions (in order). Events are
-    numbered with their steps as over REST (:class:`~advisor_client.api.Session`): after a
-    closed stream, send the unanswered ones again on a new one."""
+    numbered with their steps as over REST (:class:`~advisor_client.api.Session`), so a frame
+    whose answer was lost with its stream is sent again on a new one, and the service answers
+    the steps it applied already without applying them twice.
 
-    def __init__(self, connection: ClientConnection, session: Session):
+    ``reopen``: how to open a new stream (:meth:`AdvisorClient.stream` gives it), tried up to
+    ``retries`` times per frame, waiting ``delay(attempt)`` seconds first; ``reconnects``
+    counts the new streams opened."""
+
+    def __init__(
+        self,
+        connection: ClientConnection,
+        session: Session,
+        reopen: Callable[[], ClientConnection] | None = None,
+        retries: int = 0,
+        delay: Callable[[int], float] = lambda attempt: 0.0,
+    ):
         self.connection = connection
         self.session = session
+        self.reopen, self.retries, self.delay = reopen, retries, delay
+        self.reconnects = 0
 
     def send(self, events: EventLike | Sequence[EventLike]) -> Any:
         """One event -> one decision; a list -> a list (a binary stream: a
-        :class:`~advisor_client.protocol.DecisionFrame` either way). AdvisorError for a refused
-        batch (the stream stays usable) or a closed stream."""
-        body = api.numbered(self.session, events)
-        try:
-            self.connection.send(json.dumps(body))
-            answer = api.frame_answer(self.connection.recv())
-        except ConnectionClosed as exc:
-            raise _closed(exc) from None
+        :class:`~advisor_client.protocol.DecisionFrame` either way). A stream that went (not
+        one the service closed to refuse it) is replaced and the frame sent again on the new
+        one. AdvisorError for a refused batch (the stream stays usable), a stream the service
+        closed, or one that could not be replaced."""
+        body = json.dumps(api.numbered(self.session, events))
+        attempt = 0
+        while True:
+            try:
+                self.connection.send(body)
+                answer = api.frame_answer(self.connection.recv())
+                break
+            except ConnectionClosed as exc:
+                if self.reopen is None or not _lost(exc) or attempt >= self.retries:
+                    raise _closed(exc) from None
+            time.sleep(self.delay(attempt))
+            attempt += 1
+            self.connection = self.reopen()
+            self.reconnects += 1
         self.session.answered(answer)
         return answer
 
@@ -269,15 +301,18 @@ class AdvisorClient(_Base):
     def stream(self, session: Session, binary: bool = False) -> Stream:
         """The session's websocket (use as a context manager); ``binary``: decisions come as
         :class:`~advisor_client.protocol.DecisionFrame` arrays, about a tenth of the bytes of
-        JSON."""
+        JSON. A stream that goes is replaced as :class:`Stream` says."""
         url = api.stream_url(self.base_url, session, binary)
         headers = api.stream_headers(session)
+        return Stream(
+            self._connect(url, headers), session, lambda: self._connect(url, headers),
+            self.retries, self._delay,
+        )  # fmt: skip
+
+    def _connect(self, url: str, headers: dict[str, str]) -> ClientConnection:
         for attempt in range(self.retries + 1):
             try:
-                return Stream(
-                    connect(url, compression=None, max_size=None, additional_headers=headers),
-                    session,
-                )
+                return connect(url, compression=None, max_size=None, additional_headers=headers)
             except (OSError, TimeoutError) as exc:  # refused: nothing was sent, try again
                 if attempt == self.retries:
                     raise _ws_failure(url, exc) from None
@@ -288,19 +323,36 @@ class AdvisorClient(_Base):
 
 
 class AsyncStream:
-    """The async form of :class:`Stream`."""
+    """The async form of :class:`Stream` (``reopen`` a coroutine function)."""
 
-    def __init__(self, connection: AsyncConnection, session: Session):
+    def __init__(
+        self,
+        connection: AsyncConnection,
+        session: Session,
+        reopen: Callable[[], Awaitable[AsyncConnection]] | None = None,
+        retries: int = 0,
+        delay: Callable[[int], float] = lambda attempt: 0.0,
+    ):
         self.connection = connection
         self.session = session
+        self.reopen, self.retries, self.delay = reopen, retries, delay
+        self.reconnects = 0
 
     async def send(self, events: EventLike | Sequence[EventLike]) -> Any:
-        body = api.numbered(self.session, events)
-        try:
-            await self.connection.send(json.dumps(body))
-            answer = api.frame_answer(await self.connection.recv())
-        except ConnectionClosed as exc:
-            raise _closed(exc) from None
+        body = json.dumps(api.numbered(self.session, events))
+        attempt = 0
+        while True:
+            try:
+                await self.connection.send(body)
+                answer = api.frame_answer(await self.connection.recv())
+                break
+            except ConnectionClosed as exc:
+                if self.reopen is None or not _lost(exc) or attempt >= self.retries:
+                    raise _closed(exc) from None
+            await asyncio.sleep(self.delay(attempt))
+            attempt += 1
+            self.connection = await self.reopen()
+            self.reconnects += 1
         self.session.answered(answer)
         return answer
 
@@ -420,13 +472,17 @@ class AsyncAdvisorClient(_Base):
         ``binary`` as in :meth:`AdvisorClient.stream`."""
         url = api.stream_url(self.base_url, session, binary)
         headers = api.stream_headers(session)
+
+        async def reopen() -> AsyncConnection:
+            return await self._connect(url, headers)
+
+        return AsyncStream(await reopen(), session, reopen, self.retries, self._delay)
+
+    async def _connect(self, url: str, headers: dict[str, str]) -> AsyncConnection:
         for attempt in range(self.retries + 1):
             try:
-                return AsyncStream(
-                    await async_connect(
-                        url, compression=None, max_size=None, additional_headers=headers
-                    ),
-                    session,
+                return await async_connect(
+                    url, compression=None, max_size=None, additional_headers=headers
                 )
             except (OSError, TimeoutError) as exc:  # refused: nothing was sent, try again
                 if attempt == self.retries:

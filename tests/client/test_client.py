@@ -3,9 +3,13 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
+import socket
+import threading
 from collections.abc import Coroutine
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any, TypeVar
+from urllib.parse import urlsplit
 
 import numpy as np
 import pytest
@@ -214,3 +218,98 @@ def test_the_stream_url_carries_no_token_the_header_does() -> None:
     assert url == "wss://example.org/base/sessions/ab12/stream?format=binary"
     assert "t0k3n" not in url
     assert api.stream_headers(session) == {"Authorization": "Bearer t0k3n"}
+
+
+class CuttingProxy:
+    """A TCP proxy to the service that, once told (``cut``), drops the connection instead of
+    passing on the next bytes the service sends: the answer to a frame, lost after the service
+    applied the frame."""
+
+    def __init__(self, upstream: str):
+        self.upstream = (urlsplit(upstream).hostname or "", urlsplit(upstream).port or 80)
+        self.listener = socket.create_server(("127.0.0.1", 0))
+        self.url = f"http://127.0.0.1:{self.listener.getsockname()[1]}"
+        self.cut = threading.Event()
+        self.cuts = 0
+        threading.Thread(target=self._accept, daemon=True).start()
+
+    def _accept(self) -> None:
+        while True:
+            try:
+                near, _ = self.listener.accept()
+            except OSError:  # closed
+                return
+            far = socket.create_connection(self.upstream)
+            threading.Thread(target=self._pump, args=(near, far, False), daemon=True).start()
+            threading.Thread(target=self._pump, args=(far, near, True), daemon=True).start()
+
+    def _pump(self, src: socket.socket, dst: socket.socket, answers: bool) -> None:
+        try:
+            while data := src.recv(65536):
+                if answers and self.cut.is_set():
+                    self.cut.clear()
+                    self.cuts += 1
+                    return
+                dst.sendall(data)
+        except OSError:
+            pass
+        finally:
+            for sock in (src, dst):
+                with contextlib.suppress(OSError):
+                    sock.shutdown(socket.SHUT_RDWR)
+                sock.close()
+
+    def close(self) -> None:
+        self.listener.close()
+
+
+def test_a_stream_sends_a_frame_whose_answer_was_lost_again_on_a_new_stream(
+    server: Server,
+) -> None:
+    """The connection drops after the service applied a frame, before its answer arrived: the
+    stream opens a new one and sends the frame again with its steps; the service answers it
+    without applying it twice (sync and async)."""
+    proxy = CuttingProxy(server.url)
+    try:
+        with AdvisorClient(proxy.url, retries=3, backoff=0.05) as client:
+            session = client.create_session(window=20)
+            with client.stream(session) as stream:
+                first = stream.send([W, E] * 5)
+                proxy.cut.set()
+                again = stream.send([W, E] * 5)  # applied; its answer lost; sent again
+                assert proxy.cuts == 1 and stream.reconnects == 1
+                assert [d["step"] for d in again] == list(range(11, 21))
+                assert stream.send(W)["step"] == 21
+            assert client.session(session)["steps"] == 21  # each event applied once
+
+        async def scenario() -> tuple[list[int], int, int]:
+            async with AsyncAdvisorClient(proxy.url, retries=3, backoff=0.05) as client:
+                session = await client.create_session(window=20)
+                async with await client.stream(session) as stream:
+                    await stream.send([W, E] * 5)
+                    proxy.cut.set()
+                    again = await stream.send([W, E] * 5)
+                    reconnects = stream.reconnects
+                steps = (await client.session(session))["steps"]
+                return [d["step"] for d in again], reconnects, steps
+
+        assert run_async(scenario()) == (list(range(11, 21)), 1, 20)
+        assert proxy.cuts == 2
+    finally:
+        proxy.close()
+    with AdvisorClient(server.url) as client:  # the decisions of a stream that lost nothing
+        reference = client.create_session(window=20)
+        with client.stream(reference) as stream:
+            assert stream.send([W, E] * 5) == first
+            assert stream.send([W, E] * 5) == again
+
+
+def test_a_stream_the_service_closed_to_refuse_it_is_not_opened_again(server: Server) -> None:
+    with AdvisorClient(server.url, retries=3, backoff=0.05) as client:
+        session = client.create_session()
+        with client.stream(session) as stream:
+            assert stream.send(E)["step"] == 1
+            client.end_session(session)
+            with pytest.raises(AdvisorError) as err:
+                stream.send(W)
+            assert err.value.status == 404 and stream.reconnects == 0

@@ -25,6 +25,7 @@ def test_simulate_drives_explorers_and_prints_outcomes(server: Server) -> None:
     lines = run.stdout.strip().splitlines()
     episodes = [line for line in lines if line.startswith("episode ")]
     assert [line.split()[1] for line in episodes] == ["0", "1", "2"]  # in order
+    assert all(", P(M1|H) 0." in line or ", P(M1|H) 1.000" in line for line in episodes)
     assert lines[-1].startswith("random-avoid, advice on (paper), kappa 0.5: ")
     assert "reached their goal" in lines[-1] and "advice per 100 decisions" in lines[-1]
     with AdvisorClient(server.url) as client:  # each episode's session was ended

@@ -129,15 +129,16 @@ class Explorer:
             while left:
                 frame = self.walk(min(12, left))
                 while True:
-                    try:
+                    try:  # the stream's worker gone, the client opens a new stream itself
                         self.answers += stream.send(frame)
                         break
-                    except AdvisorError:  # the stream's worker went: a new stream, again
-                        self.reconnects += 1
+                    except AdvisorError:  # and if its retries ran out: a new stream, again
+                        self.reconnects += 1 + stream.reconnects
                         time.sleep(0.05)
                         stream = self.stream = self.client.stream(self.session)
                 left -= len(frame)
                 time.sleep(0.02)  # a walker's pace: the stream stays open a while
+            self.reconnects += stream.reconnects
             stream.close()
         except BaseException as exc:  # reported by the test
             self.failure = exc

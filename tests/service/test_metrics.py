@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import logging
 from pathlib import Path
+from typing import Any
 
 import httpx
 from fastapi.testclient import TestClient
@@ -169,7 +170,8 @@ def test_a_live_server_counts_event_routes_instead_of_logging_them(tmp_path: Pat
 
 def test_metrics_add_up_the_workers_in_prometheus_multiprocess_mode(tmp_path: Path) -> None:
     """Three worker processes count; a fourth answers /metrics with their sums (the live
-    sessions, which every worker counts whole when they share them: the largest of theirs)."""
+    sessions, which every worker counts whole when they share them: the value set last by a
+    worker that has not died)."""
     import os
     import subprocess
     import sys
@@ -187,7 +189,7 @@ def test_metrics_add_up_the_workers_in_prometheus_multiprocess_mode(tmp_path: Pa
             [sys.executable, "-c", work, str(live)], env=env, check=True, timeout=120,
             capture_output=True,
         ).stdout.split()[-1]
-        for live in (5, 2, 1)
+        for live in (5, 3, 1)
     ]  # fmt: skip
     # the first worker has exited (as a process manager reports to prometheus-client)
     show = (
@@ -208,5 +210,129 @@ def test_metrics_add_up_the_workers_in_prometheus_multiprocess_mode(tmp_path: Pa
     paper = (("domain", "default"), ("strategy", "paper"))
     assert samples[("advisor_decisions_total", paper)] == 9
     assert samples[("advisor_advice_total", paper)] == 3
-    # live sessions: the largest over workers not reported dead (the first, with 5, is dead)
-    assert samples[("advisor_live_sessions", (("domain", "default"),))] == 2
+    # live sessions: the value set last (1), not the largest (3) nor the sum (4)
+    assert samples[("advisor_live_sessions", (("domain", "default"),))] == 1
+
+
+def live_sessions(url: str) -> float:
+    text = httpx.get(f"{url}/metrics", timeout=10).text
+    for family in text_string_to_metric_families(text):
+        for s in family.samples:
+            if s.name == "advisor_live_sessions" and s.labels == {"domain": "default"}:
+                return s.value
+    raise AssertionError("no advisor_live_sessions{domain='default'} in /metrics")
+
+
+def gauge_of(directory: Path, pid: int) -> float | None:
+    """The live-sessions value worker ``pid`` last wrote in its file (None: no file)."""
+    from prometheus_client.multiprocess import MultiProcessCollector
+
+    files = [str(f) for f in directory.glob(f"gauge_live*_{pid}.db")]
+    for metric in MultiProcessCollector.merge(files):  # type: ignore[no-untyped-call]
+        for s in metric.samples:
+            if s.name == "advisor_live_sessions" and s.labels == {"domain": "default"}:
+                return float(s.value)
+    return None
+
+
+def test_the_live_sessions_gauge_is_right_after_a_worker_is_killed(tmp_path: Path) -> None:
+    """``serve --workers 2`` with Redis: three sessions, each worker's gauge saying 3; one
+    worker killed (SIGKILL), the sessions ended: /metrics says 0 at once, from the worker left,
+    and the worker uvicorn starts in the killed one's place removes its gauge file."""
+    import os
+    import signal
+    import time
+
+    import pytest
+
+    from tests.reliability.conftest import start, stop
+    from tests.reliability.test_workers import workers_of
+    from tests.service.conftest import REDIS_URL, drop_redis_keys, redis_prefix, redis_problem
+
+    problem = redis_problem()
+    if problem is not None:
+        pytest.skip(f"Redis at {REDIS_URL}: {problem}")
+
+    def wait_until(condition: object, what: str, timeout: float = 60.0) -> None:
+        deadline = time.monotonic() + timeout
+        while not condition():  # type: ignore[operator]
+            assert time.monotonic() < deadline, f"timed out waiting for {what}"
+            time.sleep(0.05)
+
+    prefix = redis_prefix()
+    files = tmp_path / "metrics"
+    files.mkdir()
+    env: dict[str, Any] = {
+        "ADVISOR_WORKERS": "2", "ADVISOR_REDIS_URL": REDIS_URL, "ADVISOR_REDIS_PREFIX": prefix,
+        "PROMETHEUS_MULTIPROC_DIR": str(files),
+    }  # fmt: skip
+    live = start(tmp_path / "data", **env)
+    try:
+        pids = workers_of(live)
+        assert len(pids) == 2, pids
+        # a connection per request: a kept-alive one may be the killed worker's
+        made = [httpx.post(f"{live.url}/domains/default/sessions", json={}).json() for _ in "abc"]
+        # each worker sets its gauge from Redis' count every few seconds
+        wait_until(lambda: all(gauge_of(files, p) == 3 for p in pids), "both gauges at 3")
+        killed = pids[0]
+        os.kill(killed, signal.SIGKILL)
+        for m in made:
+            auth = {"Authorization": f"Bearer {m['token']}"}
+            ended = httpx.delete(f"{live.url}/sessions/{m['session_id']}", headers=auth)
+            assert ended.status_code == 200, ended.text
+        assert gauge_of(files, killed) == 3  # the dead worker's last value, still there
+        assert live_sessions(live.url) == 0
+        wait_until(lambda: len(workers_of(live)) == 2, "a worker in the killed one's place")
+        wait_until(lambda: gauge_of(files, killed) is None, "the dead worker's file to go")
+        assert live_sessions(live.url) == 0
+    finally:
+        stop(live)
+        drop_redis_keys(prefix)
+
+
+def json_lines(text: str) -> list[dict[str, Any]]:
+    """Every line of a log as a JSON object (fails, showing the line, on any other)."""
+    out = []
+    for line in text.splitlines():
+        if not line.strip():
+            continue
+        try:
+            record = json.loads(line)
+        except ValueError:
+            raise AssertionError(f"a log line that is not JSON: {line!r}") from None
+        assert isinstance(record, dict), line
+        assert {"time", "level", "logger", "message"} <= record.keys(), line
+        out.append(record)
+    return out
+
+
+def test_json_logs_are_json_from_the_first_start_to_the_last_line(tmp_path: Path) -> None:
+    """``ADVISOR_LOG_FORMAT=json``, a first start (keys made, the default domain created) with
+    the viewer, requests, a graceful stop keeping a session: every line of stdout and stderr
+    (the server's and its viewer's) is a JSON object."""
+    import time
+
+    from tests.client.conftest import free_port
+    from tests.reliability.conftest import start, stop
+
+    viewer_port = free_port()
+    live = start(tmp_path / "data", log_level="info", viewer_port=viewer_port,
+                 ADVISOR_LOG_FORMAT="json")  # fmt: skip
+    try:
+        with httpx.Client(base_url=live.url, timeout=10) as http:
+            assert http.get("/domains/nowhere").status_code == 404
+            assert http.post("/domains/default/sessions", json={}).status_code == 201
+        deadline = time.monotonic() + 60
+        while "viewer on http" not in live.log.read_text(errors="replace"):
+            assert time.monotonic() < deadline, live.log.read_text(errors="replace")
+            time.sleep(0.05)
+    finally:
+        stop(live)
+    records = json_lines(live.log.read_text(errors="replace"))
+    messages = [r["message"] for r in records]
+    assert any(m.startswith("Generated the admin key") for m in messages)
+    assert any(m.startswith("Generated the read-only operator key") for m in messages)
+    assert any(m.startswith("Created domain 'default'") for m in messages)
+    assert any(m.startswith("viewer on http://127.0.0.1:") for m in messages)
+    assert any(r["logger"] == "uvicorn.access" and r.get("status") == 404 for r in records)
+    assert "Kept 1 live sessions for the next start" in messages

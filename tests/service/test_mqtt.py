@@ -3,12 +3,14 @@ restart, one of the test's own on a free port. Each test uses topics of its own.
 
 from __future__ import annotations
 
+import getpass
 import secrets
 import shutil
 import socket
 import subprocess
 import threading
 import time
+from collections import OrderedDict
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -21,6 +23,8 @@ import paho.mqtt.client as paho
 import pytest
 from fastapi.testclient import TestClient
 from paho.mqtt.enums import CallbackAPIVersion
+from paho.mqtt.packettypes import PacketTypes
+from paho.mqtt.properties import Properties
 
 from app.domain.grid import ACTIONS, GridDomain
 from app.service.main import create_app
@@ -65,20 +69,30 @@ def wait_until(condition: Callable[[], object], timeout: float = 30.0, what: str
 
 class Peer:
     """A test's own MQTT client (paho, its network thread): publishes, and keeps every message
-    of ``prefix/#`` (subscribed again at each reconnection)."""
+    of ``prefix/#`` (subscribed again at each reconnection). ``expiry``: seconds the broker
+    keeps its session (and the messages for it) while it is away."""
 
-    def __init__(self, port: int, prefix: str):
+    def __init__(self, port: int, prefix: str, expiry: int = 0):
         self.prefix = prefix
         self.messages: list[tuple[str, bytes]] = []
         self.lock = threading.Lock()
         self.client = paho.Client(
             CallbackAPIVersion.VERSION2, f"test-{secrets.token_hex(4)}", protocol=paho.MQTTv5
         )
+        self.subscribed = threading.Event()
         self.client.on_connect = lambda c, *_: c.subscribe(f"{prefix}/#", qos=1)
+        self.client.on_subscribe = lambda *_: self.subscribed.set()
         self.client.on_message = self._message
         self.client.reconnect_delay_set(1, 1)
-        self.client.connect(HOST, port)
+        props = None
+        if expiry:  # a new client id: no session to start clean from (Mosquitto 2.0.11 does
+            # not keep over a restart the session of a client that connected with clean start)
+            props = Properties(PacketTypes.CONNECT)  # type: ignore[no-untyped-call]
+            props.SessionExpiryInterval = expiry
+        self.client.connect(HOST, port, clean_start=not expiry, properties=props)
         self.client.loop_start()
+        # subscribed before it publishes: else the first answers may come before it listens
+        wait_until(self.subscribed.is_set, 10.0, f"the test client to subscribe to {prefix}/#")
 
     def _message(self, _c: Any, _u: Any, message: paho.MQTTMessage) -> None:
         with self.lock:
@@ -222,6 +236,9 @@ def own_broker(port: int, workdir: Path) -> subprocess.Popen[bytes]:
     conf.write_text(
         f"listener {port} {HOST}\nallow_anonymous true\npersistence true\n"
         f"persistence_location {workdir}/\n"
+        # started as root, Mosquitto runs as the user "mosquitto", who may not write here (its
+        # sessions would not outlive a restart); as anyone else, this changes nothing
+        f"user {getpass.getuser()}\n"
     )
     proc = subprocess.Popen([MOSQUITTO, "-c", str(conf)], stderr=subprocess.DEVNULL)
     wait_until(lambda: reachable(HOST, port), 10.0, "mosquitto to listen")
@@ -229,31 +246,118 @@ def own_broker(port: int, workdir: Path) -> subprocess.Popen[bytes]:
 
 
 @needs_mosquitto
-def test_bridge_reconnects_when_the_broker_restarts(tmp_path: Path, prefix: str) -> None:
+def test_decisions_of_events_sent_before_the_broker_stops_arrive_after_it_restarts(
+    tmp_path: Path, prefix: str
+) -> None:
+    """Events acknowledged by the broker just before it stops (handled by the bridge, being
+    handled, or still queued for it): after the restart every one has its decision, and each
+    event was applied once. The events carry their steps: a message sent again after its
+    acknowledgement was lost with the connection is answered again, not applied twice (so a
+    decision may come twice, the same one: QoS 1 is at least once)."""
     port = free_port()
     broker = own_broker(port, tmp_path)
     try:
         with service(tmp_path / "data", port, prefix) as client:
             wait_until(lambda: connected(client), what="the bridge to connect")
-            peer = Peer(port, prefix)
+            peer = Peer(port, prefix, expiry=300)  # its decisions wait for it at the broker
             try:
-                events = walk(20, seed=5)
-                peer.publish("default/e1/events", events[:10])
-                assert len(peer.wait("default/e1/decisions", 11)) == 11
+                events = [e | {"step": k + 1} for k, e in enumerate(walk(41, seed=5))]
+                peer.publish("default/e1/events", events[0])
+                assert len(peer.wait("default/e1/decisions", 2)) == 2  # the session is open
+                for event in events[1:40]:  # one message each, each acknowledged
+                    peer.publish("default/e1/events", event)
                 broker.terminate()
                 broker.wait(10)
-                wait_until(lambda: not connected(client), what="the bridge to see the broker go")
+                before = len(peer.got("default/e1/decisions"))
                 broker = own_broker(port, tmp_path)
-                wait_until(lambda: connected(client), what="the bridge to reconnect")
                 wait_until(lambda: peer.client.is_connected(), what="the test client to reconnect")
-                peer.publish("default/e1/events", events[10:])
-                got = peer.wait("default/e1/decisions", 21)
+                peer.publish("default/e1/events", events[40])  # its decision comes last
+
+                def steps() -> set[int]:
+                    return {d["step"] for d in peer.got("default/e1/decisions")}
+
+                wait_until(lambda: steps() >= set(range(42)), what="every event's decision")
+                got = peer.got("default/e1/decisions")
             finally:
                 peer.close()
-        assert [d["step"] for d in got] == list(range(21))  # the same session went on
+            operator = {"X-API-Key": client.app.state.service.operator_key}  # type: ignore[attr-defined]
+            (session,) = client.get("/overview", headers=operator).json()["sessions"]
+        print(f"\n{before} of 42 decisions before the broker stopped; {len(got)} in all")
+        assert session["steps"] == 41  # each event applied once
+        by_step: dict[int, Any] = {}
+        for d in got:  # a decision sent again is the same decision
+            assert by_step.setdefault(d["step"], d) == d
+        assert sorted(by_step) == list(range(42))  # none lost
+        # each decision is at the cell its event moved to: the next event's cell
+        assert [by_step[k]["state"] for k in range(41)] == [e["state"] for e in events]
     finally:
         broker.terminate()
         broker.wait(10)
+
+
+def test_a_message_sent_again_after_its_decisions_went_out_is_not_handled_twice() -> None:
+    """The connection drops after a message was handled, before its decisions were all
+    acknowledged: the message is not acknowledged; the broker sends it again (same packet id)
+    and the bridge publishes what was left and acknowledges it, without handling it again."""
+
+    class Client:
+        def __init__(self) -> None:
+            self.sent: list[str] = []
+            self.acked: list[int] = []
+            self.fail = True
+            self._client = self
+
+        async def publish(self, topic: str, payload: bytes, qos: int) -> None:
+            if self.fail:
+                raise aiomqtt.MqttError("connection lost")
+            self.sent.append(topic)
+
+        def ack(self, mid: int, qos: int) -> None:
+            self.acked.append(mid)
+
+    bridge = Bridge.__new__(Bridge)
+    bridge.pending, bridge.queue = [], 10
+    bridge.unacked = OrderedDict()
+    handled: list[str] = []
+
+    async def handle(topic: str, payload: bytes) -> None:
+        handled.append(topic)
+        bridge.pending.append((topic + "/decision", payload))
+
+    bridge.handle = handle  # type: ignore[method-assign]
+    message = aiomqtt.Message("p/default/e1/events", b"[1]", 1, False, 7, None)
+    client = Client()
+    with pytest.raises(aiomqtt.MqttError):
+        run_async(bridge.take(client, message))  # type: ignore[arg-type]
+    assert handled == ["p/default/e1/events"] and client.acked == []  # not acknowledged
+    client.fail = False
+    run_async(bridge.take(client, message))  # type: ignore[arg-type]  # sent again
+    assert handled == ["p/default/e1/events"]  # not handled twice
+    assert client.sent == ["p/default/e1/events/decision"] and client.acked == [7]
+    other = aiomqtt.Message("p/default/e1/events", b"[2]", 1, False, 7, None)  # id reused
+    run_async(bridge.take(client, other))  # type: ignore[arg-type]
+    assert len(handled) == 2 and client.acked == [7, 7] and not bridge.unacked
+
+
+@needs_broker
+def test_an_explorer_id_off_the_rule_is_refused_on_its_errors_topic(
+    tmp_path: Path, prefix: str
+) -> None:
+    with service(tmp_path, PORT, prefix) as client:
+        wait_until(lambda: connected(client), what="the bridge to connect")
+        peer = Peer(PORT, prefix)
+        try:
+            peer.publish("default/-robot/events", {"state": [28, 0], "action": "E"})
+            (error,) = peer.wait("default/-robot/errors", 1)
+            peer.publish("default/robot/events", {"state": [28, 0], "action": "E"})
+            peer.wait("default/robot/decisions", 2)  # handled after the refused one
+        finally:
+            peer.close()
+        assert error["status"] == 422 and "must match" in error["detail"]
+        assert peer.got("default/-robot/decisions") == []
+        bridge = client.app.state.bridge  # type: ignore[attr-defined]
+        assert [k for _, k in bridge.sessions] == ["robot"]
+        assert client.get("/overview").json()["total_sessions"] == 1
 
 
 @needs_broker
