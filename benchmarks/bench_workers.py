@@ -256,19 +256,24 @@ def report(result: dict[str, Any], seconds: float, repeats: int) -> str:
     bound = 2 * c1 / (c2 + load_us)
     ws_ratio = [b / a for a, b in zip(runs[base]["ws"], runs[one]["ws"], strict=True)]
     ws2_ratio = [b / 2 / a for a, b in zip(runs[base]["ws"], runs[two]["ws"], strict=True)]
+    cpu_ratio = med[base]["ws_cpu_us"] / med[one]["ws_cpu_us"]
     lines += [
         "",
         f"- REST, 2 workers against 1 (both with Redis), round by round: "
         f"{', '.join(f'{x:.2f}' for x in rest_ratio)} (median {statistics.median(rest_ratio):.2f}; "
-        "target 1.4). What this machine allows: one worker runs at most 1 / C1 events a "
-        f"second (C1 = {c1:.0f} us of its CPU an event); two share the 2 cores with Redis and "
-        f"wrk, so at most 2 / (C2 + Redis + wrk) = 2 / ({c2:.0f} + "
-        f"{med[two]['rest_redis_us']:.0f} + {med[two]['rest_wrk_us']:.0f}) us: a ratio of "
-        f"{bound:.2f} at most with these figures, whatever the code does.",
+        f"the medians' ratio {med[two]['rest'] / med[one]['rest']:.2f}; target 1.4). What the "
+        "CPU figures allow: one worker runs at most 1 / C1 events a second "
+        f"(C1 = {c1:.0f} us of its CPU an event); two share the 2 cores with Redis and wrk, so "
+        f"at most 2 / (C2 + Redis + wrk) = 2 / ({c2:.0f} + "
+        f"{med[two]['rest_redis_us']:.0f} + {med[two]['rest_wrk_us']:.0f}) us: a ratio of about "
+        f"{bound:.2f} (an estimate from the medians; single rounds scatter round it).",
         f"- Websocket 500-event frames with durability against the single process without it, "
         f"per core: 1 worker {', '.join(f'{x:.2f}' for x in ws_ratio)} (median "
-        f"{statistics.median(ws_ratio):.2f}); 2 workers {', '.join(f'{x:.2f}' for x in ws2_ratio)} "
-        f"(median {statistics.median(ws2_ratio):.2f}); target 0.8.",
+        f"{statistics.median(ws_ratio):.2f}; the medians' ratio "
+        f"{med[one]['ws'] / med[base]['ws']:.2f}; by the server's CPU per event "
+        f"{cpu_ratio:.2f}); 2 workers {', '.join(f'{x:.2f}' for x in ws2_ratio)} "
+        f"(median {statistics.median(ws2_ratio):.2f}, two workers, Redis and the load generator "
+        "on 2 cores); target 0.8.",
     ]
     for name, (state, kept, rest_state, rest_kept) in result["sizes"].items():
         lines.append(
