@@ -16,6 +16,7 @@ Nothing of the token is kept but its SHA-256 digest; a loaded session has no pla
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import struct
@@ -84,8 +85,13 @@ def _slots(obj: object) -> list[str]:
     return names
 
 
+_PLAIN_TYPES = frozenset({int, float, bool, str, type(None)})
+
+
 def _value(v: Any) -> Any:
     """A slot's value in MessagePack's types; tuples and arrays tagged to come back as such."""
+    if type(v) in _PLAIN_TYPES:  # most slots: numbers
+        return v
     if isinstance(v, np.ndarray):
         return {"nd": v.dtype.str, "shape": list(v.shape), "data": v.tobytes()}
     if isinstance(v, tuple):
@@ -324,6 +330,12 @@ def read_packed_records(raw: bytes) -> list[DecisionBatch]:
     return out
 
 
+@functools.lru_cache(maxsize=4096)
+def _iso(when: datetime) -> str:
+    """``when.isoformat()``, made once a session (written at every commit)."""
+    return when.isoformat()
+
+
 def dump(session: LiveSession, replay: bool = True) -> bytes:
     """``session`` as bytes (its token as a digest only). ``replay``: with the decisions kept
     for retries (the Redis form keeps those apart)."""
@@ -333,7 +345,7 @@ def dump(session: LiveSession, replay: bool = True) -> bytes:
         "format": FORMAT, "id": s.id, "token_digest": s.token_digest, "domain": s.domain.name,
         "map": map_digest(s.domain.domain), "agent_type": s.agent_type,
         "table_key": s.table_key,
-        "position": s.position, "p_normal": s.p_normal, "created_at": s.created_at.isoformat(),
+        "position": s.position, "p_normal": s.p_normal, "created_at": _iso(s.created_at),
         "last_seen": wall - (mono - s.last_seen), "born": wall - (mono - s.born),
         "sizes": list(s.sizes), "client": s.client, "reserved": s.reserved,
         "path": _ring(s.path), "p_history": _ring(s.p_history), "path_times": _ring(s.path_times),

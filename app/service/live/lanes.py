@@ -10,8 +10,10 @@ callers in the order Redis sends them, which is the order they were written. Eve
 
 A lane that loses its connection fails the calls in flight (the caller answers 503, a retry
 with the same step is safe) and connects again at the next call; a call that gets no answer
-within ``timeout`` seconds fails the same way, since a late answer could no longer be told
-apart.
+within ``timeout`` seconds (checked every quarter of it: at most 1.25 ``timeout``) fails the
+same way, since a late answer could no longer be told apart. One watchdog a lane does that
+check, not a timer a call (each timer is an entry in the event loop's heap, made and
+cancelled at every event).
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ from __future__ import annotations
 import asyncio
 import collections
 import ssl
+import time
 from typing import Any
 
 import hiredis
@@ -40,6 +43,8 @@ class Lane:
         self._reader: asyncio.StreamReader | None = None
         self._writer: asyncio.StreamWriter | None = None
         self._waiting: collections.deque[asyncio.Future[Any]] = collections.deque()
+        self._sent: collections.deque[float] = collections.deque()  # when each was written
+        self._watchdog: asyncio.TimerHandle | None = None
         self._reading: asyncio.Task[None] | None = None
         self._connecting = asyncio.Lock()
 
@@ -81,23 +86,29 @@ class Lane:
         return await self._wait(done)
 
     def _write(self, writer: asyncio.StreamWriter, args: tuple[Any, ...]) -> asyncio.Future[Any]:
-        done: asyncio.Future[Any] = asyncio.get_running_loop().create_future()
+        loop = asyncio.get_running_loop()
+        done: asyncio.Future[Any] = loop.create_future()
         self._waiting.append(done)
+        self._sent.append(time.monotonic())
         writer.write(hiredis.pack_command(args))
+        if self._watchdog is None:
+            self._watchdog = loop.call_later(self.timeout / 4, self._watch)
         return done
 
     async def _wait(self, done: asyncio.Future[Any]) -> Any:
-        """The answer to ``done``'s command, or LaneError after ``timeout`` seconds (a caller
-        that is cancelled leaves its answer to be skipped when it comes)."""
-        timer = asyncio.get_running_loop().call_later(self.timeout, self._expired, done)
-        try:
-            return await done
-        finally:
-            timer.cancel()
+        """The answer to ``done``'s command, or LaneError once it waited ``timeout`` seconds (a
+        caller that is cancelled leaves its answer to be skipped when it comes)."""
+        return await done
 
-    def _expired(self, done: asyncio.Future[Any]) -> None:
-        if not done.done():
+    def _watch(self) -> None:
+        """Every quarter of ``timeout`` while calls wait: the oldest waited too long?"""
+        self._watchdog = None
+        if not self._sent:
+            return
+        if time.monotonic() - self._sent[0] > self.timeout:
             self._lost(LaneError(f"Redis did not answer within {self.timeout} s"))
+            return
+        self._watchdog = asyncio.get_running_loop().call_later(self.timeout / 4, self._watch)
 
     async def _read(self, reader: asyncio.StreamReader) -> None:
         parser = hiredis.Reader()
@@ -109,6 +120,7 @@ class Lane:
                 parser.feed(data)
                 while (reply := parser.gets()) is not False:
                     done = self._waiting.popleft()
+                    self._sent.popleft()
                     if done.done():
                         continue  # its caller gave up (the connection is being dropped)
                     if isinstance(reply, hiredis.ReplyError):
@@ -126,6 +138,10 @@ class Lane:
         reading, self._reading = self._reading, None
         if reading is not None and reading is not asyncio.current_task():
             reading.cancel()
+        self._sent.clear()
+        if self._watchdog is not None:
+            self._watchdog.cancel()
+            self._watchdog = None
         while self._waiting:
             done = self._waiting.popleft()
             if not done.done():
