@@ -9,6 +9,7 @@ import asyncio
 import pytest
 
 from app.service.live.lanes import Lane, LaneError
+from tests.client.test_client import run_async  # off the browser tests' loop
 
 
 async def _server(answer: bool) -> tuple[asyncio.Server, int, list[bytes]]:
@@ -39,7 +40,7 @@ def test_a_lane_answers_calls_in_order() -> None:
             await lane.close()
             return list(got)
 
-    assert asyncio.run(run()) == [b"OK"] * 20
+    assert run_async(run()) == [b"OK"] * 20
 
 
 def test_a_call_without_an_answer_fails_after_the_timeout_and_the_next_connects_again() -> None:
@@ -57,4 +58,4 @@ def test_a_call_without_an_answer_fails_after_the_timeout_and_the_next_connects_
             assert await lane.call("PING") == b"OK"
             await lane.close()
 
-    asyncio.run(run())
+    run_async(run())
