@@ -576,12 +576,21 @@ def guide_compass_route(
 def guide_append(
     gmap: GuideArrays, params: GuideParams, goals: IntArray, ll: FloatArray, alive: BoolArray,
     s: int, a: int, advised: bool, advice: FloatArray, heading: int, pi: FloatArray,
+    rows: FloatArray, known: bool,
 ) -> int:  # pragma: no cover - compiled  # fmt: skip
     """``GuideAdvisor.append``: fade the evidence, add log P(a | s, k), rule out a destination
     the explorer stood on. ``goals`` holds each destination's state; ``advised``: the last
-    decision, for ``s``, gave ``advice`` (4,); ``pi`` is scratch (4,)."""
+    decision, for ``s``, gave ``advice`` (4,); ``pi`` is scratch (4,). ``rows`` (2 G, 4):
+    every destination's pi_g(. | s), then its c_g(. | s), as :func:`guide_decide` leaves them
+    in its scratch (:func:`guide_rows`); ``known``: they are already there for ``s`` (a
+    decision for ``s`` came just before), else they are made here."""
     lam, _, slack, _, bump, _ = params
     next_state = gmap[0]
+    n_goals = alive.shape[0]
+    if not known:
+        for g in range(n_goals):
+            guide_policy(gmap, g, s, rows[g])
+            guide_compass(gmap, goals[g], s, rows[n_goals + g])
     guide_open(gmap, s, pi)
     lo = (1.0 - bump) * pi[a] + bump / 4.0
     ll[0] = lam * ll[0] + math.log(0.25)
@@ -592,11 +601,9 @@ def guide_append(
         if advised:
             ind = 0.5 * (ind + advice[a])
         ll[2 + w] = lam * ll[2 + w] + math.log((1.0 - slack) * ind + slack * lo)
-    for g in range(alive.shape[0]):
-        guide_policy(gmap, g, s, pi)
-        pa = pi[a]
-        guide_compass(gmap, goals[g], s, pi)
-        ca = pi[a]
+    for g in range(n_goals):
+        pa = rows[g, a]
+        ca = rows[n_goals + g, a]
         if advised:  # they take the advice or their own way, half each
             pa = 0.5 * (pa + advice[a])
             ca = 0.5 * (ca + advice[a])
@@ -751,10 +758,10 @@ def guide_decide(
     pis = scratch[n_models : n_models + 4 * n_goals].reshape((n_goals, 4))
     cs = scratch[n_models + 4 * n_goals : n_models + 8 * n_goals].reshape((n_goals, 4))
     pcs = scratch[n_models + 8 * n_goals : n_models + 12 * n_goals].reshape((n_goals, 4))
-    for g in range(n_goals):
+    for g in range(n_goals):  # pi_g and c_g for every one (guide_append reads them)
+        guide_policy(gmap, g, s, pis[g])
+        guide_compass(gmap, goals[g], s, cs[g])
         if alive[g] or not any_alive:
-            guide_policy(gmap, g, s, pis[g])
-            guide_compass(gmap, goals[g], s, cs[g])
             guide_compass_route(gmap, g, goals[g], s, pcs[g])
     if target < 0 or not (alive[target] or not any_alive):
         target = guide_first_of_tour(dist, goals, alive, any_alive, s, max_tour)
@@ -815,6 +822,14 @@ def guide_buffers(
 
 
 @njit(cache=True)
+def guide_rows(scratch: FloatArray, n_goals: int) -> FloatArray:  # pragma: no cover - compiled
+    """The rows of :func:`guide_decide`'s scratch holding every destination's pi_g, then its
+    c_g, at the state of the last decision: (2 G, 4), what :func:`guide_append` reads."""
+    start = 4 + 3 * n_goals
+    return scratch[start : start + 8 * n_goals].reshape((2 * n_goals, 4))
+
+
+@njit(cache=True)
 def guide_stream(
     gmap: GuideArrays,
     params: GuideParams,
@@ -839,10 +854,12 @@ def guide_stream(
     kl_out, p_out, advise_out, count_out, benefit_out, advice_out = out
     n_goals = alive.shape[0]
     scratch, pi, theta = guide_buffers(n_goals)
+    rows = guide_rows(scratch, n_goals)
     for i in range(states.shape[0]):
+        known = i > 0 and states[i] == next_states[i - 1]  # decided there just before
         heading = guide_append(
             gmap, params, goals, ll, alive, states[i], actions[i], last == states[i], advice,
-            heading, pi,
+            heading, pi, rows, known,
         )  # fmt: skip
         kl, p0, target = guide_decide(
             gmap, params, goals, ll, alive, target, heading, next_states[i], theta, scratch
@@ -1085,9 +1102,10 @@ def episode(
                     for g in range(n_goals):
                         goal_ll[g] = fsum(goal_ring[g])
         if rule == GUIDE:  # guide keeps its own evidence, not the paper's window
-            g_heading = guide_append(
-                gmap, gparams, g_goals, g_ll, g_alive, s, a, advise, theta_w, g_heading, g_pi
-            )
+            g_heading = guide_append(  # the decision for s came just before
+                gmap, gparams, g_goals, g_ll, g_alive, s, a, advise, theta_w, g_heading, g_pi,
+                guide_rows(g_scratch, n_dest), True,
+            )  # fmt: skip
         else:
             pos = push(ring, loglik, pos, t + 1, period, log_probs, s, a)
         last_s, last_a = s, a
@@ -1198,9 +1216,9 @@ def q_learning(
             q[s, a] += alpha * (gamma * q[s2].max() - q[s, a])
             appended += 1
             if rule == GUIDE:
-                g_heading = guide_append(
+                g_heading = guide_append(  # the decision for s came just before
                     gmap, gparams, g_goals, g_ll, g_alive, s, a, advise, theta_w, g_heading,
-                    g_pi,
+                    g_pi, guide_rows(g_scratch, n_dest), True,
                 )  # fmt: skip
             else:
                 pos = push(ring, loglik, pos, appended, period, log_probs, s, a)
