@@ -69,7 +69,9 @@ def create_baseline(answer_bytes: int, frame_answer_bytes: int = 0) -> FastAPI:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("--port", type=int, required=True)
     ap.add_argument("--answer-bytes", type=int, default=180)
     ap.add_argument("--frame-answer-bytes", type=int, default=0)

@@ -97,7 +97,9 @@ def report(args: argparse.Namespace, res: dict[tuple[str, float], dict[str, floa
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("--episodes", type=int, default=100)
     ap.add_argument("--kappa", type=float, nargs="+", default=[0.2, 0.5])
     ap.add_argument("--write", type=Path)

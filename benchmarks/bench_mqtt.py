@@ -89,7 +89,9 @@ async def through(port: int, explorers: int, events: int, batch: int, tag: str) 
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("--explorers", type=int, default=10)
     ap.add_argument("--events", type=int, default=500, help="events per explorer")
     ap.add_argument("--batch", type=int, default=100, help="events per message, second run")

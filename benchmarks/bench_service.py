@@ -623,7 +623,9 @@ def wrk_version() -> str:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--seconds", type=float, default=4.0, help="length of one measured run")
     ap.add_argument("--rest-conns", type=int, default=32)

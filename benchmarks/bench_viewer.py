@@ -240,7 +240,9 @@ def bench_api(n_sessions: int, batch: int, requests: int, repeats: int) -> dict[
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--sessions", type=int, default=64)
     parser.add_argument("--batch", type=int, default=100)
     parser.add_argument("--requests", type=int, default=1000)

@@ -6,8 +6,9 @@ process without it; what Redis costs per event (its CPU, its commands) and holds
     python benchmarks/bench_workers.py [--seconds 8] [--repeats 3] [--write docs/PERFORMANCE.md]
 
 The three services run at once and are measured in turn, round after round (the machine is
-shared and noisy: each round meets the same conditions for each). wrk (one thread, 64
-connections over 64 sessions) is the REST load; an asyncio websocket driver in this process
+shared and noisy: each round meets the same conditions for each). wrk (16 connections over
+16 sessions; hopping between sessions, then each connection keeping to its own) is the REST
+load; an asyncio websocket driver in this process
 the stream load (4 sessions, each sending a 500-event frame and waiting for its answer). The
 load generator, Redis and the workers share this machine's 2 cores.
 """
@@ -285,9 +286,11 @@ def report(result: dict[str, Any], seconds: float, repeats: int) -> str:
 
 
 def main() -> None:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--seconds", type=float, default=8.0)
-    p.add_argument("--repeats", type=int, default=3)
+    p = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    p.add_argument("--seconds", type=float, default=8.0, help="length of each load (default 8)")
+    p.add_argument("--repeats", type=int, default=3, help="rounds of every load (default 3)")
     p.add_argument("--write", type=Path, help="rewrite this doc's workers section")
     args = p.parse_args()
     with tempfile.TemporaryDirectory() as tmp:

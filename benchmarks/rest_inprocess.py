@@ -86,7 +86,9 @@ async def run(runs: int) -> tuple[float, float]:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("--runs", type=int, default=12)
     ap.add_argument("--root", type=Path, default=HERE, help="source tree of the service")
     args = ap.parse_args()

@@ -127,7 +127,9 @@ def report(runs: dict[str, list[float]], label: str, loads: list[float], args: A
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("--before", type=Path, required=True, help="the older source tree")
     ap.add_argument("--label", default="before", help="what the older tree is")
     ap.add_argument("--repeats", type=int, default=5)
