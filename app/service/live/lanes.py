@@ -13,7 +13,9 @@ with the same step is safe) and connects again at the next call; a call that get
 within ``timeout`` seconds (checked every quarter of it: at most 1.25 ``timeout``) fails the
 same way, since a late answer could no longer be told apart. One watchdog a lane does that
 check, not a timer a call (each timer is an entry in the event loop's heap, made and
-cancelled at every event).
+cancelled at every event). Answers are parsed where the bytes arrive (an asyncio protocol's
+``data_received``), not by a reading task woken through a stream: one step of the event loop
+less an answer.
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ import asyncio
 import collections
 import ssl
 import time
-from typing import Any
+from typing import Any, cast
 
 import hiredis
 from redis.connection import parse_url
@@ -30,6 +32,45 @@ from redis.connection import parse_url
 
 class LaneError(ConnectionError):
     """The lane's connection failed, or Redis did not answer in time."""
+
+
+class _Wire(asyncio.Protocol):
+    """A lane's connection: commands out, answers parsed as they arrive and handed to the
+    lane in order."""
+
+    def __init__(self, lane: Lane):
+        self.lane = lane
+        self.parser = hiredis.Reader()
+        self.transport: asyncio.Transport | None = None
+        self.drained: asyncio.Future[None] | None = None  # set while writing is paused
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        self.transport = cast(asyncio.Transport, transport)
+        self.transport.set_write_buffer_limits(high=1 << 20)  # callers wait beyond 1 MiB
+
+    def data_received(self, data: bytes) -> None:
+        try:
+            self.parser.feed(data)
+            while (reply := self.parser.gets()) is not False:
+                self.lane._answer(reply)
+        except hiredis.ProtocolError as exc:
+            self.lane._lost(LaneError(f"Redis sent what is not RESP: {exc}"), self)
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        self._resume()
+        self.lane._lost(LaneError(str(exc) if exc else "Redis closed the connection"), self)
+
+    def pause_writing(self) -> None:
+        if self.drained is None:
+            self.drained = asyncio.get_running_loop().create_future()
+
+    def resume_writing(self) -> None:
+        self._resume()
+
+    def _resume(self) -> None:
+        drained, self.drained = self.drained, None
+        if drained is not None and not drained.done():
+            drained.set_result(None)
 
 
 class Lane:
@@ -40,65 +81,75 @@ class Lane:
         self.options = parse_url(url)  # type: ignore[no-untyped-call]
         self.tls = url.startswith("rediss://")
         self.timeout = timeout
-        self._reader: asyncio.StreamReader | None = None
-        self._writer: asyncio.StreamWriter | None = None
+        self._wire: _Wire | None = None
         self._waiting: collections.deque[asyncio.Future[Any]] = collections.deque()
         self._sent: collections.deque[float] = collections.deque()  # when each was written
         self._watchdog: asyncio.TimerHandle | None = None
-        self._reading: asyncio.Task[None] | None = None
         self._connecting = asyncio.Lock()
 
-    async def _connect(self) -> asyncio.StreamWriter:
+    @property
+    def connected(self) -> bool:
+        return self._wire is not None
+
+    async def _connect(self) -> _Wire:
         async with self._connecting:
-            if self._writer is not None:
-                return self._writer
+            if self._wire is not None:
+                return self._wire
             o = self.options
+            loop = asyncio.get_running_loop()
+            wire = _Wire(self)
             if "path" in o:
-                reader, writer = await asyncio.open_unix_connection(o["path"])
+                await loop.create_unix_connection(lambda: wire, o["path"])
             else:
                 context = ssl.create_default_context() if self.tls else None
-                reader, writer = await asyncio.open_connection(
-                    o.get("host", "127.0.0.1"), o.get("port", 6379), ssl=context
+                await loop.create_connection(
+                    lambda: wire, o.get("host", "127.0.0.1"), o.get("port", 6379), ssl=context
                 )
-            self._reader = reader
-            self._reading = asyncio.get_running_loop().create_task(self._read(reader))
             hello: list[tuple[Any, ...]] = []
             if o.get("password"):
                 user = o.get("username")
                 hello.append(("AUTH", user, o["password"]) if user else ("AUTH", o["password"]))
             if o.get("db"):
                 hello.append(("SELECT", o["db"]))
-            answers = [self._write(writer, command) for command in hello]  # first on the wire
-            self._writer = writer
+            self._wire = wire  # (a connection lost from here on fails what waits)
+            answers = [self._write(wire, command) for command in hello]  # first on the wire
             for done in answers:
-                await self._wait(done)
-            return writer
+                await done
+            return wire
 
     async def call(self, *args: Any) -> Any:
         """Send one command; its answer (ReplyError from Redis is raised as is)."""
-        writer = self._writer or await self._connect()
-        return await self._send(writer, args)
+        wire = self._wire or await self._connect()
+        done = self._write(wire, args)
+        if wire.drained is not None:  # over the transport's high-water mark: wait for it
+            await asyncio.shield(wire.drained)
+        return await done
 
-    async def _send(self, writer: asyncio.StreamWriter, args: tuple[Any, ...]) -> Any:
-        done = self._write(writer, args)
-        if writer.transport.get_write_buffer_size() > 1 << 20:
-            await writer.drain()
-        return await self._wait(done)
-
-    def _write(self, writer: asyncio.StreamWriter, args: tuple[Any, ...]) -> asyncio.Future[Any]:
+    def _write(self, wire: _Wire, args: tuple[Any, ...]) -> asyncio.Future[Any]:
+        assert wire.transport is not None
         loop = asyncio.get_running_loop()
         done: asyncio.Future[Any] = loop.create_future()
         self._waiting.append(done)
         self._sent.append(time.monotonic())
-        writer.write(hiredis.pack_command(args))
+        wire.transport.write(hiredis.pack_command(args))
         if self._watchdog is None:
             self._watchdog = loop.call_later(self.timeout / 4, self._watch)
         return done
 
-    async def _wait(self, done: asyncio.Future[Any]) -> Any:
-        """The answer to ``done``'s command, or LaneError once it waited ``timeout`` seconds (a
-        caller that is cancelled leaves its answer to be skipped when it comes)."""
-        return await done
+    def _answer(self, reply: Any) -> None:
+        """The next answer, to the oldest call waiting (a caller that was cancelled left its
+        answer to be skipped)."""
+        if not self._waiting:
+            self._lost(LaneError("Redis answered a command not sent"))
+            return
+        done = self._waiting.popleft()
+        self._sent.popleft()
+        if done.done():
+            return
+        if isinstance(reply, hiredis.ReplyError):
+            done.set_exception(reply)
+        else:
+            done.set_result(reply)
 
     def _watch(self) -> None:
         """Every quarter of ``timeout`` while calls wait: the oldest waited too long?"""
@@ -110,34 +161,14 @@ class Lane:
             return
         self._watchdog = asyncio.get_running_loop().call_later(self.timeout / 4, self._watch)
 
-    async def _read(self, reader: asyncio.StreamReader) -> None:
-        parser = hiredis.Reader()
-        try:
-            while True:
-                data = await reader.read(1 << 16)
-                if not data:
-                    raise LaneError("Redis closed the connection")
-                parser.feed(data)
-                while (reply := parser.gets()) is not False:
-                    done = self._waiting.popleft()
-                    self._sent.popleft()
-                    if done.done():
-                        continue  # its caller gave up (the connection is being dropped)
-                    if isinstance(reply, hiredis.ReplyError):
-                        done.set_exception(reply)
-                    else:
-                        done.set_result(reply)
-        except (OSError, LaneError, asyncio.IncompleteReadError) as exc:
-            self._lost(exc if isinstance(exc, LaneError) else LaneError(str(exc)))
-
-    def _lost(self, why: LaneError) -> None:
-        """Drop the connection: every call in flight fails, the next one connects again."""
-        writer, self._writer, self._reader = self._writer, None, None
-        if writer is not None:
-            writer.close()
-        reading, self._reading = self._reading, None
-        if reading is not None and reading is not asyncio.current_task():
-            reading.cancel()
+    def _lost(self, why: LaneError, wire: _Wire | None = None) -> None:
+        """Drop the connection (``wire``: only if it is still this lane's): every call in
+        flight fails, the next one connects again."""
+        if wire is not None and wire is not self._wire:
+            return  # an older connection, already dropped
+        wire, self._wire = self._wire, None
+        if wire is not None and wire.transport is not None:
+            wire.transport.close()
         self._sent.clear()
         if self._watchdog is not None:
             self._watchdog.cancel()

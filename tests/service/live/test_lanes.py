@@ -51,11 +51,42 @@ def test_a_call_without_an_answer_fails_after_the_timeout_and_the_next_connects_
             with pytest.raises(LaneError, match=r"did not answer within 0\.2 s"):
                 await lane.call("PING")
             assert seen  # it was sent; no answer came
-            assert lane._writer is None and not lane._waiting  # dropped, nothing left waiting
+            assert not lane.connected and not lane._waiting  # dropped, nothing left waiting
         talking, port2, _ = await _server(answer=True)
         async with talking:
             lane.options["port"] = port2  # the same lane, its server back
             assert await lane.call("PING") == b"OK"
+            await lane.close()
+
+    run_async(run())
+
+
+@pytest.mark.parametrize("reply", [b"", b"?not RESP\r\n"])
+def test_a_closed_connection_or_a_garbled_answer_fails_the_calls_at_once(reply: bytes) -> None:
+    """A server that closes the connection (or answers what is not RESP) fails every call in
+    flight with LaneError then and there, not at the timeout, and the lane connects again."""
+
+    async def run() -> None:
+        async def handle(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+            await reader.read(1 << 16)
+            writer.write(reply)
+            await writer.drain()
+            if not reply:
+                writer.close()
+            else:
+                await reader.read(1 << 16)  # left open: the lane is the one to drop it
+
+        server = await asyncio.start_server(handle, "127.0.0.1", 0)
+        async with server:
+            port = server.sockets[0].getsockname()[1]
+            lane = Lane(f"redis://127.0.0.1:{port}/0", timeout=30.0)
+            calls = [asyncio.ensure_future(lane.call("PING")) for _ in range(3)]
+            done, _ = await asyncio.wait(calls, timeout=5.0)
+            assert len(done) == 3  # long before the 30 s timeout
+            for call in calls:
+                with pytest.raises(LaneError):
+                    call.result()
+            assert not lane.connected and not lane._waiting
             await lane.close()
 
     run_async(run())
