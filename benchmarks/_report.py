@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import os
 import platform
 import re
@@ -11,6 +12,15 @@ import time
 from collections.abc import Callable
 from importlib import metadata
 from pathlib import Path
+
+
+def arguments(doc: str | None) -> argparse.ArgumentParser:
+    """A benchmark's parser: its ``--help`` shows the first paragraph of the script's
+    docstring ``doc`` with its lines as written."""
+    return argparse.ArgumentParser(
+        description=(doc or "").split("\n\n")[0],
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
 
 
 def machine() -> str:

@@ -16,7 +16,6 @@ from :func:`app.cli.serve.uvicorn_options`).
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from pathlib import Path
@@ -28,6 +27,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from app.cli.serve import uvicorn_options
 from app.service.config import Settings
+from benchmarks._report import arguments
 
 
 def answer_of(size: int) -> bytes:
@@ -69,9 +69,7 @@ def create_baseline(answer_bytes: int, frame_answer_bytes: int = 0) -> FastAPI:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(
-        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
-    )
+    ap = arguments(__doc__)
     ap.add_argument("--port", type=int, required=True)
     ap.add_argument("--answer-bytes", type=int, default=180)
     ap.add_argument("--frame-answer-bytes", type=int, default=0)

@@ -41,7 +41,7 @@ from app.service.main import create_app
 from app.service.state import ServiceState
 from app.viewer.remote import RemoteFeed
 from app.viewer.viewer import Viewer
-from benchmarks._report import command_line, machine, write_section
+from benchmarks._report import arguments, command_line, machine, write_section
 from benchmarks.bench_viewer import advance, free_port, serve, watch
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -222,7 +222,7 @@ def report(args: argparse.Namespace, v: dict[str, float], w: dict[str, Any],
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = arguments(__doc__)
     ap.add_argument("--sessions", type=int, default=50, help="guide sessions on the map")
     ap.add_argument("--ticks", type=int, default=20, help="viewer ticks measured")
     ap.add_argument("--rounds", type=int, default=30, help="websocket messages per strategy")

@@ -14,7 +14,6 @@ Measures (median over ``--repeats`` runs where repeated):
 
 from __future__ import annotations
 
-import argparse
 import os
 import subprocess
 import sys
@@ -34,7 +33,7 @@ from app.agents.explorers import RandomExplorer
 from app.agents.simulate import Simulator
 from app.domain.grid import GridDomain
 from app.domain.maps import DEFAULT_MAP
-from benchmarks._report import command_line, machine, median_of, write_section
+from benchmarks._report import arguments, command_line, machine, median_of, write_section
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -87,9 +86,7 @@ def experiment_all(cache: Path, out: Path) -> tuple[float, str]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(
-        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
-    )
+    parser = arguments(__doc__)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--write", type=Path, help="update this markdown file's section")
     args = parser.parse_args()

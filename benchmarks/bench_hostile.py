@@ -25,7 +25,6 @@ the largest map the service takes).
 
 from __future__ import annotations
 
-import argparse
 import json
 import multiprocessing as mp
 import os
@@ -54,7 +53,7 @@ from benchmarks._load import (
     run_wrk,
     write_sessions,
 )
-from benchmarks._report import command_line, machine, write_section
+from benchmarks._report import arguments, command_line, machine, write_section
 
 ADMIN = {"X-API-Key": "bench"}
 MiB = 1024 * 1024
@@ -610,9 +609,7 @@ WARM_UP = 90.0
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(
-        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
-    )
+    parser = arguments(__doc__)
     parser.add_argument("--root", type=Path, default=ROOT, help="source tree of the service")
     parser.add_argument("--only", nargs="*", choices=sorted(SECTIONS), default=list(SECTIONS))
     parser.add_argument("--write", type=Path, help="rewrite this document's section")

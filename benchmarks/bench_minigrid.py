@@ -31,7 +31,7 @@ from advisor_client import AdvisorClient  # noqa: E402
 from advisor_client.minigrid import AdvisedMiniGrid, CompassActions  # noqa: E402
 
 from benchmarks._load import start_advisor  # noqa: E402
-from benchmarks._report import command_line, machine, write_section  # noqa: E402
+from benchmarks._report import arguments, command_line, machine, write_section  # noqa: E402
 
 ENVS = ("MiniGrid-FourRooms-v0", "MiniGrid-MultiRoom-N4-S5-v1")
 
@@ -97,9 +97,7 @@ def report(args: argparse.Namespace, res: dict[tuple[str, float], dict[str, floa
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(
-        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
-    )
+    ap = arguments(__doc__)
     ap.add_argument("--episodes", type=int, default=100)
     ap.add_argument("--kappa", type=float, nargs="+", default=[0.2, 0.5])
     ap.add_argument("--write", type=Path)

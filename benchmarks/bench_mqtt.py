@@ -12,7 +12,6 @@ the first event published to the last decision received. Twice: one event per me
 
 from __future__ import annotations
 
-import argparse
 import asyncio
 import json
 import subprocess
@@ -31,7 +30,7 @@ sys.path.insert(0, str(ROOT))
 from app.domain.grid import ACTIONS, GridDomain  # noqa: E402
 from app.domain.maps import DEFAULT_MAP  # noqa: E402
 from benchmarks._load import free_port, start_advisor  # noqa: E402
-from benchmarks._report import command_line, machine, write_section  # noqa: E402
+from benchmarks._report import arguments, command_line, machine, write_section  # noqa: E402
 
 MOSQUITTO = "/usr/sbin/mosquitto"
 PREFIX = "bench"
@@ -89,9 +88,7 @@ async def through(port: int, explorers: int, events: int, batch: int, tag: str) 
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(
-        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
-    )
+    ap = arguments(__doc__)
     ap.add_argument("--explorers", type=int, default=10)
     ap.add_argument("--events", type=int, default=500, help="events per explorer")
     ap.add_argument("--batch", type=int, default=100, help="events per message, second run")

@@ -41,7 +41,7 @@ from benchmarks._load import (  # noqa: E402
     start_advisor,
     write_sessions,
 )
-from benchmarks._report import command_line, machine, write_section  # noqa: E402
+from benchmarks._report import arguments, command_line, machine, write_section  # noqa: E402
 
 CONFIGS: dict[str, dict[str, str]] = {
     "log every request, no metrics (before)": {
@@ -174,9 +174,7 @@ def report(args: argparse.Namespace, res: dict[str, dict[str, Any]], loads: list
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(
-        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
-    )
+    ap = arguments(__doc__)
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--seconds", type=float, default=6.0)
     ap.add_argument("--conns", type=int, default=32)

@@ -70,7 +70,7 @@ from benchmarks._load import (  # noqa: E402
     stream_load,
     write_sessions,
 )
-from benchmarks._report import command_line, machine, write_section  # noqa: E402
+from benchmarks._report import arguments, command_line, machine, write_section  # noqa: E402
 
 FIGURES = ROOT / "docs" / "figures"
 ADMIN = {"X-API-Key": "bench"}
@@ -623,9 +623,7 @@ def wrk_version() -> str:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(
-        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
-    )
+    ap = arguments(__doc__)
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--seconds", type=float, default=4.0, help="length of one measured run")
     ap.add_argument("--rest-conns", type=int, default=32)

@@ -18,7 +18,6 @@ with the viewer on and off.
 
 from __future__ import annotations
 
-import argparse
 import multiprocessing as mp
 import os
 import socket
@@ -49,7 +48,7 @@ from app.service.main import create_app
 from app.service.state import ServiceState
 from app.viewer.remote import RemoteFeed
 from app.viewer.viewer import Viewer
-from benchmarks._report import command_line, machine, median_of, write_section
+from benchmarks._report import arguments, command_line, machine, median_of, write_section
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -240,9 +239,7 @@ def bench_api(n_sessions: int, batch: int, requests: int, repeats: int) -> dict[
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(
-        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
-    )
+    parser = arguments(__doc__)
     parser.add_argument("--sessions", type=int, default=64)
     parser.add_argument("--batch", type=int, default=100)
     parser.add_argument("--requests", type=int, default=1000)

@@ -15,7 +15,6 @@ load generator, Redis and the workers share this machine's 2 cores.
 
 from __future__ import annotations
 
-import argparse
 import json
 import re
 import statistics
@@ -41,7 +40,7 @@ from benchmarks._load import (
     stream_load,
     write_sessions,
 )
-from benchmarks._report import command_line, machine, write_section
+from benchmarks._report import arguments, command_line, machine, write_section
 
 REDIS_URL = "redis://127.0.0.1:6379/0"
 PREFIX = "bench-workers"
@@ -286,9 +285,7 @@ def report(result: dict[str, Any], seconds: float, repeats: int) -> str:
 
 
 def main() -> None:
-    p = argparse.ArgumentParser(
-        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
-    )
+    p = arguments(__doc__)
     p.add_argument("--seconds", type=float, default=8.0, help="length of each load (default 8)")
     p.add_argument("--repeats", type=int, default=3, help="rounds of every load (default 3)")
     p.add_argument("--write", type=Path, help="rewrite this doc's workers section")

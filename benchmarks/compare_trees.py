@@ -14,7 +14,6 @@ checkout of an older commit (``git worktree add /tmp/before REV``).
 
 from __future__ import annotations
 
-import argparse
 import re
 import statistics
 import subprocess
@@ -23,7 +22,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks._report import machine, write_section
+from benchmarks._report import arguments, machine, write_section
 
 ROOT = Path(__file__).resolve().parents[1]
 ROW = re.compile(r"^\|\s*([^|]+?)\s*\|\s*([0-9][0-9,]*\.?[0-9]*)\s*([^|]*?)\s*\|", re.M)
@@ -63,7 +62,7 @@ def table(runs: dict[str, list[dict[str, tuple[float, str]]]], label: str) -> st
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = arguments(__doc__)
     parser.add_argument("script", help="a script under benchmarks/, e.g. bench_core.py")
     parser.add_argument("script_args", nargs="*", help="its arguments (after --)")
     parser.add_argument("--before", type=Path, required=True, help="the older source tree")

@@ -14,7 +14,6 @@ figure is the first quartile of each app's runs.
 
 from __future__ import annotations
 
-import argparse
 import asyncio
 import json
 import sys
@@ -86,9 +85,10 @@ async def run(runs: int) -> tuple[float, float]:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(
-        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
-    )
+    sys.path.insert(0, str(HERE))  # this tree's benchmarks (--root's app goes before it)
+    from benchmarks._report import arguments
+
+    ap = arguments(__doc__)
     ap.add_argument("--runs", type=int, default=12)
     ap.add_argument("--root", type=Path, default=HERE, help="source tree of the service")
     args = ap.parse_args()

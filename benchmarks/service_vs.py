@@ -12,7 +12,6 @@ before`` is the median of the per-round ratios. CPU is the server process's user
 
 from __future__ import annotations
 
-import argparse
 import statistics
 import sys
 import tempfile
@@ -37,7 +36,7 @@ from benchmarks._load import (  # noqa: E402
     stream_load,
     write_sessions,
 )
-from benchmarks._report import machine, write_section  # noqa: E402
+from benchmarks._report import arguments, machine, write_section  # noqa: E402
 from benchmarks.bench_service import FRAME, answer_size, dumps, frames_for, stream_urls, walk  # noqa: E402
 
 
@@ -127,9 +126,7 @@ def report(runs: dict[str, list[float]], label: str, loads: list[float], args: A
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(
-        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
-    )
+    ap = arguments(__doc__)
     ap.add_argument("--before", type=Path, required=True, help="the older source tree")
     ap.add_argument("--label", default="before", help="what the older tree is")
     ap.add_argument("--repeats", type=int, default=5)

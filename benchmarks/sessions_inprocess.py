@@ -10,7 +10,6 @@ exist, as in ``bench_service.py``'s memory figure.
 
 from __future__ import annotations
 
-import argparse
 import asyncio
 import gc
 import sys
@@ -24,12 +23,11 @@ from app.service import ops
 from app.service.config import Settings
 from app.service.schemas import SessionCreate
 from app.service.state import open_state
+from benchmarks._report import arguments
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(
-        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
-    )
+    ap = arguments(__doc__)
     ap.add_argument("--sessions", type=int, default=100_000)
     args = ap.parse_args()
     n = args.sessions
