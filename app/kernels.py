@@ -588,9 +588,7 @@ def guide_append(
     next_state = gmap[0]
     n_goals = alive.shape[0]
     if not known:
-        for g in range(n_goals):
-            guide_policy(gmap, g, s, rows[g])
-            guide_compass(gmap, goals[g], s, rows[n_goals + g])
+        guide_fill_rows(gmap, goals, s, rows)
     guide_open(gmap, s, pi)
     lo = (1.0 - bump) * pi[a] + bump / 4.0
     ll[0] = lam * ll[0] + math.log(0.25)
@@ -755,12 +753,11 @@ def guide_decide(
         post[k] = post[k] / tot
     lost = post[0] + post[1] + post[2] + post[3]
     # each destination's policies here, and the target
-    pis = scratch[n_models : n_models + 4 * n_goals].reshape((n_goals, 4))
-    cs = scratch[n_models + 4 * n_goals : n_models + 8 * n_goals].reshape((n_goals, 4))
+    rows = guide_rows(scratch, n_goals)  # pi_g and c_g for every one (guide_append reads them)
+    guide_fill_rows(gmap, goals, s, rows)
+    pis, cs = rows[:n_goals], rows[n_goals:]
     pcs = scratch[n_models + 8 * n_goals : n_models + 12 * n_goals].reshape((n_goals, 4))
-    for g in range(n_goals):  # pi_g and c_g for every one (guide_append reads them)
-        guide_policy(gmap, g, s, pis[g])
-        guide_compass(gmap, goals[g], s, cs[g])
+    for g in range(n_goals):
         if alive[g] or not any_alive:
             guide_compass_route(gmap, g, goals[g], s, pcs[g])
     if target < 0 or not (alive[target] or not any_alive):
@@ -827,6 +824,17 @@ def guide_rows(scratch: FloatArray, n_goals: int) -> FloatArray:  # pragma: no c
     c_g, at the state of the last decision: (2 G, 4), what :func:`guide_append` reads."""
     start = 4 + 3 * n_goals
     return scratch[start : start + 8 * n_goals].reshape((2 * n_goals, 4))
+
+
+@njit(cache=True)
+def guide_fill_rows(
+    gmap: GuideArrays, goals: IntArray, s: int, rows: FloatArray
+) -> None:  # pragma: no cover - compiled  # fmt: skip
+    """Fill ``rows`` (2 G, 4) with every destination's pi_g(. | s), then its c_g(. | s)."""
+    n_goals = goals.shape[0]
+    for g in range(n_goals):
+        guide_policy(gmap, g, s, rows[g])
+        guide_compass(gmap, goals[g], s, rows[n_goals + g])
 
 
 @njit(cache=True)
@@ -1037,6 +1045,7 @@ def episode(
     g_target = -1
     g_heading = -1
     g_scratch, g_pi, _ = guide_buffers(n_dest)
+    g_rows = guide_rows(g_scratch, n_dest)
     heading = 0
     if kind == LEFT:
         heading = int(rng.random() * 4)
@@ -1104,7 +1113,7 @@ def episode(
         if rule == GUIDE:  # guide keeps its own evidence, not the paper's window
             g_heading = guide_append(  # the decision for s came just before
                 gmap, gparams, g_goals, g_ll, g_alive, s, a, advise, theta_w, g_heading, g_pi,
-                guide_rows(g_scratch, n_dest), True,
+                g_rows, True,
             )  # fmt: skip
         else:
             pos = push(ring, loglik, pos, t + 1, period, log_probs, s, a)
@@ -1160,6 +1169,7 @@ def q_learning(
     g_target = -1
     g_heading = -1
     g_scratch, g_pi, theta_w = guide_buffers(n_dest)
+    g_rows = guide_rows(g_scratch, n_dest)
     total_steps = 0
     for e in range(episodes):
         if not keep_history:
@@ -1218,7 +1228,7 @@ def q_learning(
             if rule == GUIDE:
                 g_heading = guide_append(  # the decision for s came just before
                     gmap, gparams, g_goals, g_ll, g_alive, s, a, advise, theta_w, g_heading,
-                    g_pi, guide_rows(g_scratch, n_dest), True,
+                    g_pi, g_rows, True,
                 )  # fmt: skip
             else:
                 pos = push(ring, loglik, pos, appended, period, log_probs, s, a)
