@@ -64,7 +64,7 @@ def test_a_call_without_an_answer_fails_after_the_timeout_and_the_next_connects_
 @pytest.mark.parametrize("reply", [b"", b"?not RESP\r\n"])
 def test_a_closed_connection_or_a_garbled_answer_fails_the_calls_at_once(reply: bytes) -> None:
     """A server that closes the connection (or answers what is not RESP) fails every call in
-    flight with LaneError then and there, not at the timeout, and the lane connects again."""
+    flight with LaneError then and there, not at the timeout, and drops the connection."""
 
     async def run() -> None:
         async def handle(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
