@@ -65,7 +65,7 @@ run: run-venv
 ## cores, more on busy ones; each rewrites its own section of docs/PERFORMANCE.md (bench_hostile
 ## its combined load's in docs/RELIABILITY.md; bench_minigrid docs/RESULTS.md; bench_scaling
 ## and bench_service the curves in docs/figures/). bench_mqtt runs Debian's mosquitto;
-## bench_workers the machine's Redis.
+## bench_workers the machine's Redis; bench_redis_costs prints what docs/SCALING.md quotes of it.
 bench: venv wrk
 	$(BIN)/python benchmarks/bench_core.py --write docs/PERFORMANCE.md
 	$(BIN)/python benchmarks/bench_scaling.py --write docs/PERFORMANCE.md
@@ -78,6 +78,7 @@ bench: venv wrk
 	$(BIN)/python benchmarks/bench_buildings.py --write docs/PERFORMANCE.md
 	$(BIN)/python benchmarks/bench_hostile.py --only combined --write docs/RELIABILITY.md
 	$(BIN)/python benchmarks/bench_workers.py --write docs/PERFORMANCE.md
+	$(BIN)/python benchmarks/bench_redis_costs.py
 	$(BIN)/python benchmarks/rest_inprocess.py
 	$(BIN)/python benchmarks/sessions_inprocess.py
 
