@@ -121,9 +121,11 @@ def commit_cost(seconds: float) -> list[str]:
             load = [str(made), str(bodies)]
             run_wrk(server.url, STICKY_LUA, load, 2, CONNECTIONS, tmp, threads=CONNECTIONS)
             r.config_resetstat()
+            cpu0 = _cpu(r)
             w = run_wrk(server.url, STICKY_LUA, load, seconds, CONNECTIONS, tmp,
                         threads=CONNECTIONS)  # fmt: skip
-            stats = r.info("commandstats")
+            cpu = _cpu(r) - cpu0
+            stats, io = r.info("commandstats"), r.info("stats")
         finally:
             server.stop()
             for key in r.scan_iter(f"{PREFIX}*"):
@@ -140,6 +142,14 @@ def commit_cost(seconds: float) -> list[str]:
                 f"| {name.removeprefix('cmdstat_')} | {v['calls'] / w.requests:.2f} | "
                 f"{v['usec_per_call']:.2f} | {v['usec'] / w.requests:.2f} |"
             )
+    n = w.requests
+    rows += [
+        "",
+        f"Redis in all: {cpu * 1e6 / n:.1f} us of CPU an event; "
+        f"{io['total_reads_processed'] / n:.2f} reads and "
+        f"{io['total_writes_processed'] / n:.2f} writes of its sockets an event "
+        f"({n / max(io['total_reads_processed'], 1):.2f} events a read).",
+    ]
     sha = r.script_load("return 1")
     blob, record = os.urandom(2200), os.urandom(90)
     r.config_resetstat()
@@ -149,6 +159,12 @@ def commit_cost(seconds: float) -> list[str]:
     empty = r.info("commandstats")["cmdstat_evalsha"]["usec_per_call"]
     rows += ["", f"A script that returns at once, with the commit's arguments: {empty:.1f} us."]
     return rows
+
+
+def _cpu(r: redis.Redis) -> float:
+    """Seconds of CPU the Redis server has used (user and system, its main thread)."""
+    info = r.info("cpu")
+    return float(info["used_cpu_user_main_thread"]) + float(info["used_cpu_sys_main_thread"])
 
 
 def main() -> None:

@@ -294,3 +294,54 @@ def test_a_retry_of_any_kept_step_is_answered_again_by_any_worker(tmp_path: Path
         for c in clients:
             c.__exit__(None, None, None)
         drop_redis_keys(prefix)
+
+
+def test_every_key_of_a_session_lives_no_longer_than_its_time_to_live(tmp_path: Path) -> None:
+    """The commit renews the keys' time to live only once a quarter of it has gone by: still,
+    every key a session holds in Redis (its state, its two strings of kept decisions) has one,
+    at most the full time, through the records' rotations; and once a quarter has gone by, the
+    next event renews all of them."""
+    import redis
+
+    clients, prefix = start_workers(tmp_path, 1, replay_steps=6)
+    r = redis.Redis.from_url(REDIS_URL, decode_responses=True)
+
+    def pttl(key: str) -> int:
+        return int(r.pttl(key))  # type: ignore[arg-type]
+
+    try:
+        c = clients[0]
+        sid, auth, _ = open_session(c)
+        service = c.app.state.service  # type: ignore[attr-defined]
+        ttl = service.sessions._ttl()
+        grid = service.catalog.get("default").domain
+        rng = np.random.default_rng(3)
+        s, step = grid.start, 1
+
+        def send(n: int) -> None:
+            nonlocal s, step
+            batch = []
+            for a in rng.integers(0, 4, n).tolist():
+                batch.append({"state": grid.cell(s), "action": ACTIONS[a]})
+                s = int(grid.next_state[s, a])
+            got = c.post(f"/sessions/{sid}/events", json=[batch[0] | {"step": step}, *batch[1:]],
+                         headers=auth)  # fmt: skip
+            assert got.status_code == 200, got.text
+            step += n
+
+        keys = [f"{prefix}:s:{sid}", f"{prefix}:r:{sid}", f"{prefix}:r:{sid}:old"]
+        for n in [1] * 9 + [4, 6, 1, 3, 7, 1, 1]:  # rotations in one piece and by copy
+            send(n)
+            for key in keys:
+                left = pttl(key)
+                assert left == -2 or 0 < left <= ttl, (key, left)  # gone, or a time to live
+        assert all(r.exists(key) for key in keys)
+        for key in keys:
+            r.pexpire(key, 5_000)
+        r.hset(keys[0], "touched", "0")  # as if a quarter of the time had gone by
+        send(1)
+        assert all(pttl(key) > ttl - 5_000 for key in keys), [pttl(k) for k in keys]
+    finally:
+        for c in clients:
+            c.__exit__(None, None, None)
+        drop_redis_keys(prefix)

@@ -86,6 +86,7 @@ class Lane:
         self._sent: collections.deque[float] = collections.deque()  # when each was written
         self._watchdog: asyncio.TimerHandle | None = None
         self._connecting = asyncio.Lock()
+        self._out: list[bytes] = []  # commands packed this step of the event loop, not yet written
 
     @property
     def connected(self) -> bool:
@@ -131,10 +132,22 @@ class Lane:
         done: asyncio.Future[Any] = loop.create_future()
         self._waiting.append(done)
         self._sent.append(time.monotonic())
-        wire.transport.write(hiredis.pack_command(args))
+        if not self._out:
+            loop.call_soon(self._flush, wire)
+        self._out.append(hiredis.pack_command(args))
         if self._watchdog is None:
             self._watchdog = loop.call_later(self.timeout / 4, self._watch)
         return done
+
+    def _flush(self, wire: _Wire) -> None:
+        """Write what this step of the event loop packed, in one write: Redis then reads the
+        commands of every event this worker handled in the step at once, and answers them
+        together."""
+        if wire is not self._wire or wire.transport is None:
+            return  # that connection was dropped, and the calls it had packed failed with it
+        out, self._out = self._out, []
+        if out:
+            wire.transport.write(b"".join(out))
 
     def _answer(self, reply: Any) -> None:
         """The next answer, to the oldest call waiting (a caller that was cancelled left its
@@ -170,6 +183,7 @@ class Lane:
         if wire is not None and wire.transport is not None:
             wire.transport.close()
         self._sent.clear()
+        self._out.clear()
         if self._watchdog is not None:
             self._watchdog.cancel()
             self._watchdog = None

@@ -131,7 +131,7 @@ if cmd == 'create' then
   if why then return {why} end
   local k = skey(id)
   redis.call('HSET', k, 'blob', blob, 'step', '0', 'domain', domain, 'client', client,
-             'reserved', ARGV[7], 'kept', '0')
+             'reserved', ARGV[7], 'kept', '0', 'touched', ARGV[8])
   redis.call('PEXPIRE', k, ttl)
   redis.call('ZADD', p .. ':live', now, id)
   redis.call('INCRBY', p .. ':mem', reserved)
@@ -152,37 +152,48 @@ elseif cmd == 'commit' then
   local now, keep = tonumber(ARGV[10]), tonumber(ARGV[11])
   local summary, ttl = ARGV[12], tonumber(ARGV[13])
   local k = skey(id)
-  local h = redis.call('HMGET', k, 'step', 'domain')
+  local h = redis.call('HMGET', k, 'step', 'domain', 'kept', 'touched')
   if not h[1] then return {'gone'} end
   local v = version(h[2])
   if h[1] ~= expected then return {'moved', redis.call('HGET', k, 'blob'), h[1], v} end
   if tonumber(v) > used then return {'stale', redis.call('HGET', k, 'blob'), h[1], v} end
-  redis.call('HSET', k, 'blob', blob, 'step', step)
-  redis.call('PEXPIRE', k, ttl)
-  redis.call('ZADD', p .. ':live', now, id)
-  redis.call('HSET', p .. ':sum', id, summary)
+  local r = rkey(id)
+  -- the keys' time to live is renewed once a quarter of it has gone by, not at every event:
+  -- each key then outlives the session's last event by at least three quarters of ``ttl``
+  -- (which is twice the idle timeout and a minute: the sweep drops an idle session first)
+  local touched = tonumber(h[4]) or 0
+  local renew = now - touched >= ttl / 4
+  local kept = tonumber(h[3]) or 0
   if n > 0 and keep > 0 then
     -- the records go into two strings, appended to (a list's RPUSH of a batch's record costs
     -- Redis several times more): when the newer alone holds ``keep`` steps it becomes the
     -- older one, and the older one goes; together they always hold the last ``keep`` steps
-    local r = rkey(id)
-    redis.call('APPEND', r, record)
-    local kept = redis.call('HINCRBY', k, 'kept', n)
+    if redis.call('APPEND', r, record) == #record then
+      redis.call('PEXPIRE', r, ttl)  -- a new string: it lives as long as the others
+    end
+    kept = kept + n
     if kept >= keep then
-      -- renamed when written in one piece, else copied: the copy keeps none of the room
-      -- APPEND made for growing (up to as much again)
+      -- renamed when written in one piece (its time to live goes with it), else copied: the
+      -- copy keeps none of the room APPEND made for growing (up to as much again)
       if kept == n then
         redis.call('RENAME', r, r .. ':old')
       else
-        redis.call('SET', r .. ':old', redis.call('GET', r))
+        redis.call('SET', r .. ':old', redis.call('GET', r), 'PX', ttl)
         redis.call('DEL', r)
       end
-      redis.call('HSET', k, 'kept', '0')
-    else
-      redis.call('PEXPIRE', r, ttl)
+      kept = 0
     end
-    redis.call('PEXPIRE', r .. ':old', ttl)
   end
+  if renew then
+    redis.call('HSET', k, 'blob', blob, 'step', step, 'kept', kept, 'touched', now)
+    redis.call('PEXPIRE', k, ttl)
+    redis.call('PEXPIRE', r, ttl)
+    redis.call('PEXPIRE', r .. ':old', ttl)
+  else
+    redis.call('HSET', k, 'blob', blob, 'step', step, 'kept', kept)
+  end
+  redis.call('ZADD', p .. ':live', now, id)
+  redis.call('HSET', p .. ':sum', id, summary)
   return {'ok'}
 elseif cmd == 'end' then
   return drop(ARGV[3])

@@ -43,6 +43,54 @@ def test_a_lane_answers_calls_in_order() -> None:
     assert run_async(run()) == [b"OK"] * 20
 
 
+def test_the_calls_of_one_step_of_the_loop_go_out_in_one_write_and_are_answered_in_order() -> None:
+    """Calls made in the same step of the event loop are packed and written together (one
+    write, so that Redis reads them at once); each gets its own answer, in the order made. A
+    connection dropped before the write fails what it had packed, and the next call connects
+    again."""
+
+    async def run() -> None:
+        count = 0
+
+        async def handle(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+            nonlocal count
+            while data := await reader.read(1 << 16):
+                for _ in range(data.count(b"*")):  # one array header a command: its number
+                    count += 1
+                    writer.write(b":%d\r\n" % count)
+                await writer.drain()
+            writer.close()
+
+        server = await asyncio.start_server(handle, "127.0.0.1", 0)
+        async with server:
+            port = server.sockets[0].getsockname()[1]
+            lane = Lane(f"redis://127.0.0.1:{port}/0", timeout=5.0)
+            assert await lane.call("PING") == 1  # connected
+            wire = lane._wire
+            assert wire is not None and wire.transport is not None
+            writes: list[bytes] = []
+            write = wire.transport.write
+
+            def counted(data: bytes | bytearray | memoryview) -> None:
+                writes.append(bytes(data))
+                write(data)
+
+            wire.transport.write = counted  # type: ignore[method-assign]
+            got = await asyncio.gather(*(lane.call("PING") for _ in range(20)))
+            assert got == list(range(2, 22)) and len(writes) == 1
+            packed = [asyncio.ensure_future(lane.call("PING")) for _ in range(3)]
+            await asyncio.sleep(0)  # the calls packed, not yet written
+            lane._lost(LaneError("dropped"))
+            for call in packed:
+                with pytest.raises(LaneError, match="dropped"):
+                    await call
+            assert len(writes) == 1  # nothing went out on the dropped connection
+            assert await lane.call("PING") == 22  # a new connection, the same server
+            await lane.close()
+
+    run_async(run())
+
+
 def test_a_call_without_an_answer_fails_after_the_timeout_and_the_next_connects_again() -> None:
     async def run() -> None:
         silent, port, seen = await _server(answer=False)
