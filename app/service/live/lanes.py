@@ -5,8 +5,11 @@ Every event is one script call (:mod:`app.service.live.shared`). Through redis-p
 client a call cost this worker 110-250 us of CPU (its pool, its locks and checks: measured
 in docs/PERFORMANCE.md, "Workers"), most of a REST event's budget; a :class:`Lane` packs the
 command with hiredis (the C parser redis-py itself uses), writes it, and matches answers to
-callers in the order Redis sends them, which is the order they were written. Everything else
-(reads, admin, the sweep) goes through redis-py.
+callers in the order Redis sends them, which is the order they were written. The commands
+packed in one step of the event loop (the events of every request the step handled) go out in
+one write at its end: Redis reads them together and answers them together (2.2 events a read
+instead of one, one worker under 16 REST connections: ``benchmarks/bench_redis_costs.py``).
+Everything else (reads, admin, the sweep) goes through redis-py.
 
 A lane that loses its connection fails the calls in flight (the caller answers 503, a retry
 with the same step is safe) and connects again at the next call; a call that gets no answer
