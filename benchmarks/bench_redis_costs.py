@@ -4,14 +4,16 @@ commit script of a REST event (its commands and the script around them).
 
     python benchmarks/bench_redis_costs.py [--seconds 8]
 
-1. In process (no Redis): a session on the shipped maze per strategy and window, fed random
-   walks in 500-event batches until its window is full; its state as ``codec.dump`` writes it
-   and as ``codec.packed`` sends it (with the time packing takes, median of 20), the last
-   batch's decision record plain and packed, and a one-event record.
+1. In process (no Redis): a session on the shipped maze per strategy and window (with the
+   parameters the codec's tests use), fed random walks in 500-event batches until its window
+   is full; its state as ``codec.dump`` writes it and as ``codec.packed`` sends it (with the
+   time packing takes, median of 20), the last batch's decision record plain and packed, and
+   a one-event record.
 2. Against the Redis at ``ADVISOR_REDIS_URL`` (default 127.0.0.1:6379; skipped, saying so, when
    it does not answer): one worker, the sticky REST load of ``bench_workers.py``; Redis'
-   ``INFO commandstats`` over the measured seconds, per request, and a script that returns at
-   once with the same arguments as the commit, for the script's fixed cost.
+   ``INFO commandstats`` over the measured seconds, per request, its own CPU and the events a
+   read of its sockets carries, and a script that returns at once with the same arguments as
+   the commit, for the script's fixed cost.
 """
 
 from __future__ import annotations
@@ -29,24 +31,17 @@ import redis
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from app.advice.strategies import STRATEGIES, StrategyParams
+from app.advice.strategies import STRATEGIES
 from app.service.config import Settings
 from app.service.live.codec import decision_record, dump, packed, packed_record, replay_record
 from app.service.state import open_state
 from benchmarks._load import create_sessions, run_wrk, start_advisor, write_sessions
 from benchmarks._report import arguments, machine
 from benchmarks.bench_workers import CONNECTIONS, STICKY_LUA, walk
+from tests.service.live.test_codec import params_for  # the sessions the codec tests round-trip
 
 REDIS_URL = os.environ.get("ADVISOR_REDIS_URL", "redis://127.0.0.1:6379/0")
 PREFIX = "bench-redis-costs"
-
-
-def params_for(strategy: str) -> StrategyParams:
-    if strategy == "goal_aware":
-        return StrategyParams(beta=0.5)
-    if strategy == "random":
-        return StrategyParams(rate=0.3, seed=11)
-    return StrategyParams()
 
 
 def sizes() -> list[str]:

@@ -184,13 +184,12 @@ elseif cmd == 'commit' then
       kept = 0
     end
   end
+  redis.call('HSET', k, 'blob', blob, 'step', step, 'kept', kept)
   if renew then
-    redis.call('HSET', k, 'blob', blob, 'step', step, 'kept', kept, 'touched', now)
+    redis.call('HSET', k, 'touched', now)
     redis.call('PEXPIRE', k, ttl)
     redis.call('PEXPIRE', r, ttl)
     redis.call('PEXPIRE', r .. ':old', ttl)
-  else
-    redis.call('HSET', k, 'blob', blob, 'step', step, 'kept', kept)
   end
   redis.call('ZADD', p .. ':live', now, id)
   redis.call('HSET', p .. ':sum', id, summary)

@@ -13,16 +13,20 @@ from tests.client.test_client import run_async  # off the browser tests' loop
 
 
 async def _server(answer: bool) -> tuple[asyncio.Server, int, list[bytes]]:
-    """A server speaking just enough RESP: each command read is answered ``+OK`` (or never)."""
+    """A server speaking just enough RESP: each command read is answered with its number
+    (``:1``, ``:2``, ... counted over every connection), or never."""
     seen: list[bytes] = []
+    count = 0
 
     async def handle(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        nonlocal count
         try:
             while data := await reader.read(1 << 16):
                 seen.append(data)
                 if answer:
                     for _ in range(data.count(b"*")):  # one array header a command
-                        writer.write(b"+OK\r\n")
+                        count += 1
+                        writer.write(b":%d\r\n" % count)
                     await writer.drain()
         finally:
             writer.close()
@@ -40,7 +44,7 @@ def test_a_lane_answers_calls_in_order() -> None:
             await lane.close()
             return list(got)
 
-    assert run_async(run()) == [b"OK"] * 20
+    assert run_async(run()) == list(range(1, 21))
 
 
 def test_the_calls_of_one_step_of_the_loop_go_out_in_one_write_and_are_answered_in_order() -> None:
@@ -50,20 +54,8 @@ def test_the_calls_of_one_step_of_the_loop_go_out_in_one_write_and_are_answered_
     again."""
 
     async def run() -> None:
-        count = 0
-
-        async def handle(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-            nonlocal count
-            while data := await reader.read(1 << 16):
-                for _ in range(data.count(b"*")):  # one array header a command: its number
-                    count += 1
-                    writer.write(b":%d\r\n" % count)
-                await writer.drain()
-            writer.close()
-
-        server = await asyncio.start_server(handle, "127.0.0.1", 0)
+        server, port, _ = await _server(answer=True)
         async with server:
-            port = server.sockets[0].getsockname()[1]
             lane = Lane(f"redis://127.0.0.1:{port}/0", timeout=5.0)
             assert await lane.call("PING") == 1  # connected
             wire = lane._wire
@@ -103,7 +95,7 @@ def test_a_call_without_an_answer_fails_after_the_timeout_and_the_next_connects_
         talking, port2, _ = await _server(answer=True)
         async with talking:
             lane.options["port"] = port2  # the same lane, its server back
-            assert await lane.call("PING") == b"OK"
+            assert await lane.call("PING") == 1
             await lane.close()
 
     run_async(run())
