@@ -31,14 +31,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import numpy.typing as npt
 from numba import njit
 
-FloatArray = npt.NDArray[np.float64]
-IntArray = npt.NDArray[np.int64]
-BoolArray = npt.NDArray[np.bool_]
-KeyArray = npt.NDArray[np.int32]
-FlagArray = npt.NDArray[np.uint8]
+from app.arrays import BoolArray, ByteArray, FloatArray, IntArray, KeyArray
+
 Tables = tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]
 GoalTables = tuple[IntArray, float, FloatArray, FloatArray, FloatArray]
 #: (next_state (S, 4), open moves per state (S,), cells (S, 2), distance to each destination
@@ -238,7 +234,7 @@ def goal_decide(
 # ---- the service's batches: the window as pair keys -------------------------------------------
 @njit(cache=True)
 def observe_stream(
-    window: tuple[KeyArray, FlagArray, FloatArray],
+    window: tuple[KeyArray, ByteArray, FloatArray],
     loglik: FloatArray,
     pos: int,
     steps: int,
@@ -306,7 +302,7 @@ def observe_stream(
 
 @njit(cache=True)
 def keep_values(
-    keys: KeyArray, kept: FlagArray, old: FloatArray, log_probs: FloatArray
+    keys: KeyArray, kept: ByteArray, old: FloatArray, log_probs: FloatArray
 ) -> int:  # pragma: no cover
     """For each pair of the window whose value is not kept yet, keep its value under each
     model's ``log_probs`` (the tables it was added with) in ``old``; returns how many."""
@@ -324,8 +320,8 @@ def keep_values(
 # ---- the service's goal-aware sessions: both windows as pair keys -------------------------------
 @njit(cache=True, inline="always")
 def goal_push(
-    window: tuple[KeyArray, FlagArray, FloatArray],
-    goal_window: tuple[FlagArray, FloatArray],
+    window: tuple[KeyArray, ByteArray, FloatArray],
+    goal_window: tuple[ByteArray, FloatArray],
     loglik: FloatArray, goal_ll: FloatArray, alive: BoolArray, pos: int, steps: int,
     period: int, beta: float, log_probs: FloatArray, goals: GoalTables, s: int, a: int,
 ) -> tuple[int, int, int]:  # pragma: no cover - compiled  # fmt: skip
@@ -391,8 +387,8 @@ def goal_push(
 
 @njit(cache=True)
 def goal_append(
-    window: tuple[KeyArray, FlagArray, FloatArray],
-    goal_window: tuple[FlagArray, FloatArray],
+    window: tuple[KeyArray, ByteArray, FloatArray],
+    goal_window: tuple[ByteArray, FloatArray],
     loglik: FloatArray, goal_ll: FloatArray, alive: BoolArray, pos: int, steps: int,
     period: int, beta: float, log_probs: FloatArray, goals: GoalTables, s: int, a: int,
 ) -> tuple[int, int, int]:  # pragma: no cover - compiled  # fmt: skip
@@ -417,8 +413,8 @@ def goal_decision(
 
 @njit(cache=True)
 def goal_stream(
-    window: tuple[KeyArray, FlagArray, FloatArray],
-    goal_window: tuple[FlagArray, FloatArray],
+    window: tuple[KeyArray, ByteArray, FloatArray],
+    goal_window: tuple[ByteArray, FloatArray],
     sums: tuple[FloatArray, FloatArray, BoolArray],
     pos: int,
     steps: int,

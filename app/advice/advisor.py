@@ -28,11 +28,8 @@ import numpy.typing as npt
 
 from app.advice.models import AdviceTables
 from app.advice.priors import GoalPriors
+from app.arrays import BoolArray, FloatArray, IntArray
 from app.domain.grid import N_ACTIONS
-
-FloatArray = npt.NDArray[np.float64]
-IntArray = npt.NDArray[np.int64]
-BoolArray = npt.NDArray[np.bool_]
 
 DEFAULT_KAPPA = 0.5
 DEFAULT_WINDOW = 300

@@ -17,11 +17,8 @@ import numpy.typing as npt
 
 from app.advice.advisor import DEFAULT_KAPPA, DEFAULT_WINDOW, check_kappa_window, resync_period
 from app.advice.models import AdviceTables
+from app.arrays import BoolArray, FloatArray, IntArray
 from app.domain.grid import N_ACTIONS
-
-FloatArray = npt.NDArray[np.float64]
-IntArray = npt.NDArray[np.int64]
-BoolArray = npt.NDArray[np.bool_]
 
 
 @dataclass(frozen=True)

@@ -68,15 +68,12 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import numpy.typing as npt
 
 from app.advice.advisor import DEFAULT_KAPPA, DEFAULT_WINDOW, Advisor, Decision
 from app.advice.models import AdviceTables
 from app.advice.priors import GoalPriors
+from app.arrays import FloatArray, IntArray
 from app.domain.grid import N_ACTIONS, GridDomain, compass_detours_each
-
-FloatArray = npt.NDArray[np.float64]
-IntArray = npt.NDArray[np.int64]
 
 #: probability mass the open-moves lost model gives to bumping into walls
 LOST_BUMP = 0.02

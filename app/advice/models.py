@@ -18,9 +18,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
+from app.arrays import FloatArray
 from app.domain.grid import N_ACTIONS
-
-FloatArray = npt.NDArray[np.float64]
 
 
 @dataclass(frozen=True)

@@ -21,10 +21,9 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from app.arrays import FloatArray, IntArray
 from app.domain.grid import N_ACTIONS
 
-FloatArray = npt.NDArray[np.float64]
-IntArray = npt.NDArray[np.int64]
 TrajectoryLike = npt.ArrayLike  # (T, 2) int pairs (state, action)
 
 

@@ -40,11 +40,9 @@ from typing import ClassVar
 import numpy as np
 import numpy.typing as npt
 
+from app.arrays import BoolArray, FloatArray
 from app.domain.grid import N_ACTIONS, GridDomain
 from app.domain.paths import optimal_actions
-
-FloatArray = npt.NDArray[np.float64]
-BoolArray = npt.NDArray[np.bool_]
 
 #: Names of the fixed-policy explorers, in the order used by the experiments and kernels.
 FIXED_EXPLORERS: tuple[str, ...] = ("random", "random-avoid", "left", "bug", "optimal")

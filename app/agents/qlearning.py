@@ -25,12 +25,11 @@ from __future__ import annotations
 from typing import Literal
 
 import numpy as np
-import numpy.typing as npt
 
 from app.agents.explorers import sample_action, uniform_choice
+from app.arrays import FloatArray
 from app.domain.grid import N_ACTIONS, GridDomain
 
-FloatArray = npt.NDArray[np.float64]
 TieRule = Literal["advice", "uniform"]
 TIE_RULES: tuple[str, ...] = ("advice", "uniform")
 GOAL_REWARD = 1000.0

@@ -15,7 +15,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import numpy.typing as npt
 
 from app import kernels
 from app.advice.advisor import DEFAULT_KAPPA, DEFAULT_WINDOW, check_kappa_window, resync_period
@@ -25,12 +24,9 @@ from app.advice.priors import GoalPriors
 from app.advice.strategies import STRATEGIES, StrategyParams, guide_params
 from app.agents.explorers import FIXED_EXPLORERS
 from app.agents.qlearning import TIE_RULES
+from app.arrays import BoolArray, FloatArray, IntArray
 from app.domain.grid import GridDomain
 from app.domain.paths import optimal_actions
-
-FloatArray = npt.NDArray[np.float64]
-IntArray = npt.NDArray[np.int64]
-BoolArray = npt.NDArray[np.bool_]
 
 #: the kernels' codes for the explorers and the strategies, by name
 EXPLORER_CODES = {

@@ -21,7 +21,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from app.domain.grid import FREE, GOAL, START, WALL, BoolArray, GridDomain
+from app.arrays import BoolArray
+from app.domain.grid import FREE, GOAL, START, WALL, GridDomain
 from app.domain.place import components, place
 
 

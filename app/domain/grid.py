@@ -27,7 +27,8 @@ from functools import cached_property
 from pathlib import Path
 
 import numpy as np
-import numpy.typing as npt
+
+from app.arrays import BoolArray, IntArray
 
 ACTIONS: tuple[str, ...] = ("N", "E", "S", "W")
 N, E, S, W = 0, 1, 2, 3
@@ -39,9 +40,6 @@ ARROWS = ("^", ">", "v", "<")
 WALL, FREE, START, GOAL = "#", ".", "S", "G"
 MAP_CHARACTERS = (WALL, FREE, START, GOAL)
 UNREACHABLE = -1
-
-IntArray = npt.NDArray[np.int64]
-BoolArray = npt.NDArray[np.bool_]
 
 
 class MapError(ValueError):

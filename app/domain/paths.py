@@ -13,13 +13,10 @@ from __future__ import annotations
 from typing import Literal, NamedTuple
 
 import numpy as np
-import numpy.typing as npt
 
+from app.arrays import BoolArray, FloatArray, IntArray
 from app.domain.grid import N_ACTIONS, GridDomain
 
-IntArray = npt.NDArray[np.int64]
-FloatArray = npt.NDArray[np.float64]
-BoolArray = npt.NDArray[np.bool_]
 TrajectorySource = Literal["start", "anywhere"]
 TRAJECTORY_SOURCES: tuple[str, ...] = ("start", "anywhere")
 

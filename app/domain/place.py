@@ -19,7 +19,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from app.domain.grid import FREE, GOAL, MOVES, START, WALL, BoolArray, IntArray, MapError
+from app.arrays import BoolArray, IntArray
+from app.domain.grid import FREE, GOAL, MOVES, START, WALL, MapError
 
 Cell = tuple[int, int]
 

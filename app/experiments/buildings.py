@@ -40,7 +40,6 @@ from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
-import numpy.typing as npt
 from matplotlib.figure import Figure
 from tqdm import tqdm
 
@@ -49,13 +48,13 @@ from app.advice.strategies import StrategyParams
 from app.agents.experts import train_goal_priors
 from app.agents.explorers import FIXED_EXPLORERS
 from app.agents.simulate import Simulator
+from app.arrays import FloatArray
 from app.domain.generate import generate_building_domain
 from app.domain.grid import GridDomain, compass_detours_each
 from app.domain.maps import DEFAULT_MAP
 from app.experiments.common import CommonArgs, LearningArgs, rng_for, wilson
 from app.experiments.output import RunDir, header, markdown_table
 
-FloatArray = npt.NDArray[np.float64]
 Z95 = 1.959963984540054
 CURVES = ("none", "paper", "goal_aware", "guide")
 COLOURS = {"paper": "tab:blue", "goal_aware": "tab:red", "guide": "tab:green"}

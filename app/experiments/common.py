@@ -20,11 +20,9 @@ from app.advice.models import AdviceTables
 from app.advice.priors import ActionPrior
 from app.agents.experts import EXPERT_SOURCES, ExpertSource, train_prior
 from app.agents.simulate import QParams, Simulator
+from app.arrays import FloatArray, IntArray
 from app.domain.grid import GridDomain
 from app.domain.maps import DEFAULT_MAP
-
-FloatArray = npt.NDArray[np.float64]
-IntArray = npt.NDArray[np.int64]
 
 
 @dataclass

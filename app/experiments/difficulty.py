@@ -19,15 +19,13 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 
 from app.agents.explorers import LeftExplorer
+from app.arrays import FloatArray
 from app.domain.grid import GridDomain
 from app.experiments.common import CommonArgs, prepare, rng_for
 from app.experiments.output import RunDir, header, markdown_table
 from app.experiments.traps import dead_end_masks
-
-FloatArray = npt.NDArray[np.float64]
 
 
 @dataclass

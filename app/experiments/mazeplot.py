@@ -3,14 +3,11 @@
 from __future__ import annotations
 
 import numpy as np
-import numpy.typing as npt
 from matplotlib.axes import Axes
 from matplotlib.colors import ListedColormap, LogNorm, Normalize, PowerNorm
 
+from app.arrays import BoolArray, FloatArray
 from app.domain.grid import GridDomain
-
-FloatArray = npt.NDArray[np.float64]
-BoolArray = npt.NDArray[np.bool_]
 
 #: The heat map's colours: yellow (few visits) to dark red (most).
 HEAT_CMAP = "YlOrRd"

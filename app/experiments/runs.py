@@ -10,18 +10,15 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import numpy.typing as npt
 from tqdm import tqdm
 
 from app.agents.qlearning import QLearningExplorer
+from app.arrays import BoolArray, FloatArray, IntArray
 from app.experiments.common import CommonArgs, LearningArgs, Setup, rng_for
 from app.experiments.traps import LAST_N, dead_end_masks, other_dead_end_share, trap_goal
 
 ONE_SHOT_STREAM = "one-shot"
 LEARNING_STREAM = "learning"
-FloatArray = npt.NDArray[np.float64]
-IntArray = npt.NDArray[np.int64]
-BoolArray = npt.NDArray[np.bool_]
 
 
 @dataclass

@@ -36,10 +36,10 @@ from dataclasses import asdict
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 from matplotlib.figure import Figure
 
 from app.agents.explorers import FIXED_EXPLORERS
+from app.arrays import FloatArray
 from app.experiments.common import wilson
 from app.experiments.output import RunDir, header, markdown_table
 from app.experiments.strategy_suite import (
@@ -53,7 +53,6 @@ from app.experiments.strategy_suite import (
     run_all,
 )
 
-FloatArray = npt.NDArray[np.float64]
 SCOPES = ("suite", "file", "perfect", "braided")
 Z95 = 1.959963984540054
 #: The target explorers of the issue's first target.

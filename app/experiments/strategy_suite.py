@@ -19,12 +19,12 @@ from app.advice.strategies import StrategyParams
 from app.agents.experts import train_goal_priors
 from app.agents.explorers import FIXED_EXPLORERS
 from app.agents.simulate import Simulator
+from app.arrays import FloatArray
 from app.domain.generate import generate_domain
 from app.domain.grid import GridDomain
 from app.experiments.common import CommonArgs, rng_for
 from app.experiments.traps import dead_end_masks, other_dead_end_share, trap_goal
 
-FloatArray = npt.NDArray[np.float64]
 #: Curves in the order of tables and plots (``none``: no advice given).
 CURVES = ("none", "paper", "goal_aware", "early", "importance", "mistake", "random", "always")
 #: The parameter each curve's cost level sets.

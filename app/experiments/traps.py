@@ -14,12 +14,10 @@ back in; this measures how often that ends a task.
 from __future__ import annotations
 
 import numpy as np
-import numpy.typing as npt
 
+from app.arrays import BoolArray, IntArray
 from app.domain.grid import GridDomain
 
-BoolArray = npt.NDArray[np.bool_]
-IntArray = npt.NDArray[np.int64]
 TRAP_SHARE = 0.5
 LAST_N = 500
 

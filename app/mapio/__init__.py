@@ -12,7 +12,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
-from app.domain.grid import BoolArray, Frame, MapError
+from app.arrays import BoolArray
+from app.domain.grid import Frame, MapError
 
 Format = Literal["auto", "movingai", "ros", "image"]
 FORMATS: tuple[str, ...] = ("auto", "movingai", "ros", "image")

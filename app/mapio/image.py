@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from app.domain.grid import BoolArray
+from app.arrays import BoolArray
 from app.domain.place import components
 from app.mapio import Imported, MapImportError
 from app.mapio.raster import merge_cells, read_image

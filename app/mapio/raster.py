@@ -8,7 +8,7 @@ import numpy as np
 import numpy.typing as npt
 from PIL import Image, UnidentifiedImageError
 
-from app.domain.grid import BoolArray
+from app.arrays import BoolArray
 from app.mapio import MapImportError
 
 #: images larger than this many pixels are refused (a 20,000 x 20,000 map at 5 cm is 1 km wide)

@@ -9,7 +9,6 @@ from __future__ import annotations
 import json
 
 import numpy as np
-import numpy.typing as npt
 import orjson
 
 from app.advice.advisor import Decision, DecisionBatch
@@ -17,6 +16,7 @@ from app.advice.guide import GuideMap
 from app.advice.models import AdviceTables
 from app.advice.priors import GoalPriors
 from app.advice.strategies import StrategyParams, guide_params, strategy_params
+from app.arrays import IntArray
 from app.domain.grid import ACTIONS, Frame, GridDomain, MapError
 from app.domain.paths import expert_trajectories, path_within
 from app.service.data.domains import DomainNotFound, DomainState
@@ -47,7 +47,6 @@ from app.service.state import ServiceState
 from app.service.wire.encode import batch_binary, batch_json, decision_json, theta_text
 from app.service.wire.events import read_move, read_moves
 
-IntArray = npt.NDArray[np.int64]
 #: an expert walk's longest (``expert_trajectory``'s default ``max_steps``)
 EXPERT_MAX_STEPS = 10_000
 

@@ -14,11 +14,8 @@ from itertools import chain
 import numpy as np
 import numpy.typing as npt
 
+from app.arrays import BoolArray, FloatArray, IntArray
 from app.domain.grid import N_ACTIONS, GridDomain
-
-FloatArray = npt.NDArray[np.float64]
-IntArray = npt.NDArray[np.int64]
-BoolArray = npt.NDArray[np.bool_]
 
 #: Heading of each action in the plane (radians from +x), in the order N, E, S, W.
 ACTION_ANGLES = np.array([np.pi / 2, 0.0, -np.pi / 2, np.pi])

@@ -22,12 +22,11 @@ import numpy.typing as npt
 import viser
 from viser import BatchedMeshHandle, ImageHandle, SceneNodeHandle
 
+from app.arrays import FloatArray
 from app.domain.grid import GridDomain
 from app.viewer import geometry as geo
 from app.viewer.sessions import FLOOR_COLOUR, SessionLayers
 from app.viewer.state import SessionView
-
-FloatArray = npt.NDArray[np.float64]
 
 LAYERS = ("prior", "shading", "paths", "markers", "advice")
 WALL_HEIGHT = 0.6

@@ -15,15 +15,13 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 
 import numpy as np
-import numpy.typing as npt
 import viser
 from viser import SceneNodeHandle
 
+from app.arrays import FloatArray
 from app.domain.grid import GridDomain
 from app.viewer import geometry as geo
 from app.viewer.state import SessionView
-
-FloatArray = npt.NDArray[np.float64]
 
 FLOOR_COLOUR = (236, 233, 224)
 #: Distinct colours; a session keeps its colour while it lives, a new one takes the least used.

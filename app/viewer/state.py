@@ -13,12 +13,9 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
-import numpy as np
-import numpy.typing as npt
-
+from app.arrays import FloatArray
 from app.domain.grid import GridDomain
 
-FloatArray = npt.NDArray[np.float64]
 Cell = tuple[int, int]
 Probabilities = tuple[float, float, float, float]
 

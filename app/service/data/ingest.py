@@ -10,15 +10,14 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
-import numpy.typing as npt
 from pydantic import TypeAdapter, ValidationError
 
+from app.arrays import IntArray
 from app.domain.grid import GridDomain
 from app.service.data.store import Trajectory
 from app.service.problems import BadInput, describe_errors
 from app.service.schemas import ACTION_CODE, TrajectoriesCreate
 
-IntArray = npt.NDArray[np.int64]
 BODY = TypeAdapter(TrajectoriesCreate)
 
 

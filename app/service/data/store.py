@@ -49,8 +49,8 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 
 from app.advice.priors import ActionPrior, trajectory_counts
+from app.arrays import IntArray
 
-IntArray = npt.NDArray[np.int64]
 POOLED = ActionPrior.POOLED
 RETRIES = 5
 

@@ -16,8 +16,8 @@ import numpy as np
 import numpy.typing as npt
 
 from app.advice.models import AdviceTables
+from app.arrays import IntArray
 
-IntArray = npt.NDArray[np.int64]
 Advice = tuple[float, float, float, float]
 
 

@@ -32,14 +32,13 @@ from app.advice.guide import GuideMap
 from app.advice.models import AdviceTables
 from app.advice.priors import GoalPriors
 from app.advice.strategies import StrategyParams, guide_params
+from app.arrays import Moves
 from app.service.data.domains import DomainState
 from app.service.live.history import Advice, AdviceLog, Recent
 from app.service.live.replay import DEFAULT_STEPS, Replay, retried
 from app.service.live.stream import StreamAdvisor, StreamGoalAware, StreamGuide, StreamRule
 from app.service.security import token_digest
 
-IntArray = npt.NDArray[np.int64]
-Moves = tuple[IntArray, IntArray, IntArray]
 RECENT_ADVICE = 50
 
 

@@ -18,13 +18,12 @@ import numpy as np
 import numpy.typing as npt
 
 from app.advice.advisor import Decision, DecisionBatch
+from app.arrays import Moves
 
 ROW = np.dtype(
     [("state", "<i4"), ("advise", "u1"), ("kl", "<f8"), ("p", "<f8"), ("advice", "<f8", (4,))]
 )
 DEFAULT_STEPS = 500
-IntArray = npt.NDArray[np.int64]
-Moves = tuple[IntArray, IntArray, IntArray]
 
 
 class StepConflict(ValueError):

@@ -22,13 +22,13 @@ from starlette.concurrency import run_in_threadpool
 
 from app.advice.advisor import Decision, DecisionBatch
 from app.advice.strategies import StrategyParams
+from app.arrays import Moves
 from app.service.data.domains import DomainCatalog, DomainNotFound, DomainState
 from app.service.data.store import Store
 from app.service.live import codec
 from app.service.live.registry import (
     Aggregate,
     LiveSession,
-    Moves,
     SessionRegistry,
     SessionSnapshot,
 )

@@ -49,6 +49,7 @@ from starlette.concurrency import run_in_threadpool
 
 from app.advice.advisor import Decision, DecisionBatch
 from app.advice.strategies import StrategyParams
+from app.arrays import Moves
 from app.service.data.domains import DomainCatalog, DomainNotFound, DomainState
 from app.service.live import codec
 from app.service.live.lanes import Lane
@@ -56,7 +57,6 @@ from app.service.live.registry import (
     Aggregate,
     ClientQuotaReached,
     LiveSession,
-    Moves,
     SessionMemoryFull,
     SessionNotFound,
     SessionRegistry,

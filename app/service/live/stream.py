@@ -27,10 +27,8 @@ from app.advice.goals import GoalAwareAdvisor
 from app.advice.guide import GuideAdvisor, GuideParams, kernel_params
 from app.advice.models import AdviceTables
 from app.advice.strategies import RuleAdvisor
+from app.arrays import FloatArray, IntArray
 from app.domain.grid import N_ACTIONS
-
-IntArray = npt.NDArray[np.int64]
-FloatArray = npt.NDArray[np.float64]
 
 _NO_RING = np.zeros((0, 0))  # no value kept: the window's values are those of the tables
 _NO_ADVICE = np.zeros((0, N_ACTIONS))

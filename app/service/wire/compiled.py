@@ -28,12 +28,9 @@ the bytes are those of the one-event answer, which orjson writes whole.
 from __future__ import annotations
 
 import numpy as np
-import numpy.typing as npt
 from numba import njit
 
-IntArray = npt.NDArray[np.int64]
-ByteArray = npt.NDArray[np.uint8]
-BoolArray = npt.NDArray[np.bool_]
+from app.arrays import BoolArray, ByteArray, IntArray
 
 # byte values
 _SPACE, _TAB, _LF, _CR = 32, 9, 10, 13

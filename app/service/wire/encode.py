@@ -18,16 +18,14 @@ import weakref
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 import orjson
 from advisor_client import protocol
 
 from app.advice.advisor import Decision, DecisionBatch
 from app.advice.models import AdviceTables
+from app.arrays import IntArray
 from app.domain.grid import GridDomain
 from app.service.wire.compiled import tokens, write_decisions
-
-IntArray = npt.NDArray[np.int64]
 
 NUMPY = orjson.OPT_SERIALIZE_NUMPY
 

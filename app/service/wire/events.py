@@ -29,17 +29,15 @@ from itertools import chain
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 from pydantic import TypeAdapter, ValidationError
 
+from app.arrays import IntArray, Moves
 from app.domain.grid import GridDomain
 from app.service.problems import BadInput, describe_errors
 from app.service.schemas import ACTION_CODE, EventIn
 from app.service.wire import compiled
 from app.service.wire.compiled import check_moves, scan_events
 
-IntArray = npt.NDArray[np.int64]
-Moves = tuple[IntArray, IntArray, IntArray]
 Scanned = tuple[IntArray, IntArray, IntArray, IntArray]
 
 EVENT = TypeAdapter(EventIn)

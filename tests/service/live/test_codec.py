@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 
 from app.advice.advisor import DecisionBatch
 from app.advice.strategies import STRATEGIES, StrategyParams
+from app.arrays import Moves
 from app.service.data.domains import DomainState
 from app.service.data.store import Trajectory
 from app.service.live.codec import (
@@ -32,8 +33,6 @@ from app.service.live.codec import (
 from app.service.live.registry import Limits, LiveSession, SessionRegistry
 from app.service.security import token_digest
 from app.service.state import ServiceState
-
-Moves = tuple[np.ndarray, np.ndarray, np.ndarray]
 
 
 def walk(domain: DomainState, start: int, n: int, rng: np.random.Generator) -> Moves:
