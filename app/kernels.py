@@ -17,7 +17,7 @@ kernel                    the readable form (and its test)
 ``observe_stream``        a batch of ``Advisor.observe`` for the service's ``StreamAdvisor``
 ``goal_stream``           a batch of ``GoalAwareAdvisor.observe`` for ``StreamGoalAware``
 ``episode``               ``run_episode`` (app/agents/episodes.py) with the explorers of
-                          app/agents/explorers.py and every advisor of ``make_advisor``
+                          app/agents/explorers.py and every compiled strategy's advisor
 ``q_learning``            ``run_learning`` with ``QLearningExplorer`` (app/agents/qlearning.py)
 ========================  ====================================================================
 
@@ -46,7 +46,7 @@ GuideParams = tuple[float, float, float, float, float, int]
 
 #: explorer kinds, in the order of app.agents.explorers.FIXED_EXPLORERS
 RANDOM, RANDOM_AVOID, LEFT, BUG, OPTIMAL = 0, 1, 2, 3, 4
-#: strategies, in the order of app.advice.strategies.STRATEGIES
+#: the strategies' compiled forms (each entry of app/strategies/table.py names its code)
 PAPER, GOAL_AWARE, EARLY, IMPORTANCE, MISTAKE, RANDOM_RULE, ALWAYS, GUIDE = 0, 1, 2, 3, 4, 5, 6, 7
 
 

@@ -37,6 +37,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from app.domain.generate import generate_building_domain
 from app.domain.grid import ACTIONS, GridDomain
 from app.service.config import Settings
+from app.service.live.registry import SessionSettings
 from app.service.main import create_app
 from app.service.state import ServiceState
 from app.viewer.remote import RemoteFeed
@@ -69,7 +70,7 @@ def bench_viewer(grid: GridDomain, n_sessions: int, ticks: int) -> dict[str, flo
             state.catalog.guide_map(domain)
             guide_ms = (time.perf_counter() - t0) * 1e3
             for _ in range(n_sessions):
-                state.registry.create(domain, 0.5, 300, None, grid.start, "guide")
+                state.registry.create(domain, SessionSettings.of("guide"))
             rng = np.random.default_rng(0)
             advance(state, rng, 300)
             viewer = Viewer(RemoteFeed(client, state.operator_key), port=free_port())

@@ -31,10 +31,11 @@ import redis
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from app.advice.strategies import STRATEGIES
 from app.service.config import Settings
 from app.service.live.codec import decision_record, dump, packed, packed_record, replay_record
+from app.service.live.registry import SessionSettings
 from app.service.state import open_state
+from app.strategies import STRATEGIES
 from benchmarks._load import create_sessions, run_wrk, start_advisor, write_sessions
 from benchmarks._report import arguments, machine
 from benchmarks.bench_workers import CONNECTIONS, STICKY_LUA, walk
@@ -60,7 +61,8 @@ def sizes() -> list[str]:
             for strategy in STRATEGIES:
                 for window in (300, 10_000):
                     s, _ = reg.create(
-                        domain, 0.3, window, None, grid.start, strategy, params_for(strategy)
+                        domain,
+                        SessionSettings.of(strategy, 0.3, window, params_for(strategy)),
                     )
                     here, last = grid.start, None
                     for _ in range(window // 500 + 1):

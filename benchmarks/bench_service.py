@@ -217,8 +217,15 @@ def bench_parts(tmp: Path, repeats: int) -> dict[str, float]:
     grid = domain.domain
     frames = frames_for(grid, 7)
     limit = state.settings.max_batch_events
-    session, _ = asyncio.run(ops.create_session(state, domain, SessionCreate()))
+    session, _ = asyncio.run(ops.open_session(state, domain, SessionCreate()))
     moves = [read_moves(grid, f, limit)[0] for f in frames]
+
+    def everything(frame: str | bytes, binary: bool) -> bytes:
+        """What the event routes do with a batch (in one slice): read, decide, write."""
+        got, _, first = read_moves(grid, frame, limit)
+        decided = state.registry.observe_batch(session, got, first)
+        return batch_binary(decided, grid) if binary else batch_json(decided, grid)
+
     ops.warm_up()
     libm_only(np.random.default_rng(0).random(FRAME) + 0.5)
     advisor = session.advisor
@@ -234,8 +241,8 @@ def bench_parts(tmp: Path, repeats: int) -> dict[str, float]:
         "encode_json_orjson": lambda i: orjson.dumps(
             [decision_dict(d, grid) for d in out.decisions()]
         ),
-        "all_binary": lambda i: ops.apply_events_binary(state, session, frames[i % len(frames)]),
-        "all_json": lambda i: ops.apply_events(state, session, frames[i % len(frames)]),
+        "all_binary": lambda i: everything(frames[i % len(frames)], True),
+        "all_json": lambda i: everything(frames[i % len(frames)], False),
     }
     res: dict[str, list[float]] = {}
     for _ in range(repeats):
@@ -594,8 +601,8 @@ def parts_report(p: dict[str, float], ws: dict[str, Any] | None) -> list[str]:
         ("encode_binary", "write the binary answer"),
         ("encode_json", "write the JSON answer (orjson's numbers, laid out by a compiled loop)"),
         ("encode_json_orjson", "the same JSON written by orjson from a list of dicts alone"),
-        ("all_binary", "everything, binary answer (`ops.apply_events_binary`)"),
-        ("all_json", "everything, JSON answer (`ops.apply_events`)"),
+        ("all_binary", "everything, binary answer (read, decide, write)"),
+        ("all_json", "everything, JSON answer (read, decide, write)"),
     ]
     out += [f"| {label} | {p[k]:.1f} | {p[k] / FRAME * 1e3:.0f} ns |" for k, label in names]
     if ws is not None:

@@ -44,6 +44,7 @@ from fastapi.testclient import TestClient
 from app.domain.grid import ACTIONS, GridDomain
 from app.domain.maps import DEFAULT_MAP
 from app.service.config import Settings
+from app.service.live.registry import SessionSettings
 from app.service.main import create_app
 from app.service.state import ServiceState
 from app.viewer.remote import RemoteFeed
@@ -93,7 +94,9 @@ def bench_in_process(n_sessions: int, repeats: int) -> dict[str, float]:
             state: ServiceState = client.app.state.service  # type: ignore[attr-defined]
             domain = state.catalog.get("default")
             for _ in range(n_sessions):
-                state.registry.create(domain, 0.5, 300, None, domain.domain.start)
+                state.registry.create(
+                    domain, SessionSettings.of("paper", 0.5, 300, start=domain.domain.start)
+                )
             rng = np.random.default_rng(0)
             advance(state, rng, 300)  # full recent path / p_normal / advice history
             feed = RemoteFeed(client, state.operator_key)

@@ -68,7 +68,7 @@ async def run(runs: int) -> tuple[float, float]:
                                "action": "E"}).encode()  # fmt: skip
             targets = []
             for _ in range(64):
-                session, _ = asyncio.run(ops.create_session(state, domain, SessionCreate()))
+                session, _ = asyncio.run(ops.open_session(state, domain, SessionCreate()))
                 headers = [(b"authorization", f"Bearer {session.token}".encode()),
                            (b"content-type", b"application/json"),
                            (b"content-length", str(len(body)).encode())]  # fmt: skip

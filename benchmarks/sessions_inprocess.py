@@ -23,6 +23,7 @@ from app.service import ops
 from app.service.config import Settings
 from app.service.schemas import SessionCreate
 from app.service.state import open_state
+from app.service.wire.events import read_moves
 from benchmarks._report import arguments
 
 
@@ -41,8 +42,9 @@ def main() -> None:
         events = b"[" + b",".join([b'{"state":[28,0],"action":"E"}',
                                    b'{"state":[28,1],"action":"W"}'] * 100) + b"]"  # fmt: skip
         for _ in range(n):
-            session, _ = asyncio.run(ops.create_session(state, domain, SessionCreate()))
-            ops.apply_events(state, session, events)
+            session, _ = asyncio.run(ops.open_session(state, domain, SessionCreate()))
+            moves, _, _ = read_moves(domain.domain, events, len(events))
+            state.registry.observe_batch(session, moves)
         tracked = len(gc.get_objects())
         full = []
         for _ in range(3):

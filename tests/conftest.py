@@ -3,8 +3,13 @@
 from __future__ import annotations
 
 import os
+from pathlib import Path
 
+import numpy as np
+import pytest
 from hypothesis import HealthCheck, settings
+
+from app.domain.generate import generate_maze
 
 settings.register_profile(
     "default", max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow]
@@ -17,3 +22,13 @@ settings.register_profile(
     suppress_health_check=[HealthCheck.too_slow],
 )
 settings.load_profile("ci" if os.environ.get("CI") else "default")
+
+
+@pytest.fixture(scope="session")
+def small_maze(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A map file for the experiments: any valid map works, so a generated 11x11 maze with 3
+    goals, not the shipped one."""
+    path = tmp_path_factory.mktemp("maze") / "small.txt"
+    rows = generate_maze(11, 11, np.random.default_rng(4), braid=0.3, n_goals=3)
+    path.write_text("\n".join(rows) + "\n")
+    return path

@@ -28,10 +28,17 @@ MAY_IMPORT: dict[str, set[str]] = {
     "app.domain": set(),
     "app.advice": {"app.domain"},
     "app.mapio": {"app.domain"},  # file formats (Pillow, PyYAML) read into the core's grids
-    "app.agents": {"app.domain", "app.advice", "app.kernels"},
-    "app.experiments": {"app.domain", "app.advice", "app.kernels", "app.agents"},
-    "app.service": {"app.domain", "app.advice", "app.kernels", "advisor_client.protocol"},
-    "app.service.viewer_feed": {"app.viewer"},  # the one adapter between the two
+    # the strategies' table: each entry's readable advisor, served form and compiled form
+    "app.strategies": {"app.domain", "app.advice", "app.kernels"},
+    "app.agents": {"app.domain", "app.advice", "app.kernels", "app.strategies"},
+    "app.experiments": {"app.domain", "app.advice", "app.kernels", "app.strategies", "app.agents"},
+    "app.service": {
+        "app.domain",
+        "app.advice",
+        "app.kernels",
+        "app.strategies",
+        "advisor_client.protocol",
+    },
     "app.viewer": {"app.domain", "app.advice"},
 }
 #: what every part of app/ may import: the array types (numpy's typing only)

@@ -25,6 +25,7 @@ class GoalAwareAdvisor(Advisor):
     app/kernels.py:goal_posterior and goal_decide are the same arithmetic, compiled.
     """
 
+    strategy = "goal_aware"
     own_advice = True
 
     __slots__ = ("_goal_ll", "_goal_pos", "_goal_ring", "alive", "beta", "priors")
@@ -44,10 +45,6 @@ class GoalAwareAdvisor(Advisor):
         self.priors = priors
         self.beta = float(beta)
         super().__init__(tables, kappa, window)
-
-    @property
-    def strategy(self) -> str:
-        return "goal_aware"
 
     def params(self) -> dict[str, int | float]:
         return {"beta": self.beta}

@@ -71,6 +71,7 @@ import numpy as np
 
 from app.advice.advisor import DEFAULT_KAPPA, DEFAULT_WINDOW, Advisor, Decision
 from app.advice.models import AdviceTables
+from app.advice.params import StrategyParams
 from app.advice.priors import GoalPriors
 from app.arrays import FloatArray, IntArray
 from app.domain.grid import N_ACTIONS, GridDomain, compass_detours_each
@@ -305,11 +306,17 @@ class GuideMap:
 @dataclass(frozen=True)
 class GuideParams:
     """guide's own parameters: their defaults, bounds and meaning are those of
-    :class:`app.advice.strategies.StrategyParams` (``guide_params`` makes one)."""
+    :class:`app.advice.params.StrategyParams` (:meth:`of` picks them out)."""
 
     p_lost: float
     slack: float
     spread: float
+
+    @classmethod
+    def of(cls, params: StrategyParams | None = None) -> GuideParams:
+        """guide's parameters of ``params`` (None: the defaults)."""
+        p = params or StrategyParams()
+        return cls(p.p_lost, p.slack, p.spread)
 
 
 def kernel_params(window: int, p: GuideParams) -> tuple[float, float, float, float, float, int]:
@@ -324,6 +331,7 @@ def kernel_params(window: int, p: GuideParams) -> tuple[float, float, float, flo
 class GuideAdvisor(Advisor):
     """Leads explorers that look lost to a destination of the map; see the module text."""
 
+    strategy = "guide"
     own_advice = True
 
     __slots__ = (
@@ -349,10 +357,6 @@ class GuideAdvisor(Advisor):
             raise ValueError("need 0 < p_lost < 1, 0 < slack <= 1 and 0 <= spread <= 1")
         super().__init__(tables, kappa, window)
         self._lam = kernel_params(self.window, p)[0]
-
-    @property
-    def strategy(self) -> str:
-        return "guide"
 
     def params(self) -> dict[str, int | float]:
         return {"p_lost": self.p_lost, "slack": self.slack, "spread": self.spread}

@@ -6,7 +6,7 @@ Plain Python, one step at a time: the obvious version the compiled kernels in
 One step (METHOD.md): the advisor has decided for the explorer's state ``s``; the explorer
 acts (sampling the advice, ``decision.advice``, if advised and ``advised`` is on), moves to
 ``s'``; reaching its goal ends the episode; otherwise the advisor appends (s, a) to its
-window and decides for ``s'``. Any advisor of :mod:`app.advice.strategies` can watch.
+window and decides for ``s'``. Any advisor of :mod:`app.strategies` can watch.
 With ``advised=False`` the advisor still watches (its P(M1 | H) is recorded) but its advice
 is not passed on.
 """

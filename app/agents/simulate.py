@@ -4,10 +4,11 @@
 >>> run = sim.fixed("random", goal, np.random.default_rng(0), advised=True, kappa=0.5)
 >>> run.success, run.steps, run.advice_count
 
-Every advising strategy of :func:`app.advice.strategies.make_advisor` runs in the same kernel
-(``strategy=``); ``goal_aware`` needs the per-goal counts (``goal_priors``). From equal
-generators a run makes the draws, moves and decisions of the reference loop
-(:func:`app.agents.episodes.run_episode`), which ``tests/agents/test_simulate.py`` checks.
+Every advising strategy of :mod:`app.strategies` with a compiled form runs in the same kernel
+(``strategy=``; one without runs the reference loop); ``goal_aware`` and ``guide`` need the
+per-goal counts (``goal_priors``). From equal generators a run makes the draws, moves and
+decisions of the reference loop (:func:`app.agents.episodes.run_episode`), which
+``tests/agents/test_simulate.py`` checks.
 """
 
 from __future__ import annotations
@@ -16,27 +17,24 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from app import kernels
-from app.advice.advisor import DEFAULT_KAPPA, DEFAULT_WINDOW, check_kappa_window, resync_period
-from app.advice.guide import GuideError, GuideMap, kernel_params
+from app import kernels, strategies
+from app.advice.advisor import DEFAULT_KAPPA, DEFAULT_WINDOW, resync_period
+from app.advice.guide import GuideError, GuideMap, GuideParams, kernel_params
 from app.advice.models import AdviceTables
+from app.advice.params import StrategyParams
 from app.advice.priors import GoalPriors
-from app.advice.strategies import STRATEGIES, StrategyParams, guide_params
-from app.agents.explorers import FIXED_EXPLORERS
+from app.agents.episodes import run_episode
+from app.agents.explorers import FIXED_EXPLORERS, make_explorer
 from app.agents.qlearning import TIE_RULES
 from app.arrays import BoolArray, FloatArray, IntArray
 from app.domain.grid import GridDomain
 from app.domain.paths import optimal_actions
+from app.strategies import AdvisorSettings, DomainData, Need, Strategy
 
 #: the kernels' codes for the explorers and the strategies, by name
 EXPLORER_CODES = {
     "random": kernels.RANDOM, "random-avoid": kernels.RANDOM_AVOID, "left": kernels.LEFT,
     "bug": kernels.BUG, "optimal": kernels.OPTIMAL,
-}  # fmt: skip
-STRATEGY_CODES = {
-    "paper": kernels.PAPER, "goal_aware": kernels.GOAL_AWARE, "early": kernels.EARLY,
-    "importance": kernels.IMPORTANCE, "mistake": kernels.MISTAKE,
-    "random": kernels.RANDOM_RULE, "always": kernels.ALWAYS, "guide": kernels.GUIDE,
 }  # fmt: skip
 _NOTHING = np.zeros(0)
 _DEFAULTS = StrategyParams()
@@ -51,7 +49,7 @@ _NO_GOALS = np.zeros(0, dtype=np.int64)
 
 def guide_arrays(window: int, params: StrategyParams) -> kernels.GuideParams:
     """guide's parameters as the kernels read them."""
-    return kernel_params(window, guide_params(params))
+    return kernel_params(window, GuideParams.of(params))
 
 
 @dataclass(frozen=True)
@@ -128,7 +126,8 @@ def goal_tables(domain: GridDomain, priors: GoalPriors | None) -> kernels.GoalTa
 
 class Simulator:
     """A domain, the advisor's tables (and the per-goal counts goal-aware advice narrows theta
-    with), prepared once for many compiled runs."""
+    with), prepared once for many runs: compiled where the strategy has a compiled form
+    (:attr:`Strategy.kernel`), else the readable loop with its readable advisor."""
 
     def __init__(
         self, domain: GridDomain, tables: AdviceTables, goal_priors: GoalPriors | None = None
@@ -139,24 +138,41 @@ class Simulator:
             raise ValueError("goal priors and maze must have the same states")
         self.domain = domain
         self.tables = tables
+        self.goal_priors = goal_priors
         self.goals = goal_tables(domain, goal_priors)
-        self.has_goals = goal_priors is not None
+        self._no_guide: GuideError | None = None  # why the map cannot be guided
         try:
             self.guide: GuideMap | None = GuideMap.of(domain, goal_priors)
-        except GuideError:
-            self.guide = None
+        except GuideError as exc:
+            self.guide, self._no_guide = None, exc
+        self.data = DomainData(tables, goal_priors, self.guide)
         self.next_state = np.ascontiguousarray(domain.next_state)
         self.open_moves = np.ascontiguousarray(domain.open_moves)
         self.cells = np.ascontiguousarray(domain.cells)
         self._worlds: dict[int, tuple[IntArray, BoolArray, IntArray, BoolArray]] = {}
 
+    def settings(
+        self, strategy: str, kappa: float, window: int, params: StrategyParams | None
+    ) -> tuple[Strategy, AdvisorSettings]:
+        """The entry of ``strategy`` and checked settings; ValueError when this domain lacks
+        what it needs (a map that cannot be guided says why)."""
+        entry = strategies.get(strategy)
+        settings = entry.settings(kappa, window, params)
+        lacking = entry.missing(self.data)
+        if lacking:
+            if Need.GUIDE_MAP in lacking and self._no_guide is not None:
+                raise self._no_guide
+            raise ValueError(f"{strategy} advice needs {lacking[0].value}")
+        return entry, settings
+
     def _guide(
-        self, strategy: str, window: int, p: StrategyParams
+        self, entry: Strategy, settings: AdvisorSettings
     ) -> tuple[kernels.GuideArrays, kernels.GuideParams, IntArray]:
-        if strategy == "guide" and self.guide is not None:
+        params = guide_arrays(settings.window, settings.params)
+        if Need.GUIDE_MAP in entry.needs and self.guide is not None:
             goals = np.array(self.guide.goals, dtype=np.int64)
-            return self.guide.arrays, guide_arrays(window, p), goals
-        return _NO_GUIDE, guide_arrays(window, p), _NO_GOALS
+            return self.guide.arrays, params, goals
+        return _NO_GUIDE, params, _NO_GOALS
 
     def optimal(self, goal: int) -> BoolArray:
         return self._world(goal)[3]
@@ -188,20 +204,14 @@ class Simulator:
         (default: seeded with ``params.seed``, as the reference advisor seeds its own)."""
         if explorer not in FIXED_EXPLORERS:
             raise ValueError(f"unknown explorer {explorer!r}: use {', '.join(FIXED_EXPLORERS)}")
-        if strategy not in STRATEGIES:
-            raise ValueError(f"unknown strategy {strategy!r}: use one of {', '.join(STRATEGIES)}")
-        if strategy == "goal_aware" and not self.has_goals:
-            raise ValueError("goal_aware advice needs the experts' goals (goal priors)")
-        if strategy == "guide" and self.guide is None:
-            GuideMap.of(self.domain)  # raises GuideError saying why
-        check_kappa_window(kappa, window)
-        p = _DEFAULTS if params is None else params
-        if params is not None:
-            params.check()
+        entry, settings = self.settings(strategy, kappa, window, params)
         if max_steps < 1:
             raise ValueError(f"max_steps must be at least 1, got {max_steps}")
+        if entry.kernel is None:
+            return self._fixed_readable(entry, settings, explorer, goal, rng, advised, max_steps)
+        p = settings.params
         if rule_rng is None:  # a fresh generator only where the random rule draws from it
-            rule_rng = np.random.default_rng(p.seed) if strategy == "random" else _UNUSED_RNG
+            rule_rng = np.random.default_rng(p.seed) if "seed" in entry.reads else _UNUSED_RNG
         states = np.empty(max_steps, dtype=np.int64)
         p_out = np.empty(max_steps) if record_p else _NOTHING
         advise = np.empty(max_steps, dtype=np.bool_)
@@ -212,14 +222,14 @@ class Simulator:
             goal,
             max_steps,
             advised,
-            STRATEGY_CODES[strategy],
-            float(kappa),
-            int(window),
-            resync_period(int(window)),
+            entry.kernel,
+            settings.kappa,
+            settings.window,
+            resync_period(settings.window),
             (int(p.n_steps), float(p.threshold), float(p.rate), float(p.beta)),
             self.tables.arrays,
             self.goals,
-            self._guide(strategy, int(window), p),
+            self._guide(entry, settings),
             rng,
             rule_rng,
             (states, p_out, advise),
@@ -227,6 +237,24 @@ class Simulator:
         return FixedRun(
             bool(success), int(steps), int(count), float(benefit), int(ruled_out),
             states[:steps], p_out[:steps], advise[:steps],
+        )  # fmt: skip
+
+    def _fixed_readable(
+        self, entry: Strategy, settings: AdvisorSettings, explorer: str, goal: int,
+        rng: np.random.Generator, advised: bool, max_steps: int,
+    ) -> FixedRun:  # fmt: skip
+        """:meth:`fixed` for a strategy without a compiled form: the reference loop."""
+        advisor = entry.advisor(self.data, settings)
+        rec = run_episode(
+            self.domain, make_explorer(explorer, self.domain), advisor, goal, rng,
+            advised=advised, max_steps=max_steps,
+        )  # fmt: skip
+        beliefs = advisor.goal_beliefs() or []
+        return FixedRun(
+            rec.success, rec.steps, advisor.advice_count, advisor.benefit,
+            sum(out for _, _, out in beliefs), np.array(rec.states, dtype=np.int64),
+            np.array([d.p_normal for d in rec.decisions]),
+            np.array([d.advise for d in rec.decisions], dtype=np.bool_),
         )  # fmt: skip
 
     def learning(
@@ -243,20 +271,21 @@ class Simulator:
         window: int = DEFAULT_WINDOW,
         step_budget: int = 0,
         strategy: str = "paper",
-        guide_params: StrategyParams | None = None,
+        strategy_params: StrategyParams | None = None,
     ) -> LearningRun:
-        """``episodes`` episodes of one Q-learning task (a fresh Q-table), advised by the
-        paper's rule or by ``guide`` (``strategy``; ``guide_params`` its parameters).
-        ``step_budget`` > 0 stops after that many moves in total (Figure 7)."""
-        check_kappa_window(kappa, window)
-        if strategy not in ("paper", "guide"):
-            raise ValueError(f"Q-learning runs with strategy paper or guide, not {strategy!r}")
-        if strategy == "guide" and self.guide is None:
-            GuideMap.of(self.domain)  # raises GuideError saying why
-        p = _DEFAULTS if guide_params is None else guide_params
-        p.check()
+        """``episodes`` episodes of one Q-learning task (a fresh Q-table), advised by
+        ``strategy`` with ``strategy_params``: compiled for the strategies whose compiled form
+        runs in :func:`app.kernels.q_learning` (:attr:`Strategy.learns`). ``step_budget`` > 0
+        stops after that many moves in total (Figure 7)."""
+        entry, settings = self.settings(strategy, kappa, window, strategy_params)
         if episodes < 1 or max_steps < 1:
             raise ValueError("episodes and max_steps must be at least 1")
+        if entry.kernel is None or not entry.learns:
+            raise ValueError(
+                f"Q-learning runs with a strategy whose compiled form learns "
+                f"({', '.join(e.name for e in strategies.STRATEGIES.values() if e.learns)}), "
+                f"not {strategy!r}"
+            )
         q = np.zeros((self.domain.n_states, 4))
         steps = np.zeros(episodes, dtype=np.int64)
         success = np.zeros(episodes, dtype=np.bool_)
@@ -273,12 +302,12 @@ class Simulator:
             (params.alpha, params.gamma, params.epsilon, params.ties == "advice"),
             advised,
             keep_history,
-            float(kappa),
-            int(window),
-            resync_period(int(window)),
+            settings.kappa,
+            settings.window,
+            resync_period(settings.window),
             self.tables.arrays,
-            STRATEGY_CODES[strategy],
-            self._guide(strategy, int(window), p),
+            entry.kernel,
+            self._guide(entry, settings),
             rng,
             q,
             (steps, success, advice, decisions, p_mean),

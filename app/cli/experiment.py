@@ -44,8 +44,9 @@ EXPERIMENTS = {
 
 
 def field_docs(cls: type) -> dict[str, str]:
-    """The docstring under each field of a dataclass (and of its bases)."""
-    docs: dict[str, str] = {}
+    """The docstring under each field of a dataclass (and of its bases), or the field's
+    ``metadata["doc"]`` (the fields made from the strategies' entries)."""
+    docs: dict[str, str] = {f.name: f.metadata["doc"] for f in fields(cls) if "doc" in f.metadata}
     for klass in reversed(cls.__mro__[:-1]):
         try:
             tree = ast.parse(textwrap.dedent(inspect.getsource(klass)))

@@ -22,7 +22,7 @@ from advisor_client import AdvisorError, AsyncAdvisorClient
 from advisor_client.types import Decision
 from tqdm import tqdm
 
-from app.advice.strategies import STRATEGIES
+from app import strategies
 from app.agents.explorers import FIXED_EXPLORERS, make_explorer
 from app.cli.options import choice
 from app.domain.grid import ACTIONS, GridDomain
@@ -170,7 +170,7 @@ def simulate(
     delay: Annotated[float, typer.Option(min=0.0, help="Seconds between moves (to watch).")] = 0.0,
     keep: Annotated[bool, typer.Option(help="Leave sessions open after each episode.")] = False,
     strategy: Annotated[
-        str, choice(STRATEGIES, "When to advise (the strategy's default parameters).")
+        str, choice(strategies.names(), "When to advise (the strategy's default parameters).")
     ] = "paper",
     progress: Annotated[bool, typer.Option(help="A progress bar (on stderr).")] = True,
 ) -> None:

@@ -18,9 +18,9 @@ Q-learning: per map ``--q-tasks`` learners, each ``--episodes`` episodes of at m
 enough to reach it, stated in the report), advised or not by ``paper`` and ``guide`` at the
 default kappa; measured by the share of episodes that reach the goal.
 
-Targets (``guide`` at its defaults, what a session with only ``{"strategy": "guide"}`` gets:
-kappa 0.5, window 300, and guide's own parameters; ``--p-lost``, ``--slack`` and ``--spread``
-change them for every guide run here):
+Targets (``--candidate``, ``guide``, at its defaults, what a session with only
+``{"strategy": "guide"}`` gets: kappa 0.5, window 300, and guide's own parameters;
+``--p-lost``, ``--slack`` and ``--spread`` change them for every guide run here):
 random and random-avoid >= 90 % success, bug >= 80 %, each at <= 25 advice per 100 steps,
 on every map; left, optimal and Q-learning never significantly worse than without advice
 (the paired 95 % interval of the change includes 0 or lies above it); for random and
@@ -31,6 +31,7 @@ random-avoid, guide's curve above paper's and goal_aware's over the advice rates
 
 from __future__ import annotations
 
+import itertools
 import math
 import multiprocessing
 import time
@@ -43,8 +44,8 @@ import numpy as np
 from matplotlib.figure import Figure
 from tqdm import tqdm
 
+from app import strategies
 from app.advice.models import AdviceTables
-from app.advice.strategies import StrategyParams
 from app.agents.experts import train_goal_priors
 from app.agents.explorers import FIXED_EXPLORERS
 from app.agents.simulate import Simulator
@@ -53,11 +54,23 @@ from app.domain.generate import generate_building_domain
 from app.domain.grid import GridDomain, compass_detours_each
 from app.domain.maps import DEFAULT_MAP
 from app.experiments.common import CommonArgs, LearningArgs, rng_for, wilson
+from app.experiments.curves import (
+    Z95,
+    Config,
+    base_params,
+    check_strategies,
+    paired,
+    strategy_args,
+)
+from app.experiments.curves import configs as curve_configs
 from app.experiments.output import RunDir, header, markdown_table
 
-Z95 = 1.959963984540054
-CURVES = ("none", "paper", "goal_aware", "guide")
-COLOURS = {"paper": "tab:blue", "goal_aware": "tab:red", "guide": "tab:green"}
+#: the strategies compared by default, and their kappa levels here (guide's are its entry's)
+STRATEGIES = ("paper", "goal_aware", "guide")
+LEVELS = {"paper": (0.25, 0.5, 1.0, 2.0), "goal_aware": (0.25, 0.5, 1.0, 2.0)}
+#: the curves' colours, in the order of the strategies compared
+PALETTE = ("tab:blue", "tab:red", "tab:green", "tab:purple", "tab:brown", "tab:grey", "black")
+StrategyOptions = strategy_args("BuildingsStrategies", STRATEGIES, LEVELS)
 #: the target explorers and their success targets
 TARGETS = {"random": 0.9, "random-avoid": 0.9, "bug": 0.8}
 MAX_ADVICE_PER_100 = 25.0
@@ -66,7 +79,7 @@ UNHARMED = ("left", "optimal")
 
 
 @dataclass
-class Args(CommonArgs, LearningArgs):
+class Args(CommonArgs, LearningArgs, StrategyOptions):  # type: ignore[valid-type,misc]
     """Buildings arguments (``--tasks``: tasks per map, explorer and configuration)."""
 
     tasks: int = 100
@@ -77,18 +90,8 @@ class Args(CommonArgs, LearningArgs):
     """Generated buildings: the side of each (rows = columns), each with its own seed."""
     mazes: tuple[Path, ...] = ()
     """More maps of the suite: map files in the project's text format (``maze import``)."""
-    kappas: tuple[float, ...] = (0.25, 0.5, 1.0, 2.0)
-    """paper and goal_aware: kappa levels (the default ``--kappa`` is always among them)."""
-    guide_kappas: tuple[float, ...] = (0.1, 0.25, 0.5, 0.75, 1.0, 1.25, 1.4, 1.6)
-    """guide: kappa levels (the default ``--kappa`` is always among them). Its value, the KL
-    (at most about 1.19 nats at the default spread) weighted by the stake (at most 2), stays
-    below about 2.4, so a kappa above that never advises."""
-    p_lost: float = StrategyParams.p_lost
-    """guide: its p_lost parameter (the default is the session default)."""
-    slack: float = StrategyParams.slack
-    """guide: its slack parameter."""
-    spread: float = StrategyParams.spread
-    """guide: its spread parameter."""
+    candidate: str = "guide"
+    """The strategy the targets are about (its curve against the others', its defaults)."""
     q_tasks: int = 20
     """Q-learning tasks per map (0: none), at the default kappa."""
     episodes: int = 100
@@ -115,46 +118,24 @@ class Args(CommonArgs, LearningArgs):
             raise ValueError("q-reach must be at least 1")
         if not self.buildings and not self.map_files():
             raise ValueError("the suite is empty: give --buildings sizes or --mazes files")
-        self.guide_params().check()
-        for k in (*self.kappas, *self.guide_kappas):
-            if not (math.isfinite(k) and k >= 0):
-                raise ValueError(f"kappa levels must be finite numbers >= 0, got {k}")
+        check_strategies(self)
+        if self.candidate not in self.strategies:
+            raise ValueError(f"{self.candidate} is not among the strategies run")
         for p in self.map_files():
             if not p.is_file():
                 raise ValueError(f"no map file {p}")
 
-    def guide_params(self) -> StrategyParams:
-        return StrategyParams(p_lost=self.p_lost, slack=self.slack, spread=self.spread)
+    def learners(self) -> tuple[str, ...]:
+        """The strategies compared whose compiled form also advises a Q-learner."""
+        return tuple(n for n in self.strategies if strategies.get(n).learns)
 
     def map_files(self) -> list[Path]:
         extra = [self.maze] if Path(self.maze) != DEFAULT_MAP else []
         return [Path(p) for p in (*extra, *self.mazes)]
 
 
-@dataclass(frozen=True)
-class Config:
-    """One point of one curve: a strategy at one kappa."""
-
-    curve: str
-    kappa: float
-    default: bool = False
-
-    @property
-    def key(self) -> str:
-        return "none" if self.curve == "none" else f"{self.curve}@{self.kappa:g}"
-
-    @property
-    def strategy(self) -> str:
-        return "paper" if self.curve == "none" else self.curve
-
-
 def configs(args: Args) -> list[Config]:
-    out = [Config("none", args.kappa, True)]
-    for curve, levels in (
-        ("paper", args.kappas), ("goal_aware", args.kappas), ("guide", args.guide_kappas),
-    ):  # fmt: skip
-        out += [Config(curve, k, k == args.kappa) for k in sorted({*levels, args.kappa})]
-    return out
+    return curve_configs(args)
 
 
 @dataclass(frozen=True)
@@ -236,23 +217,23 @@ def run_fixed(args: Args, spec: MapSpec, explorer: str) -> dict[str, dict[str, F
         for i, goal in enumerate(world.goals):
             run = world.sim.fixed(
                 explorer, goal, rng_for(args.seed, "buildings", spec.index, explorer, i),
-                advised=c.curve != "none", strategy=c.strategy, kappa=c.kappa,
-                window=args.window, params=args.guide_params(), max_steps=args.steps,
-                record_p=False,
+                advised=c.advised, strategy=c.strategy, kappa=c.kappa,
+                window=args.window, params=c.params, max_steps=args.steps, record_p=False,
             )  # fmt: skip
             m["success"][i] = run.success
             m["steps"][i] = run.steps
-            m["advice"][i] = run.advice_count if c.curve != "none" else 0
+            m["advice"][i] = run.advice_count if c.advised else 0
         out[c.key] = m
     return out
 
 
 def run_learning(args: Args, spec: MapSpec) -> dict[str, dict[str, FloatArray]]:
-    """Q-learning: none, paper and guide at the default kappa; per task the share of
-    episodes that reached the goal, and advice per 100 steps."""
+    """Q-learning: none and each strategy that advises learners, at the default kappa; per
+    task the share of episodes that reached the goal, and advice per 100 steps."""
     world = cached_world(args, spec)
     out: dict[str, dict[str, FloatArray]] = {}
-    for curve in ("none", "paper", "guide"):
+    base = base_params(args)
+    for curve in ("none", *args.learners()):
         m = {name: np.zeros(args.q_tasks) for name in ("success", "steps", "advice")}
         for i in range(args.q_tasks):
             goal = world.goals[i % len(world.goals)]
@@ -260,7 +241,7 @@ def run_learning(args: Args, spec: MapSpec) -> dict[str, dict[str, FloatArray]]:
                 goal, rng_for(args.seed, "buildings-q", spec.index, i), advised=curve != "none",
                 params=args.q_params(), episodes=args.episodes, max_steps=world.q_steps,
                 kappa=args.kappa, window=args.window,
-                strategy="paper" if curve == "none" else curve, guide_params=args.guide_params(),
+                strategy="paper" if curve == "none" else curve, strategy_params=base,
             )  # fmt: skip
             m["success"][i] = run.success.mean()
             m["steps"][i] = run.steps.sum()
@@ -294,7 +275,7 @@ def run_all(args: Args) -> Results:
     }  # fmt: skip
     learning = {
         c: {m: np.zeros((len(suite), args.q_tasks)) for m in ("success", "steps", "advice")}
-        for c in ("none", "paper", "guide")
+        for c in ("none", *args.learners())
     }
     jobs: list[tuple[MapSpec, str]] = [(s, e) for s in suite for e in FIXED_EXPLORERS]
     if args.q_tasks:
@@ -322,14 +303,6 @@ def run_all(args: Args) -> Results:
 
 
 # ---- the summary ------------------------------------------------------------------------------
-def paired(a: FloatArray, b: FloatArray) -> tuple[float, float, float]:
-    """Mean of a - b over paired tasks with a 95% normal interval, clipped to [-1, 1]."""
-    d = (np.asarray(a, dtype=np.float64) - b).ravel()
-    mean = float(d.mean())
-    se = float(d.std(ddof=1)) / math.sqrt(d.size) if d.size > 1 else math.inf
-    return mean, max(-1.0, mean - Z95 * se), min(1.0, mean + Z95 * se)
-
-
 def rate(m: dict[str, FloatArray]) -> float:
     """Advice per 100 steps: the mean over tasks of 100 x advice / moves, as in Table I."""
     return float((100.0 * m["advice"] / np.maximum(m["steps"], 1)).mean())
@@ -417,8 +390,9 @@ def curve_above(mine: FloatArray, other: FloatArray, tasks: int = 0) -> dict[str
 
 
 def targets(results: Results, table: list[dict[str, Any]], q: list[dict[str, Any]],
-            kappa: float) -> dict[str, Any]:  # fmt: skip
-    key = f"guide@{kappa:g}"
+            args: Args) -> dict[str, Any]:  # fmt: skip
+    cand = args.candidate
+    key = next(c.key for c in results.configs if c.curve == cand and c.default)
     checks: list[dict[str, Any]] = []
     for spec in results.maps:
         for explorer, need in TARGETS.items():
@@ -436,8 +410,8 @@ def targets(results: Results, table: list[dict[str, Any]], q: list[dict[str, Any
                 f"{r['change_ci_high']:+.0%}]",
                 "ok": r["change_ci_high"] >= 0.0,
             })  # fmt: skip
-        if q:
-            r = find(q, map=spec.name, curve="guide")
+        if q and cand in args.learners():
+            r = find(q, map=spec.name, curve=cand)
             checks.append({
                 "map": spec.name, "what": "Q-learning not significantly worse",
                 "value": f"{r['change_vs_none']:+.1%} [{r['change_ci_low']:+.1%}, "
@@ -445,8 +419,8 @@ def targets(results: Results, table: list[dict[str, Any]], q: list[dict[str, Any
                 "ok": r["change_ci_high"] >= 0.0,
             })  # fmt: skip
         for explorer in ("random", "random-avoid"):
-            mine = curve_points(table, spec.name, explorer, "guide")
-            for other in ("paper", "goal_aware"):
+            mine = curve_points(table, spec.name, explorer, cand)
+            for other in (n for n in args.strategies if n != cand):
                 tasks = find(table, map=spec.name, explorer=explorer, curve="none")["tasks"]
                 c = curve_above(mine, curve_points(table, spec.name, explorer, other), tasks)
                 value = (
@@ -456,7 +430,7 @@ def targets(results: Results, table: list[dict[str, Any]], q: list[dict[str, Any
                 )  # fmt: skip
                 checks.append({
                     "map": spec.name,
-                    "what": f"{explorer}: guide's curve above {other}'s (beyond noise)",
+                    "what": f"{explorer}: {cand}'s curve above {other}'s (beyond noise)",
                     "value": value, "ok": c["above"] is not False,
                 })  # fmt: skip
     return {"checks": checks, "all_hold": all(c["ok"] for c in checks)}
@@ -488,7 +462,7 @@ def map_info(world: World) -> dict[str, Any]:
 
 
 # ---- the report -------------------------------------------------------------------------------
-def plots(results: Results, table: list[dict[str, Any]]) -> Figure:
+def plots(results: Results, table: list[dict[str, Any]], args: Args) -> Figure:
     """Success against advice per 100 steps as kappa varies: a panel per map (and the suite)
     and explorer, a curve per strategy; the cross is the unadvised explorer."""
     scopes = [s.name for s in results.maps] + ["suite"]
@@ -498,7 +472,7 @@ def plots(results: Results, table: list[dict[str, Any]]) -> Figure:
     for i, scope in enumerate(scopes):
         for j, explorer in enumerate(explorers):
             ax = axes[i, j]
-            for curve, colour in COLOURS.items():
+            for curve, colour in zip(args.strategies, itertools.cycle(PALETTE), strict=False):
                 pts = curve_points(table, scope, explorer, curve)
                 ax.plot(pts[:, 0], pts[:, 1], "o-", color=colour, label=curve, ms=3)
                 d = find(table, map=scope, explorer=explorer, curve=curve, default=True)
@@ -540,34 +514,36 @@ def markdown(
         f"## At the default kappa ({args.kappa:g}): success (advice per 100 steps)", "",
     ]  # fmt: skip
     scopes = [m["name"] for m in maps] + ["suite"]
-    head = ["explorer", "map", "none", "paper", "goal_aware", "guide", "guide - none [95%]"]
+    cand, curves = args.candidate, ("none", *args.strategies)
+    head = ["explorer", "map", *curves, f"{cand} - none [95%]"]
     body = []
     for explorer in FIXED_EXPLORERS:
         for scope in scopes:
             cells = []
-            for curve in CURVES:
+            for curve in curves:
                 r = find(table, map=scope, explorer=explorer, curve=curve, default=True)
                 rate_text = "" if curve == "none" else f" ({r['advice_per_100_steps']:.1f})"
                 cells.append(f"{r['success']:.0%}{rate_text}")
-            g = find(table, map=scope, explorer=explorer, curve="guide", default=True)
+            g = find(table, map=scope, explorer=explorer, curve=cand, default=True)
             change = (f"{g['change_vs_none']:+.0%} [{g['change_ci_low']:+.0%}, "
                       f"{g['change_ci_high']:+.0%}]")  # fmt: skip
             body.append([explorer, scope, *cells, change])
     lines += [markdown_table(head, body), ""]
-    if q:
+    learners = ("none", *args.learners())
+    if q and cand in learners:
         lines += [
             f"## Q-learning ({args.episodes} episodes per task, {args.q_tasks} tasks per map)",
             "", "Share of episodes that reached the goal (advice per 100 steps).", "",
             markdown_table(
-                ["map", "none", "paper", "guide", "guide - none [95%]"],
+                ["map", *learners, f"{cand} - none [95%]"],
                 [[s,
                   *[f"{find(q, map=s, curve=c)['episodes_reaching_goal']:.1%}"
                     + ("" if c == "none" else
                        f" ({find(q, map=s, curve=c)['advice_per_100_steps']:.1f})")
-                    for c in ("none", "paper", "guide")],
-                  f"{find(q, map=s, curve='guide')['change_vs_none']:+.1%} "
-                  f"[{find(q, map=s, curve='guide')['change_ci_low']:+.1%}, "
-                  f"{find(q, map=s, curve='guide')['change_ci_high']:+.1%}]"]
+                    for c in learners],
+                  f"{find(q, map=s, curve=cand)['change_vs_none']:+.1%} "
+                  f"[{find(q, map=s, curve=cand)['change_ci_low']:+.1%}, "
+                  f"{find(q, map=s, curve=cand)['change_ci_high']:+.1%}]"]
                  for s in scopes],
             ), "",
         ]  # fmt: skip
@@ -589,7 +565,7 @@ def run(args: Args, out: RunDir) -> dict[str, Any]:
     results = run_all(args)
     elapsed = time.perf_counter() - started
     table, q = rows(results), learning_rows(results)
-    t = targets(results, table, q, args.kappa)
+    t = targets(results, table, q, args)
     maps = [map_info(cached_world(args, s)) for s in results.maps]
     result = {
         **header("buildings", args, elapsed), "maps": maps,
@@ -601,5 +577,5 @@ def run(args: Args, out: RunDir) -> dict[str, Any]:
     if q:
         out.csv("buildings_learning", q)
     out.markdown("buildings", markdown(table, q, t, maps, args, elapsed))
-    out.figure("buildings", plots(results, table))
+    out.figure("buildings", plots(results, table, args))
     return result

@@ -7,11 +7,13 @@ first half perfect, the rest braided with ``--braid``; ``--map-size`` square, 8 
 An advised explorer samples its move from the advice: theta_s, or theta^w_s for goal-aware
 advice. Q-learning is left out: its compiled kernel knows only the paper's rule.
 
-Cost levels: kappa for ``paper`` and ``goal_aware``, ``n_steps`` for ``early``, the threshold
-for ``importance`` and ``mistake``, the rate for ``random``; ``always`` has one level. The
-default level of each curve is ``--kappa`` (0.5) and :class:`StrategyParams`' defaults.
-``goal_aware`` uses ``--beta`` (0: ruling goals out only); other betas are run at the default
-kappa only.
+Cost levels (each strategy's entry says which: kappa for ``paper`` and ``goal_aware``,
+``n_steps`` for ``early``, the threshold for ``importance`` and ``mistake``, the rate for
+``random``; ``always`` has one level), ``--<strategy>-levels`` to change them. The default
+level of each curve is ``--kappa`` (0.5) and the parameters' defaults (``--beta`` for
+``goal_aware``, 0: ruling goals out only); ``--variants`` adds curves at the default kappa
+only (other betas). The targets are about ``--candidate`` (goal_aware) against
+``--baseline`` (paper).
 
 Randomness: per map its own streams for the generated maze, the expert data and the tasks'
 goals; per task one explorer stream ``rng_for(seed, "strategies", map, explorer, task)``
@@ -30,6 +32,7 @@ interval. Advice per 100 steps is the mean over tasks of 100 x advice / moves, a
 
 from __future__ import annotations
 
+import itertools
 import math
 import time
 from dataclasses import asdict
@@ -38,15 +41,14 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
+from app import strategies
 from app.agents.explorers import FIXED_EXPLORERS
 from app.arrays import FloatArray
 from app.experiments.common import wilson
+from app.experiments.curves import Config, base_params, paired
 from app.experiments.output import RunDir, header, markdown_table
 from app.experiments.strategy_suite import (
-    CURVES,
-    LEVEL_NAME,
     Args,
-    Config,
     Results,
     map_info,
     prepare_world,
@@ -54,7 +56,6 @@ from app.experiments.strategy_suite import (
 )
 
 SCOPES = ("suite", "file", "perfect", "braided")
-Z95 = 1.959963984540054
 #: The target explorers of the issue's first target.
 RANDOM_WALKERS = ("random", "random-avoid")
 #: An explorer is competent if it succeeds in at least this share of tasks without advice.
@@ -67,13 +68,10 @@ def scope_maps(results: Results, scope: str) -> list[int]:
     return [s.index for s in results.maps if s.kind == scope]
 
 
-def paired(a: FloatArray, b: FloatArray) -> tuple[float, float, float]:
-    """Mean of a - b over paired tasks (success 0/1), with a 95% normal interval clipped to
-    the possible range [-1, 1]."""
-    d = (np.asarray(a, dtype=np.float64) - b).ravel()
-    mean = float(d.mean())
-    se = float(d.std(ddof=1)) / math.sqrt(d.size) if d.size > 1 else math.inf
-    return mean, max(-1.0, mean - Z95 * se), min(1.0, mean + Z95 * se)
+def level_name(c: Config) -> str:
+    """The parameter a configuration's curve sweeps ("" for none, or no level)."""
+    level = strategies.get(c.strategy).level
+    return "" if not c.advised or level is None else level.param
 
 
 def advice_per_100(m: dict[str, FloatArray]) -> FloatArray:
@@ -96,11 +94,11 @@ def row(
         "explorer": explorer,
         "curve": c.curve,
         "key": c.key,
-        "level_name": LEVEL_NAME.get(c.curve, "kappa"),
+        "level_name": level_name(c),
         "level": c.level,
         "default": c.default,
         "kappa": c.kappa,
-        "beta": c.params.beta,
+        "params": strategies.get(c.strategy).in_force(c.params) if c.advised else {},
         "maps": len(maps),
         "tasks": n,
         "successes": k,
@@ -139,27 +137,27 @@ def summarise(results: Results, args: Args) -> dict[str, Any]:
     return {
         "rows": rows,
         "map_rows": map_rows,
-        "versus": versus(results),
+        "versus": versus(results, args),
         "targets": targets(results, rows, args),
     }
 
 
-def versus(results: Results) -> list[dict[str, Any]]:
-    """goal_aware at its default level against every other curve's default, paired per task
-    over the suite (positive: goal-aware succeeds more often)."""
-    d = defaults(results)
-    ga = d["goal_aware"]
+def versus(results: Results, args: Args) -> list[dict[str, Any]]:
+    """The candidate at its default level against every other curve's default, paired per
+    task over the suite (positive: the candidate succeeds more often)."""
+    d = defaults(results, args)
+    cand = d[args.candidate]
     out = []
     for explorer in FIXED_EXPLORERS:
         data = results.data[explorer]
         for name, c in d.items():
-            if name == "goal_aware":
+            if name == args.candidate:
                 continue
-            diff = paired(data[ga.key]["success"], data[c.key]["success"])
+            diff = paired(data[cand.key]["success"], data[c.key]["success"])
             out.append(
                 {
                     "explorer": explorer,
-                    "goal_aware": ga.key,
+                    "candidate": cand.key,
                     "other": c.key,
                     "difference": diff[0],
                     "difference_ci_low": diff[1],
@@ -176,30 +174,33 @@ def find(rows: list[dict[str, Any]], scope: str, explorer: str, key: str) -> dic
     raise KeyError((scope, explorer, key))
 
 
-def defaults(results: Results) -> dict[str, Config]:
-    """The default configuration of each curve of CURVES."""
-    return {c.curve: c for c in results.configs if c.default and c.curve in CURVES}
+def defaults(results: Results, args: Args) -> dict[str, Config]:
+    """The default configuration of no advice and of each strategy compared."""
+    curves = ("none", *args.strategies)
+    return {c.curve: c for c in results.configs if c.default and c.curve in curves}
 
 
 def targets(results: Results, rows: list[dict[str, Any]], args: Args) -> dict[str, Any]:
-    """The issue's targets, measured on the whole suite.
+    """The targets, measured on the whole suite.
 
-    1. goal_aware at the default kappa succeeds more often than paper at the same kappa
-       (paired interval above 0) with no more advice (per 100 steps and per task), for the
-       random walkers; also: at how many of the paper's levels some goal_aware level gives
-       more success with no more advice per 100 steps.
-    2. the recommended default (goal_aware at the default kappa) does not lower the success
-       of a competent explorer (no-advice success >= COMPETENT) below its no-advice level.
+    1. the candidate (``--candidate``) at the default kappa succeeds more often than the
+       baseline (``--baseline``) at the same kappa (paired interval above 0) with no more
+       advice (per 100 steps and per task), for the random walkers; also: at how many of the
+       baseline's levels some candidate level gives more success with no more advice per
+       100 steps.
+    2. the recommended default (the candidate at the default kappa) does not lower the
+       success of a competent explorer (no-advice success >= COMPETENT) below its no-advice
+       level.
     """
-    d = defaults(results)
-    ga, pa = d["goal_aware"], d["paper"]
+    d = defaults(results, args)
+    ga, pa = d[args.candidate], d[args.baseline]
     first = []
     for explorer in RANDOM_WALKERS:
         g, p = find(rows, "suite", explorer, ga.key), find(rows, "suite", explorer, pa.key)
         data = results.data[explorer]
         diff = paired(data[ga.key]["success"], data[pa.key]["success"])
-        curve = [c for c in results.configs if c.curve == "goal_aware"]
-        paper_levels = [c for c in results.configs if c.curve == "paper"]
+        curve = [c for c in results.configs if c.curve == args.candidate]
+        paper_levels = [c for c in results.configs if c.curve == args.baseline]
         dominated = 0
         for c in paper_levels:
             pr = find(rows, "suite", explorer, c.key)
@@ -216,17 +217,17 @@ def targets(results: Results, rows: list[dict[str, Any]], args: Args) -> dict[st
         first.append(
             {
                 "explorer": explorer,
-                "goal_aware": g["success"],
-                "paper": p["success"],
+                "candidate": g["success"],
+                "baseline": p["success"],
                 "difference": diff[0],
                 "difference_ci_low": diff[1],
                 "difference_ci_high": diff[2],
-                "goal_aware_advice_per_100": g["advice_per_100_steps"],
-                "paper_advice_per_100": p["advice_per_100_steps"],
-                "goal_aware_advice_per_task": g["advice_per_task"],
-                "paper_advice_per_task": p["advice_per_task"],
-                "paper_levels_beaten": dominated,
-                "paper_levels": len(paper_levels),
+                "candidate_advice_per_100": g["advice_per_100_steps"],
+                "baseline_advice_per_100": p["advice_per_100_steps"],
+                "candidate_advice_per_task": g["advice_per_task"],
+                "baseline_advice_per_task": p["advice_per_task"],
+                "baseline_levels_beaten": dominated,
+                "baseline_levels": len(paper_levels),
                 "met": diff[1] > 0 and less_advice,
             }
         )
@@ -243,7 +244,7 @@ def targets(results: Results, rows: list[dict[str, Any]], args: Args) -> dict[st
                 {
                     "explorer": explorer,
                     "strategy": c.key,
-                    "recommended": name == "goal_aware",
+                    "recommended": name == args.candidate,
                     "no_advice": none["success"],
                     "advised": r["success"],
                     "change": r["change_vs_none"],
@@ -255,7 +256,9 @@ def targets(results: Results, rows: list[dict[str, Any]], args: Args) -> dict[st
             )
     recommended = [x for x in second if x["recommended"]]
     return {
-        "goal_aware_beats_paper": first,
+        "candidate": args.candidate,
+        "baseline": args.baseline,
+        "candidate_beats_baseline": first,
         "first_met": all(x["met"] for x in first),
         "competent": second,
         "recommended": ga.key,
@@ -308,7 +311,8 @@ def verdict(r: dict[str, Any]) -> str:
 def markdown(summary: dict[str, Any], args: Args, elapsed: float) -> str:
     rows: list[dict[str, Any]] = summary["rows"]
     configs = {r["key"]: r for r in rows}  # any scope: only the config fields are read
-    default_keys = [r["key"] for r in rows if r["default"] and r["curve"] in CURVES]
+    curves = ("none", *args.strategies)
+    default_keys = [r["key"] for r in rows if r["default"] and r["curve"] in curves]
     default_keys = list(dict.fromkeys(default_keys))
     parts = [settings_note(args, elapsed)]
     table = []
@@ -347,7 +351,7 @@ def markdown(summary: dict[str, Any], args: Args, elapsed: float) -> str:
         )
     )
     parts.append(helps_table(rows, default_keys, configs))
-    parts.append(versus_table(summary["versus"], default_keys, configs))
+    parts.append(versus_table(summary["versus"], default_keys, configs, args.candidate))
     parts.append(kinds_table(rows, default_keys, configs))
     parts.append(targets_text(summary["targets"]))
     parts.append(sweep_table(rows))
@@ -370,8 +374,8 @@ def settings_note(args: Args, elapsed: float) -> str:
         f"each; {args.tasks} tasks per map, explorer and configuration (the same tasks and "
         f"explorer streams for every configuration); one-shot limit {args.steps} steps; seed "
         f"{args.seed}; experts `{args.experts}` ({args.per_goal} per goal), alpha0 "
-        f"{args.alpha0}, window {args.window}; goal-aware beta {args.beta}. Q-learning not "
-        f"included. {elapsed:.0f} s with {args.workers} worker(s)."
+        f"{args.alpha0}, window {args.window}; strategies' parameters {base_params(args)}. "
+        f"Q-learning not included. {elapsed:.0f} s with {args.workers} worker(s)."
     )
 
 
@@ -396,18 +400,19 @@ def helps_table(
 
 
 def versus_table(
-    versus: list[dict[str, Any]], keys: list[str], configs: dict[str, dict[str, Any]]
-) -> str:
-    others = [k for k in keys if configs[k]["curve"] != "goal_aware"]
+    versus: list[dict[str, Any]], keys: list[str], configs: dict[str, dict[str, Any]],
+    candidate: str,
+) -> str:  # fmt: skip
+    others = [k for k in keys if configs[k]["curve"] != candidate]
     by = {(v["explorer"], v["other"]): v for v in versus}
     table = [
         [explorer, *(change(by[explorer, k], "difference") for k in others)]
         for explorer in FIXED_EXPLORERS
     ]
-    ga = next(k for k in keys if configs[k]["curve"] == "goal_aware")
+    cand = next(k for k in keys if configs[k]["curve"] == candidate)
     return (
-        f"**Goal-aware advice against every other default** (suite): success of "
-        f"{short(configs[ga])} minus the other's, percentage points, paired per task "
+        f"**{candidate} against every other default** (suite): success of "
+        f"{short(configs[cand])} minus the other's, percentage points, paired per task "
         "[95% CI].\n\n" + markdown_table(["explorer", *(short(configs[k]) for k in others)], table)
     )
 
@@ -434,33 +439,33 @@ def kinds_table(
 
 def targets_text(t: dict[str, Any]) -> str:
     lines = [
-        f"**Target 1** (goal-aware vs paper at the default kappa, suite): "
+        f"**Target 1** ({t['candidate']} vs {t['baseline']} at the default kappa, suite): "
         f"{'met' if t['first_met'] else 'NOT met'}.\n"
     ]
     table = [
         [
             x["explorer"],
-            pct(x["paper"]),
-            pct(x["goal_aware"]),
+            pct(x["baseline"]),
+            pct(x["candidate"]),
             f"{100 * x['difference']:+.1f} [{100 * x['difference_ci_low']:+.1f}, "
             f"{100 * x['difference_ci_high']:+.1f}]",
-            f"{x['paper_advice_per_100']:.1f} → {x['goal_aware_advice_per_100']:.1f}",
-            f"{x['paper_advice_per_task']:.0f} → {x['goal_aware_advice_per_task']:.0f}",
-            f"{x['paper_levels_beaten']}/{x['paper_levels']}",
+            f"{x['baseline_advice_per_100']:.1f} → {x['candidate_advice_per_100']:.1f}",
+            f"{x['baseline_advice_per_task']:.0f} → {x['candidate_advice_per_task']:.0f}",
+            f"{x['baseline_levels_beaten']}/{x['baseline_levels']}",
             "met" if x["met"] else "not met",
         ]
-        for x in t["goal_aware_beats_paper"]
+        for x in t["candidate_beats_baseline"]
     ]
     lines.append(
         markdown_table(
             [
                 "explorer",
-                "paper %",
-                "goal_aware %",
+                f"{t['baseline']} %",
+                f"{t['candidate']} %",
                 "difference, pp [95% CI]",
-                "advice /100 (paper → goal_aware)",
+                f"advice /100 ({t['baseline']} → {t['candidate']})",
                 "advice /task",
-                "paper levels beaten",
+                f"{t['baseline']} levels beaten",
                 "",
             ],
             table,
@@ -526,15 +531,9 @@ def sweep_table(rows: list[dict[str, Any]]) -> str:
 
 
 # ---- plots ------------------------------------------------------------------------------
-COLOURS = {
-    "paper": "tab:blue",
-    "goal_aware": "tab:red",
-    "early": "tab:green",
-    "importance": "tab:purple",
-    "mistake": "tab:brown",
-    "random": "tab:grey",
-    "always": "black",
-}
+#: the curves' colours, in the order of the strategies compared
+PALETTE = ("tab:blue", "tab:red", "tab:green", "tab:purple", "tab:brown", "tab:grey", "black",
+           "tab:orange", "tab:olive", "tab:cyan", "tab:pink")  # fmt: skip
 
 
 def plots(summary: dict[str, Any], args: Args) -> dict[str, Figure]:
@@ -552,7 +551,7 @@ def plot(rows: list[dict[str, Any]], scope: str, args: Args) -> Figure:
         none = next(r for r in mine if r["curve"] == "none")
         ax.axhspan(100 * none["success_ci_low"], 100 * none["success_ci_high"], color="0.9")
         ax.axhline(100 * none["success"], color="0.4", ls="--", lw=1, label="no advice")
-        for curve, colour in COLOURS.items():
+        for curve, colour in zip(args.strategies, itertools.cycle(PALETTE), strict=False):
             pts = sorted(
                 (r for r in mine if r["curve"] == curve), key=lambda r: r["advice_per_100_steps"]
             )
@@ -561,9 +560,9 @@ def plot(rows: list[dict[str, Any]], scope: str, args: Args) -> Figure:
             low = y - np.array([100 * r["success_ci_low"] for r in pts])
             high = np.array([100 * r["success_ci_high"] for r in pts]) - y
             ax.errorbar(x, y, yerr=[low, high], color=colour, ms=4, lw=1.2, capsize=2,
-                        marker="s" if curve == "always" else "o", label=curve)  # fmt: skip
+                        marker="o" if len(pts) > 1 else "s", label=curve)  # fmt: skip
             for r, xi, yi in zip(pts, x, y, strict=True):
-                if r["default"] and curve != "always":
+                if r["default"] and len(pts) > 1:
                     ax.plot(xi, yi, marker="*", ms=13, color=colour, mec="black", mew=0.6)
         ax.set_title(explorer)
         ax.grid(alpha=0.3)

@@ -4,10 +4,9 @@ reports them)."""
 
 from __future__ import annotations
 
-import math
 import multiprocessing
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from typing import Any, Literal
 
 import numpy as np
@@ -15,7 +14,6 @@ import numpy.typing as npt
 from tqdm import tqdm
 
 from app.advice.models import AdviceTables
-from app.advice.strategies import StrategyParams
 from app.agents.experts import train_goal_priors
 from app.agents.explorers import FIXED_EXPLORERS
 from app.agents.simulate import Simulator
@@ -23,26 +21,18 @@ from app.arrays import FloatArray
 from app.domain.generate import generate_domain
 from app.domain.grid import GridDomain
 from app.experiments.common import CommonArgs, rng_for
+from app.experiments.curves import Config, check_strategies, strategy_args
+from app.experiments.curves import configs as curve_configs
 from app.experiments.traps import dead_end_masks, other_dead_end_share, trap_goal
 
-#: Curves in the order of tables and plots (``none``: no advice given).
-CURVES = ("none", "paper", "goal_aware", "early", "importance", "mistake", "random", "always")
-#: The parameter each curve's cost level sets.
-LEVEL_NAME = {
-    "none": "",
-    "paper": "kappa",
-    "goal_aware": "kappa",
-    "early": "n_steps",
-    "importance": "threshold",
-    "mistake": "threshold",
-    "random": "rate",
-    "always": "",
-}
+#: The strategies compared by default, in the order of tables and plots.
+STRATEGIES = ("paper", "goal_aware", "early", "importance", "mistake", "random", "always")
 MEASURES = ("success", "steps", "advice", "trapped", "other_dead_end_share", "ruled_out")
+StrategyOptions = strategy_args("StrategyOptions", STRATEGIES)
 
 
 @dataclass
-class Args(CommonArgs):
+class Args(CommonArgs, StrategyOptions):  # type: ignore[valid-type,misc]
     """Strategies arguments (``--tasks``: tasks per map, explorer and configuration)."""
 
     tasks: int = 50
@@ -55,27 +45,17 @@ class Args(CommonArgs):
     """Rows and columns of a generated maze (29: 449-465 free cells, as the shipped 455)."""
     braid: float = 0.2
     """Braid of the braided mazes (the shipped maze was generated with 0.2)."""
-    beta: float = 0.0
-    """Goal-aware advice: weight of the per-goal likelihood of H (0: ruling out only)."""
     workers: int = 2
-    """Processes (1: run in this process)."""
+    """Processes (1: run in this process; a strategy registered at run time needs it)."""
     last_n: int = 500
     """A failure is 'trapped' if half of its last ``last_n`` steps were in another goal's
     dead end (app/experiments/traps.py)."""
-    kappas: tuple[float, ...] = (0.25, 0.5, 0.75, 1.0)
-    """paper: kappa levels (kappa 0 is ``always``)."""
-    goal_kappas: tuple[float, ...] = (0.0, 0.25, 0.5, 0.75, 1.0)
-    """goal_aware: kappa levels (kappa 0: always advise theta^w)."""
-    betas: tuple[float, ...] = (0.1, 0.5, 1.0)
-    """goal_aware: other betas, at the default kappa only."""
-    early_steps: tuple[int, ...] = (20, 100, 500, 2000)
-    """early: advise during the first n_steps decisions."""
-    importance_thresholds: tuple[float, ...] = (0.25, 0.5, 0.75, 1.0)
-    """importance: advise where KL[theta_s || uniform] >= threshold."""
-    mistake_thresholds: tuple[float, ...] = (0.05, 0.15, 0.25, 0.5)
-    """mistake: advise after a move a with theta_s(a) < threshold."""
-    rates: tuple[float, ...] = (0.02, 0.05, 0.1, 0.2, 0.4)
-    """random: probability of advising per step."""
+    variants: tuple[str, ...] = ("goal_aware beta=0.1", "goal_aware beta=0.5", "goal_aware beta=1")
+    """More curves at the default kappa only: '<strategy> <parameter>=<value>'."""
+    candidate: str = "goal_aware"
+    """The strategy the targets are about (compared with every other at its default level)."""
+    baseline: str = "paper"
+    """The strategy the candidate must beat for the random walkers."""
 
     def check(self) -> None:
         super().check()
@@ -83,55 +63,17 @@ class Args(CommonArgs):
             raise ValueError("strategies needs expert trajectories: experts start or anywhere")
         if self.maps < 0 or self.map_size < 5 or self.workers < 1 or self.steps < 1:
             raise ValueError("need maps >= 0, map-size >= 5, workers >= 1 and steps >= 1")
-        if not (0.0 <= self.braid <= 1.0 and 0.0 <= self.beta <= 1.0):
-            raise ValueError("braid and beta must be in [0, 1]")
-
-
-@dataclass(frozen=True)
-class Config:
-    """One point of one curve: a strategy at one cost level."""
-
-    curve: str  # a name in CURVES, or "goal_aware beta=<b>"
-    strategy: str  # the kernel's strategy ("paper" for ``none``, which gives no advice)
-    level: float  # the curve's cost parameter (nan: none, always)
-    kappa: float
-    params: StrategyParams = field(default_factory=StrategyParams)
-    default: bool = False  # the curve's default level
-
-    @property
-    def key(self) -> str:
-        return self.curve if math.isnan(self.level) else f"{self.curve}@{self.level:g}"
-
-    @property
-    def advised(self) -> bool:
-        return self.curve != "none"
+        if not 0.0 <= self.braid <= 1.0:
+            raise ValueError("braid must be in [0, 1]")
+        check_strategies(self)
+        for name in (self.candidate, self.baseline):
+            if name not in self.strategies:
+                raise ValueError(f"{name} is not among the strategies run")
 
 
 def configs(args: Args) -> list[Config]:
     """Every configuration run, in report order; each curve's levels ascending."""
-    base = StrategyParams(beta=args.beta)
-    k0 = args.kappa
-    out = [Config("none", "paper", math.nan, k0, base, True)]
-    for kappa in sorted({*args.kappas, k0}):
-        out.append(Config("paper", "paper", kappa, kappa, base, kappa == k0))
-    for kappa in sorted({*args.goal_kappas, k0}):
-        out.append(Config("goal_aware", "goal_aware", kappa, kappa, base, kappa == k0))
-    for n in sorted({*args.early_steps, base.n_steps}):
-        p = StrategyParams(n_steps=n, beta=args.beta)
-        out.append(Config("early", "early", n, k0, p, n == base.n_steps))
-    for rule, values in (
-        ("importance", args.importance_thresholds),
-        ("mistake", args.mistake_thresholds),
-    ):
-        for t in sorted({*values, base.threshold}):
-            p = StrategyParams(threshold=t, beta=args.beta)
-            out.append(Config(rule, rule, t, k0, p, t == base.threshold))
-    for r in sorted({*args.rates, base.rate}):
-        out.append(Config("random", "random", r, k0, StrategyParams(rate=r), r == base.rate))
-    out.append(Config("always", "always", math.nan, k0, base, True))
-    for b in sorted(set(args.betas) - {args.beta}):
-        out.append(Config(f"goal_aware beta={b:g}", "goal_aware", k0, k0, StrategyParams(beta=b)))
-    return out
+    return curve_configs(args, args.variants)
 
 
 @dataclass(frozen=True)

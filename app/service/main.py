@@ -12,13 +12,14 @@ from fastapi.staticfiles import StaticFiles
 from fastapi_offline import FastAPIOffline
 from starlette.concurrency import run_in_threadpool
 
-from app.service import apidocs, metrics, viewer_feed
+from app.service import metrics
 from app.service.config import VERSION, Settings
 from app.service.errors import BodyLimit, NoWebSocketRoute, install_error_handlers
 from app.service.logs import announce, quiet_event_routes
 from app.service.openapi import install_openapi
 from app.service.ops import warm_up
-from app.service.routes import ROUTERS
+from app.service.routes import ROUTERS, apidocs
+from app.service.routes import metrics as metrics_route
 from app.service.routes.sessions import add_event_route
 from app.service.security import redact_access_log
 from app.service.state import ServiceState, open_state
@@ -75,10 +76,10 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         if gauges is not None:
             gauges.cancel()
         await state.sessions.close()
-        if not state.sessions.shared:  # a graceful restart keeps the live sessions
-            kept = await run_in_threadpool(state.sessions.save, state.store)
-            if kept:
-                announce(f"Kept {kept} live sessions for the next start", settings.log_format)
+        # a graceful restart keeps the live sessions (Redis keeps them itself)
+        kept = await run_in_threadpool(state.sessions.save, state.store)
+        if kept:
+            announce(f"Kept {kept} live sessions for the next start", settings.log_format)
         await run_in_threadpool(state.close)
 
 
@@ -109,10 +110,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     add_event_route(app)  # the busiest route first, on the app's own router
     for router in ROUTERS:
         app.include_router(router)
-    app.include_router(viewer_feed.router)
-    app.include_router(apidocs.router)
     if settings.metrics_enabled:
-        app.include_router(metrics.router)
+        app.include_router(metrics_route.router)
     if settings.static_dir.is_dir():
         app.mount("/static", StaticFiles(directory=settings.static_dir), "static")
     install_openapi(app)

@@ -31,9 +31,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from fastapi import APIRouter, Response
 from prometheus_client import (
-    CONTENT_TYPE_LATEST,
     REGISTRY,
     CollectorRegistry,
     Counter,
@@ -45,7 +43,6 @@ from prometheus_client import (
 from prometheus_client import multiprocess as mp
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from app.service.deps import StateDep
 from app.service.logs import REQUEST_ID, new_request_id
 
 if TYPE_CHECKING:
@@ -219,16 +216,6 @@ def exposition() -> bytes:
         mp.MultiProcessCollector(registry)  # type: ignore[no-untyped-call]
         return generate_latest(registry)
     return generate_latest(REGISTRY)
-
-
-router = APIRouter(tags=["operations"])
-
-
-@router.get("/metrics", response_class=Response, responses={200: {"content": {"text/plain": {}}}})
-async def metrics(state: StateDep) -> Response:
-    """Prometheus metrics in the text exposition format (README, "Operations")."""
-    await refresh_sessions(state)
-    return Response(exposition(), media_type=CONTENT_TYPE_LATEST)
 
 
 class MetricsMiddleware:

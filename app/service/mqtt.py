@@ -349,15 +349,8 @@ class Bridge:
         body = self.configs.get(key) or SessionCreate()
         if body.start is None:
             body = body.model_copy(update={"start": _first_state(payload)})
-        if body.strategy == "goal_aware" and domain.goal_priors is None:
-            await asyncio.to_thread(self.state.catalog.goal_priors, domain)
-        if body.strategy == "guide" and domain.guide_map is None:
-            try:
-                await asyncio.to_thread(self.state.catalog.guide_map, domain)
-            except ValueError as exc:
-                raise Refused(422, f"strategy guide: {exc}") from None
         try:
-            session, decision = await ops.create_session(self.state, domain, body)
+            session, decision = await ops.open_session(self.state, domain, body)
         except BadInput as exc:
             raise Refused(exc.status, exc.detail) from None
         self.sessions[key] = session

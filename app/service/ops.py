@@ -7,15 +7,18 @@ the others run on the event loop and never block.
 from __future__ import annotations
 
 import json
+from typing import Any
 
 import numpy as np
 import orjson
+from starlette.concurrency import run_in_threadpool
 
+from app import strategies
 from app.advice.advisor import Decision, DecisionBatch
 from app.advice.guide import GuideMap
 from app.advice.models import AdviceTables
+from app.advice.params import StrategyParams
 from app.advice.priors import GoalPriors
-from app.advice.strategies import StrategyParams, guide_params, strategy_params
 from app.arrays import IntArray
 from app.domain.grid import ACTIONS, Frame, GridDomain, MapError
 from app.domain.paths import expert_trajectories, path_within
@@ -27,14 +30,14 @@ from app.service.live.registry import (
     ClientQuotaReached,
     LiveSession,
     SessionMemoryFull,
+    SessionSettings,
     SessionSnapshot,
     TooManySessions,
 )
 from app.service.live.replay import StepConflict
-from app.service.live.stream import StreamAdvisor, StreamGoalAware, StreamGuide
 from app.service.metrics import METRICS, ingested
 from app.service.problems import BadInput
-from app.service.public import overview_domain, overview_session
+from app.service.public import overview_domain, overview_session, viewer_session
 from app.service.schemas import (
     Cell,
     DomainPut,
@@ -46,6 +49,7 @@ from app.service.schemas import (
 from app.service.state import ServiceState
 from app.service.wire.encode import batch_binary, batch_json, decision_json, theta_text
 from app.service.wire.events import read_move, read_moves
+from app.strategies import DomainData
 
 #: an expert walk's longest (``expert_trajectory``'s default ``max_steps``)
 EXPERT_MAX_STEPS = 10_000
@@ -58,56 +62,68 @@ def cell_state(domain: GridDomain, cell: Cell, what: str) -> int:
         raise BadInput(f"{what}: {exc}") from None
 
 
-def session_params(state: ServiceState, domain: DomainState, body: SessionCreate) -> StrategyParams:
-    """The strategy's parameters of a session request, checked against this service's limits
-    before anything is built for it: the window, the parameters, and for goal_aware and guide
-    the per-goal tables (goals x cells) and goal_aware's per-goal window (goals x window)."""
-    settings = state.settings
-    limit = settings.max_window
-    if body.window > limit:
-        raise BadInput(f"window: {body.window} is larger than this service allows ({limit})")
+def session_settings(
+    state: ServiceState, domain: DomainState, body: SessionCreate
+) -> SessionSettings:
+    """A session request's settings, checked against this service's limits before anything
+    is built for it: the strategy, the window, the strategy's parameters, for strategies that
+    read the experts' goals the per-goal tables (goals x cells), for one that keeps a value
+    per goal and pair the goals x window, and the start cell."""
+    limits = state.settings
+    if body.window > limits.max_window:
+        raise BadInput(
+            f"window: {body.window} is larger than this service allows ({limits.max_window})"
+        )
     given = body.params.model_dump(exclude_unset=True) if body.params else {}
     try:
-        params = strategy_params(body.strategy, given)
+        entry = strategies.get(body.strategy)
+        advisor = entry.settings(body.kappa, body.window, given)
     except ValueError as exc:
         raise BadInput(f"params: {exc}") from None
-    if body.strategy in ("goal_aware", "guide"):
-        goals, cells = len(domain.domain.goals), domain.domain.n_states
-        if goals * cells > settings.max_goal_cells:
-            raise BadInput(
-                f"strategy {body.strategy}: domain {domain.name!r} has {goals} goals x {cells} "
-                f"free cells = {goals * cells} per-goal entries, more than this service keeps "
-                f"({settings.max_goal_cells}, ADVISOR_MAX_GOAL_CELLS)"
-            )
-    if body.strategy == "goal_aware" and params.beta > 0.0:
-        goals, most = len(domain.domain.goals), settings.max_goal_window
-        if goals * body.window > most:
-            raise BadInput(
-                f"window: goal_aware with beta > 0 keeps a value per goal and pair: {goals} "
-                f"goals x window {body.window} = {goals * body.window} is more than this service "
-                f"allows ({most}, ADVISOR_MAX_GOAL_WINDOW): a smaller window, or beta 0"
-            )
-    return params
+    goals, cells = len(domain.domain.goals), domain.domain.n_states
+    if entry.needs and goals * cells > limits.max_goal_cells:
+        raise BadInput(
+            f"strategy {entry.name}: domain {domain.name!r} has {goals} goals x {cells} "
+            f"free cells = {goals * cells} per-goal entries, more than this service keeps "
+            f"({limits.max_goal_cells}, ADVISOR_MAX_GOAL_CELLS)"
+        )
+    if entry.goal_window(advisor.params) and goals * body.window > limits.max_goal_window:
+        raise BadInput(
+            f"window: {entry.name} with these parameters keeps a value per goal and pair: "
+            f"{goals} goals x window {body.window} = {goals * body.window} is more than this "
+            f"service allows ({limits.max_goal_window}, ADVISOR_MAX_GOAL_WINDOW): a smaller "
+            "window, or parameters that keep none (goal_aware: beta 0)"
+        )
+    grid = domain.domain
+    start = None if body.start is None else cell_state(grid, body.start, "start")
+    return SessionSettings(advisor, body.agent_type, start)
+
+
+async def open_session(
+    state: ServiceState, domain: DomainState, body: SessionCreate, client: str | None = None
+) -> tuple[LiveSession, Decision]:
+    """A session for ``body`` (checked first, :func:`session_settings`), the domain made ready
+    for its strategy off the event loop the first time (:meth:`DomainCatalog.prepare`: goal
+    priors, a guide map); ``client``: whom its quota counts against (None: no quota)."""
+    settings = session_settings(state, domain, body)
+    entry = strategies.get(settings.advisor.strategy)
+    if entry.missing(domain.data(POOLED)):
+        try:
+            await run_in_threadpool(state.catalog.prepare, domain, entry.needs)
+        except ValueError as exc:  # a map that cannot have it (GuideError)
+            raise BadInput(f"strategy {settings.advisor.strategy}: {exc}") from None
+    return await create_session(state, domain, settings, client)
 
 
 async def create_session(
-    state: ServiceState, domain: DomainState, body: SessionCreate,
-    params: StrategyParams | None = None, client: str | None = None,
+    state: ServiceState, domain: DomainState, settings: SessionSettings,
+    client: str | None = None,
 ) -> tuple[LiveSession, Decision]:  # fmt: skip
-    """A session for a request checked by :func:`session_params` (``params``: its answer; the
-    domain's goal tables built, for goal_aware and guide, off the event loop:
-    :meth:`DomainCatalog.goal_priors`, :meth:`DomainCatalog.guide_map`); ``client``: whom its
-    quota counts against (None: no per-client quota)."""
-    if params is None:
-        params = session_params(state, domain, body)
-    grid = domain.domain
-    start = grid.start if body.start is None else cell_state(grid, body.start, "start")
+    """A session of checked ``settings`` on ``domain`` (made ready for its strategy); the
+    sessions' refusals as 503 and 429 answers."""
     sessions = state.sessions
     try:
-        session, decision = await sessions.create(
-            domain, body.kappa, body.window, body.agent_type, start, body.strategy, params,
-            client,
-        )  # fmt: skip
+        session, decision = await sessions.create(domain, settings, client)
     except TooManySessions:
         raise BadInput(
             f"the service has its maximum of {sessions.max_sessions} live sessions: "
@@ -148,30 +164,12 @@ def conflict(exc: StepConflict) -> BadInput:
     return BadInput(str(exc), 409)
 
 
-def apply_events(state: ServiceState, session: LiveSession, raw: bytes | str) -> bytes:
-    """Events (JSON text: one or a list) -> decisions (JSON: one or a list, in order), in one
-    go (the routes run :func:`answer_events`, the same work with long batches in slices)."""
-    grid = session.domain.domain
-    try:
-        move = read_move(grid, raw)
-        if move is not None:  # one event object: plain ints and one decision
-            d = state.registry.observe_one(session, *move)
-            _count(state, session, 1, int(d.advise))
-            return decision_json(d, grid)
-        moves, _, first = read_moves(grid, raw, state.settings.max_batch_events)  # a list
-        out = state.registry.observe_batch(session, moves, first)
-    except StepConflict as exc:
-        raise conflict(exc) from None
-    _count_batch(state, session, out)
-    return batch_json(out, grid)
-
-
 async def answer_events(
     state: ServiceState, session: LiveSession, raw: bytes | str, binary: bool = False
 ) -> bytes:
-    """:func:`apply_events` (or, ``binary``, :func:`apply_events_binary`) as the routes run it:
-    a long batch in slices, the event loop free for others between them
-    (:meth:`SessionRegistry.observe_sliced`)."""
+    """Events (JSON text: one or a list) -> decisions (JSON: one or a list, in order; with
+    ``binary``, one binary frame, :mod:`advisor_client.protocol`): a long batch in slices, the
+    event loop free for others between them (:meth:`SessionRegistry.observe_sliced`)."""
     grid, sessions = session.domain.domain, state.sessions
     try:
         if not binary:
@@ -245,19 +243,6 @@ def position_moves(
     s2 = np.array(visited[1:], dtype=np.int64)
     a = np.argmax(grid.next_state[s] == s2[:, None], axis=1).astype(np.int64)
     return s, a, s2
-
-
-def apply_events_binary(state: ServiceState, session: LiveSession, raw: bytes | str) -> bytes:
-    """Events (JSON text: one or a list) -> decisions as one binary frame
-    (:mod:`advisor_client.protocol`), the same decisions as :func:`apply_events` gives."""
-    grid = session.domain.domain
-    moves, _, first = read_moves(grid, raw, state.settings.max_batch_events)
-    try:
-        out = state.registry.observe_batch(session, moves, first)
-    except StepConflict as exc:
-        raise conflict(exc) from None
-    _count_batch(state, session, out)
-    return batch_binary(out, grid)
 
 
 def put_domain(state: ServiceState, name: str, body: DomainPut) -> tuple[DomainState, bool, bool]:
@@ -370,6 +355,22 @@ def overview(
     })  # fmt: skip
 
 
+#: Sessions handed to the viewer per snapshot at most (the most recently active).
+VIEWER_SESSIONS = 64
+
+
+async def viewer_snapshot(state: ServiceState) -> bytes:
+    """``GET /viewer/snapshot``: what the viewer draws now, as JSON (``ViewerSnapshot``; the
+    sessions' copies made in a worker thread)."""
+    domains = [
+        {"name": d.name, "updated_at": d.updated_at, "prior_version": d.view.version}
+        for d in state.catalog.states()
+    ]
+    sessions = [viewer_session(s) for s in await state.sessions.snapshot(VIEWER_SESSIONS)]
+    highest = [e.kappa_max for e in strategies.STRATEGIES.values() if e.kappa_max is not None]
+    return orjson.dumps({"domains": domains, "sessions": sessions, "kappa_max": max(highest)})
+
+
 def prepare_answers(domain: DomainState) -> None:
     """*Worker thread.* The text of theta that batch answers copy their advice from, for each
     table of the domain's current prior, made here rather than at the first batch after the
@@ -380,28 +381,32 @@ def prepare_answers(domain: DomainState) -> None:
 
 def warm_up() -> None:
     """Load (or compile, the first time) every compiled loop of the event paths (reader,
-    checks, advisor, writers), so that no request waits for it."""
+    checks, every strategy's service advisor, writers), so that no request waits for it."""
     grid = GridDomain.from_strings(["#####", "#S.G#", "#####"])
     tables = AdviceTables.paper(np.full((grid.n_states, 4), 0.25))
     event = {"state": list(grid.cell(grid.start)), "action": ACTIONS[1]}
     moves, _, _ = read_moves(grid, json.dumps([event] * 3), 3)
-    advisor = StreamAdvisor(tables, kappa=0.0, window=2)
-    advisor.start(grid.start)
-    out = advisor.observe_batch(*moves)
-    advisor.tables = AdviceTables.paper(np.full((grid.n_states, 4), 0.25))  # a prior update
-    advisor.observe_batch(*moves)
-    batch_json(out, grid)
-    batch_binary(out, grid)
-    # goal_aware's loops too, a prior update (new goal counts) included, and guide's
-    goals = GoalPriors(grid.n_states, grid.goals).add([np.array([[0, 1]])], [0])
-    aware = StreamGoalAware(tables, goals, kappa=0.0, window=2, beta=0.5)
-    aware.start(grid.start)
-    aware.observe_batch(*moves)
-    aware.use_tables(tables, GoalPriors(grid.n_states, grid.goals).add([np.array([[0, 1]])], [0]))
-    aware.observe(*(int(m[0]) for m in moves))
-    aware.goal_beliefs()
-    guide = StreamGuide(
-        tables, GuideMap.of(grid, goals), kappa=0.0, window=2, params=guide_params(None)
-    )
-    guide.start(grid.start)
-    guide.observe_batch(*moves)
+
+    def goals() -> GoalPriors:
+        return GoalPriors(grid.n_states, grid.goals).add([np.array([[0, 1]])], [0])
+
+    data = DomainData(tables, goals(), GuideMap.of(grid, goals()))
+    for entry in strategies.STRATEGIES.values():
+        # the per-goal window too where a strategy keeps one (goal_aware's beta > 0)
+        half: list[dict[str, Any]] = [{p: 0.5} for p in entry.reads]
+        swept = [StrategyParams(), *(StrategyParams(**h) for h in half)]
+        for params in swept:
+            try:
+                settings = entry.settings(0.0, 2, params)
+            except ValueError:
+                continue  # 0.5 is out of this parameter's bounds
+            advisor = entry.service_advisor(data, settings)
+            advisor.start(grid.start)
+            out = advisor.observe_batch(*moves)
+            # a prior update (new tables, new goal counts), then one event and a batch
+            advisor.use_tables(AdviceTables.paper(np.full((grid.n_states, 4), 0.25)), goals())
+            advisor.observe(*(int(m[0]) for m in moves))
+            advisor.observe_batch(*moves)
+            advisor.goal_beliefs()
+            batch_json(out, grid)
+            batch_binary(out, grid)

@@ -79,20 +79,30 @@ def session_public(s: SessionSnapshot) -> SessionPublic:
     )  # fmt: skip
 
 
-def overview_session(s: SessionSnapshot) -> dict[str, Any]:
-    """A live session as the overview lists it (``OverviewSession``), as plain data: an
-    overview of 1,000 sessions is written by orjson, not built as pydantic models."""
-    last = None
-    if s.advice:
-        step, cell, advice = s.advice[-1]
-        last = {"step": step, "state": cell, "advice": dict(zip("NESW", advice, strict=True))}
+def _session_figures(s: SessionSnapshot) -> dict[str, Any]:
+    """What the overview and the viewer's feed show of every live session, as plain data
+    (written by orjson: an overview of 1,000 sessions is not built as pydantic models)."""
     return {
         "session_id": s.id, "domain": s.domain, "agent_type": s.agent_type, "kappa": s.kappa,
         "strategy": s.strategy, "goals": _goal_dicts(s), "steps": s.steps,
         "position": s.position, "p_normal": s.p_normal, "advice_count": s.advice_count,
-        "total_cost": s.total_cost, "advice_per_100": s.advice_per_100, "last_advice": last,
-        "path": s.path, "p_normal_history": s.p_history,
+        "total_cost": s.total_cost, "advice_per_100": s.advice_per_100, "path": s.path,
+        "p_normal_history": s.p_history,
     }  # fmt: skip
+
+
+def overview_session(s: SessionSnapshot) -> dict[str, Any]:
+    """A live session as the overview lists it (``OverviewSession``)."""
+    last = None
+    if s.advice:
+        step, cell, advice = s.advice[-1]
+        last = {"step": step, "state": cell, "advice": dict(zip("NESW", advice, strict=True))}
+    return _session_figures(s) | {"last_advice": last}
+
+
+def viewer_session(s: SessionSnapshot) -> dict[str, Any]:
+    """A live session as the viewer's feed gives it (``ViewerSession``)."""
+    return _session_figures(s) | {"advice": s.advice}
 
 
 def _goals(s: SessionSnapshot) -> list[GoalBelief] | None:

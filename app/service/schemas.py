@@ -13,6 +13,7 @@ from datetime import datetime
 from typing import TYPE_CHECKING, Annotated, Any, Literal, NotRequired
 
 from pydantic import (
+    AfterValidator,
     BaseModel,
     ConfigDict,
     Field,
@@ -23,7 +24,9 @@ from pydantic import (
 )
 from typing_extensions import TypedDict
 
-from app.advice.strategies import StrategyParams as CoreStrategyParams
+from app import strategies
+from app.advice.advisor import DEFAULT_KAPPA, DEFAULT_WINDOW
+from app.advice.params import StrategyParams as CoreStrategyParams
 
 NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
 NAME_RULE = "1-64 characters: letters, digits, '_', '.', '-' (starting with a letter or digit)"
@@ -54,11 +57,13 @@ AgentType = Annotated[
     StringConstraints(pattern=NAME_PATTERN),
     Field(description=f"A kind of agent ({NAME_RULE}).", examples=["visitor"]),
 ]
-KAPPA_MAX = 1e6
+#: the largest kappa a request may ask for (no strategy advises above a few nats: each
+#: strategy's own range is ``kappa_max`` in ``GET /strategies``)
+KAPPA_LIMIT = 1e6
 Kappa = Annotated[
     float,
     Field(
-        strict=True, ge=0.0, le=KAPPA_MAX, allow_inf_nan=False,
+        strict=True, ge=0.0, le=KAPPA_LIMIT, allow_inf_nan=False,
         description="Cost of one piece of advice (nats); 0 always advises. At most 1e6 (a KL "
         "over four actions is at most log 4 = 1.39 nats), so that a session's total cost, "
         "kappa x advice count, stays a finite number.",
@@ -213,25 +218,37 @@ class PriorPublic(BaseModel):
 
 
 # ---- sessions, events and decisions ----------------------------------------------------------
-StrategyName = Literal[
-    "paper", "goal_aware", "early", "importance", "mistake", "random", "always", "guide"
-]
+def _known_strategy(name: str) -> str:
+    if name not in strategies.STRATEGIES:
+        raise ValueError(f"unknown strategy {name!r}: use one of {', '.join(strategies.names())}")
+    return name
+
+
+def _strategy_schema(schema: dict[str, Any]) -> None:
+    """The strategies registered when the schema is made, with what each does."""
+    schema["enum"] = list(strategies.names())
+    schema["description"] = (
+        STRATEGY_DOC
+        + " "
+        + "; ".join(f"'{e.name}': {e.summary}" for e in strategies.STRATEGIES.values())
+    )
+
+
 STRATEGY_DOC = (
-    "When to advise (docs/ARCHITECTURE.md, 'Advising strategies'): 'paper' (default): iff "
-    "KL[theta_s || P(A|s,H)] >= kappa; 'goal_aware': the same rule with theta narrowed by a "
-    "posterior over the experts' goals; 'early': the first n_steps decisions; 'importance': "
-    "where KL[theta_s || uniform] >= threshold; 'mistake': after an action with theta_s(a) < "
-    "threshold; 'random': with probability rate; 'always'; 'guide' (beyond the paper; the one "
-    "to deploy in a building): leads explorers that look lost to a destination of the map "
-    "along shortest paths, advice in every cell, ruling out destinations passed. Every "
-    "strategy advises theta_s (goal_aware and guide: their own advice) and costs kappa per "
-    "piece of advice."
+    "When to advise (GET /strategies lists each strategy with its parameters; "
+    "docs/ARCHITECTURE.md, 'Advising strategies'). Every strategy costs kappa per piece of "
+    "advice."
 )
+#: a strategy of the table (:mod:`app.strategies`), checked when a request is read
+StrategyName = Annotated[
+    str, AfterValidator(_known_strategy), Field(json_schema_extra=_strategy_schema)
+]
 
 
 def _strategy_params_fields() -> dict[str, Any]:
     """The request's strategy parameters, made from the core's one definition
-    (:class:`app.advice.strategies.StrategyParams`: names, defaults, bounds, who reads them)."""
+    (:class:`app.advice.params.StrategyParams`: names, defaults, bounds, meaning; which
+    strategy reads which is its entry's, :mod:`app.strategies`)."""
     out: dict[str, Any] = {}
     for f in fields(CoreStrategyParams):
         m = f.metadata
@@ -259,8 +276,8 @@ else:
 
 
 class SessionCreate(Strict):
-    kappa: Kappa = 0.5
-    window: Window = 300
+    kappa: Kappa = DEFAULT_KAPPA
+    window: Window = DEFAULT_WINDOW
     agent_type: AgentType | None = None
     start: Cell | None = Field(None, description="Start cell (default: the domain's start).")
     strategy: StrategyName = Field("paper", description=STRATEGY_DOC)
@@ -426,3 +443,61 @@ class Overview(BaseModel):
         description="Most recently active first, with where each explorer is and was (the "
         "last cells within the retention); empty without an operator's key."
     )
+
+
+# ---- the viewer's feed (operator key) --------------------------------------------------------
+class ViewerDomain(BaseModel):
+    name: str
+    updated_at: datetime = Field(description="Changes when the domain is PUT again.")
+    prior_version: int = Field(description="Changes whenever its prior does.")
+
+
+class ViewerSession(SessionBase):
+    """A live session as the viewer draws it."""
+
+    path: list[Cell] = Field(description="Recent cells within the retention, oldest first.")
+    p_normal_history: list[float]
+    advice: list[tuple[int, Cell, tuple[float, float, float, float]]] = Field(
+        description="(step, cell, advice as N, E, S, W) of the recent advice, oldest first."
+    )
+
+
+class ViewerSnapshot(BaseModel):
+    domains: list[ViewerDomain]
+    sessions: list[ViewerSession] = Field(description="Most recently active first.")
+    kappa_max: float = Field(
+        description="The largest kappa at which any strategy of this service still advises "
+        "(the viewer's kappa slider goes up to it)."
+    )
+
+
+class ViewerStatus(BaseModel):
+    enabled: bool = Field(description="Whether `serve` starts the viser viewer beside the API.")
+    port: int | None = Field(description="Its port (null when not enabled).")
+    host: str | None = Field(description="The interface it listens on (null when not enabled).")
+
+
+# ---- the strategies (public) -----------------------------------------------------------------
+class StrategyParamPublic(BaseModel):
+    name: str
+    default: float
+    low: float
+    high: float | None = Field(description="null: no upper bound.")
+    description: str
+
+
+class StrategyPublic(BaseModel):
+    """One advising strategy a session may ask for (``strategy``), and what it reads."""
+
+    name: str
+    summary: str = Field(description="What it does, in plain words.")
+    params: list[StrategyParamPublic] = Field(description="The parameters it reads (params).")
+    needs: list[str] = Field(
+        description="What it reads of a domain besides the prior: 'goal_priors' (the experts' "
+        "goals), 'guide_map' (the map's destinations); built at a domain's first such session."
+    )
+    kappa_max: float | None = Field(
+        description="The largest kappa at which it can still advise (null: kappa only prices "
+        "its advice; the rule decides without it)."
+    )
+    compiled: bool = Field(description="Whether a compiled form runs its batches.")

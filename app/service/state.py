@@ -10,10 +10,10 @@ from app.service.answers import Fresh
 from app.service.clients import OPERATOR, ClientKeys, Network, networks
 from app.service.config import Settings
 from app.service.data.bootstrap import bootstrap
-from app.service.data.domains import DomainCatalog, DomainState
+from app.service.data.domains import DomainCatalog
 from app.service.data.store import Store
 from app.service.live.registry import Limits, SessionRegistry
-from app.service.live.sessions import LocalSessions
+from app.service.live.sessions import LocalSessions, Sessions
 from app.service.security import load_admin_key, load_operator_key
 
 
@@ -29,7 +29,7 @@ class ServiceState:
     trusted: tuple[Network, ...] = ()  # proxies whose X-Forwarded-For is believed
     client_keys: ClientKeys = field(default_factory=ClientKeys)  # keys that are clients
     fresh: Fresh = field(default_factory=Fresh)  # answers made at most once a second
-    sessions: LocalSessions = None  # type: ignore[assignment]  # the live sessions (below)
+    sessions: Sessions = None  # type: ignore[assignment]  # the live sessions (below)
 
     def __post_init__(self) -> None:
         if self.sessions is None:  # the embedded default: the sessions of this process
@@ -70,7 +70,7 @@ def open_state(settings: Settings) -> tuple[ServiceState, list[str]]:
     if made:
         messages.append(made)
     trusted = networks(settings.trusted_proxies)
-    sessions: LocalSessions | None = None
+    sessions: Sessions | None = None
     if settings.redis_url:  # sessions in Redis; this registry a cache of those it used
         from app.service.live.shared import SharedSessions
 
@@ -87,10 +87,9 @@ def open_state(settings: Settings) -> tuple[ServiceState, list[str]]:
         settings, store, catalog, registry, admin_key, operator_key, trusted=trusted,
         client_keys=client_keys, sessions=sessions,  # type: ignore[arg-type]
     )  # fmt: skip
-    if not state.sessions.shared:
-        kept = state.sessions.restore(store, catalog.get, lambda d, s: prepare(catalog, d, s))
-        if kept:
-            messages.append(f"Restored {kept} live sessions kept at the last shutdown")
+    kept = state.sessions.restore(store)
+    if kept:
+        messages.append(f"Restored {kept} live sessions kept at the last shutdown")
     return state, messages
 
 
@@ -108,12 +107,3 @@ def quota_keys(settings: Settings, admin_key: str, operator_key: str) -> ClientK
             )
         named.append((f"key {name}", key))
     return ClientKeys(named)
-
-
-def prepare(catalog: DomainCatalog, domain: DomainState, strategy: str) -> None:
-    """*Worker thread.* Build what ``strategy`` reads of ``domain`` (goal_aware: the goal
-    priors; guide: the guide map) if it is not built yet."""
-    if strategy == "goal_aware":
-        catalog.goal_priors(domain)
-    elif strategy == "guide":
-        catalog.guide_map(domain)

@@ -35,7 +35,9 @@ NONE = "(none)"
 #: What "lost" means for the kappa shading.
 LOST_CERTAIN = "P(M1|H) = 0: certainly lost"
 LOST_PICKED = "P(M1|H) of the picked session"
-KAPPA_MAX = 1.4  # just above log 4, the largest KL[theta_s || uniform]
+#: the kappa slider's range until the service says its strategies' (``Snapshot.kappa_max``):
+#: just above log 4, the largest KL[theta_s || uniform], the paper's rule's range
+SLIDER_KAPPA_HIGH = 1.4
 #: The picked session's plot; P(M1|H) is this quantity's one name on every page.
 PLOT_TITLE = "P(M1|H) over time"
 LAYER_LABELS = {
@@ -63,9 +65,11 @@ class Controls:
         self._fit_asked = False
         self.fit.on_click(lambda _event: self._ask_fit())
         with gui.add_folder("Advice threshold"):
+            self.kappa_high = SLIDER_KAPPA_HIGH
             self.kappa = gui.add_slider(
-                "kappa", 0.0, KAPPA_MAX, 0.01, DEFAULT_KAPPA, hint="Cost of one piece of advice"
-            )
+                "kappa", 0.0, self.kappa_high, 0.01, DEFAULT_KAPPA,
+                hint="Cost of one piece of advice",
+            )  # fmt: skip
             self.lost = gui.add_dropdown("Lost means", (LOST_CERTAIN, LOST_PICKED))
             self.shading_text = gui.add_markdown("")
         with gui.add_folder("Layers"):
@@ -127,9 +131,10 @@ class Controls:
 
     @property
     def picked_kappa(self) -> float:
-        """The slider's kappa, within [0, KAPPA_MAX]. Any page can open the viewer's websocket
-        and send a value the slider would never give (NaN, -5, 1e308, text): such a value is
-        put back in range (NaN and non-numbers: the default) and the slider shows it."""
+        """The slider's kappa, within [0, :attr:`kappa_high`]. Any page can open the viewer's
+        websocket and send a value the slider would never give (NaN, -5, 1e308, text): such a
+        value is put back in range (NaN and non-numbers: the default) and the slider shows
+        it."""
         value = self.kappa.value
         try:
             v = float(value)
@@ -137,7 +142,7 @@ class Controls:
             v = DEFAULT_KAPPA
         if isinstance(value, bool) or not math.isfinite(v):
             v = DEFAULT_KAPPA
-        v = min(max(v, 0.0), KAPPA_MAX)
+        v = min(max(v, 0.0), self.kappa_high)
         if isinstance(value, bool) or not isinstance(value, float):
             # viser's setter casts to the type of the value it holds: give it a float first
             self.kappa._impl.value = v
@@ -151,6 +156,12 @@ class Controls:
             box._impl.value = False  # viser's setter casts to the held value's type
             box.value = True
         return bool(box.value)
+
+    def set_kappa_high(self, high: float) -> None:
+        """The slider reaches ``high`` (every strategy's range: the service says it)."""
+        if high != self.kappa_high and math.isfinite(high) and high > 0.0:
+            self.kappa_high = high
+            self.kappa.max = high
 
     # ---- refreshing from the pump --------------------------------------------------------
     def set_domains(self, names: Sequence[str]) -> None:

@@ -74,7 +74,7 @@ class RemoteFeed:
         for gone in set(self._grids) - set(domains):
             self._grids.pop(gone, None)
             self._views.pop(gone, None)
-        return Snapshot(domains, [session_view(s) for s in snap["sessions"]])
+        return Snapshot(domains, [session_view(s) for s in snap["sessions"]], snap.get("kappa_max"))
 
 
 def theta_of(grid: GridDomain, theta: list[list[list[float] | None]]) -> np.ndarray:

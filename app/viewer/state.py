@@ -1,10 +1,10 @@
 """What the viewer reads: plain snapshots of domains and live sessions.
 
 The viewer is a consumer of state. It never reaches into the service; something else (the
-service's adapter, :mod:`app.service.viewer_feed`, or a test) hands it a :class:`Snapshot`
-through a :data:`Feed`, a callable the pump calls at a fixed rate. Snapshots are cheap to make
-(references to arrays the owner does not mutate, short lists) and carry version numbers so the
-viewer redraws only what changed.
+service's ``GET /viewer/snapshot`` read by :mod:`app.viewer.remote`, or a test) hands it a
+:class:`Snapshot` through a :data:`Feed`, a callable the pump calls at a fixed rate.
+Snapshots are cheap to make (references to arrays the owner does not mutate, short lists) and
+carry version numbers so the viewer redraws only what changed.
 """
 
 from __future__ import annotations
@@ -81,6 +81,8 @@ class Snapshot:
 
     domains: dict[str, DomainView] = field(default_factory=dict)
     sessions: Sequence[SessionView] = ()
+    #: the largest kappa at which any strategy of the service advises (None: not said)
+    kappa_max: float | None = None
 
     def sessions_of(self, domain: str) -> list[SessionView]:
         return [s for s in self.sessions if s.domain == domain]

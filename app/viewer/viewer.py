@@ -54,6 +54,8 @@ class ClientView:
     def apply(self, snap: Snapshot) -> None:
         """Bring this browser's scene and panel up to date with ``snap``."""
         controls = self.controls
+        if snap.kappa_max is not None:
+            controls.set_kappa_high(snap.kappa_max)
         controls.set_domains(sorted(snap.domains))
         view = snap.domains.get(controls.picked_domain or "")
         if view is None:

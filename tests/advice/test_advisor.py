@@ -9,9 +9,7 @@ from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
 from app.advice.advisor import Advisor, kl_divergence
-from app.advice.batch import BatchAdvisor
 from app.advice.models import AdviceTables, BehaviourModel, uniform_model
-from tests.tables import random_tables
 
 LOG4 = math.log(4)
 
@@ -93,52 +91,6 @@ def test_window_sums_stay_exact_over_long_streams(
     assert adv.log_likelihoods[0] == pytest.approx(scratch, abs=1e-9)
     assert adv.log_likelihoods[1] == pytest.approx((length - lo) * math.log(0.25), abs=1e-9)
     assert adv.history_length == length - lo
-
-
-@given(streams(), st.integers(1, 5), st.integers(0, 2**32 - 1), st.sampled_from([2, 3]))
-def test_batch_gives_the_single_decisions(
-    data: tuple[np.ndarray, list[tuple[int, int, int]], int, float], n_exp: int, seed: int,
-    n_models: int,
-) -> None:  # fmt: skip
-    """BatchAdvisor (numpy) against the core, over two or three models of random weights:
-    the same decisions and counts; KL and P(M1|H) to 1e-12 (numpy's vectorised exp and log
-    may differ from libm's in the last bit, which the compiled forms do not)."""
-    theta, _, window, kappa = data
-    rng = np.random.default_rng(seed)
-    tables = random_tables(rng, theta.shape[0], n_models, theta)
-    n = theta.shape[0]
-    kappas = rng.choice([kappa, 0.0, 0.3], n_exp)
-    singles = [Advisor(tables, kappa=float(k), window=window) for k in kappas]
-    batch = BatchAdvisor(tables, n_exp, kappa=kappas, window=window)
-    start = rng.integers(0, n, n_exp)
-    bd = batch.start(start)
-    sd = [adv.start(int(s)) for adv, s in zip(singles, start, strict=True)]
-    _assert_same(bd, sd)
-    for _ in range(int(rng.integers(0, 3 * window + 5))):
-        idx = np.flatnonzero(rng.random(n_exp) < 0.7)  # a random subset advances
-        if rng.random() < 0.05:  # and now and then one explorer starts over
-            e, s0 = int(rng.integers(n_exp)), int(rng.integers(n))
-            _assert_same(batch.start([s0], [e]), [singles[e].start(s0)])
-        s, a, s2 = (rng.integers(0, n, idx.size), rng.integers(0, 4, idx.size),
-                    rng.integers(0, n, idx.size))  # fmt: skip
-        bd = batch.observe(s, a, s2, idx)
-        sd = [
-            singles[e].observe(int(x), int(y), int(z))
-            for e, x, y, z in zip(idx, s, a, s2, strict=True)
-        ]
-        _assert_same(bd, sd)
-    for e, adv in enumerate(singles):
-        np.testing.assert_array_equal(batch._loglik[:, e], adv.log_likelihoods)
-        assert batch.steps[e] == adv.steps and batch.decisions[e] == adv.decisions
-
-
-def _assert_same(bd, sd) -> None:  # type: ignore[no-untyped-def]
-    assert bd.advise.tolist() == [d.advise for d in sd]
-    np.testing.assert_allclose(bd.kl, [d.kl for d in sd], rtol=0, atol=1e-12)
-    np.testing.assert_allclose(bd.p_normal, [d.p_normal for d in sd], rtol=0, atol=1e-12)
-    assert bd.advice_count.tolist() == [d.advice_count for d in sd]
-    np.testing.assert_allclose(bd.total_cost, [d.total_cost for d in sd], atol=1e-12)
-    np.testing.assert_allclose(bd.benefit, [d.benefit for d in sd], atol=1e-9)
 
 
 @given(

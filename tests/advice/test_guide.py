@@ -14,8 +14,8 @@ from hypothesis import strategies as st
 from app.advice import guide
 from app.advice.guide import GuideError, GuideMap
 from app.advice.models import AdviceTables
+from app.advice.params import StrategyParams
 from app.advice.priors import GoalPriors
-from app.advice.strategies import StrategyParams, make_advisor
 from app.agents.episodes import run_episode, run_learning
 from app.agents.experts import train_goal_priors
 from app.agents.explorers import FIXED_EXPLORERS, make_explorer
@@ -23,6 +23,7 @@ from app.agents.qlearning import QLearningExplorer
 from app.agents.simulate import QParams, Simulator
 from app.domain.generate import generate_building_domain, generate_domain
 from app.domain.grid import GridDomain, compass_moves
+from app.strategies import make_advisor
 
 
 def world(seed: int, building: bool) -> tuple[GridDomain, AdviceTables, GoalPriors]:
@@ -208,7 +209,7 @@ def test_compiled_guide_q_learning_is_the_core_s(
     fast = Simulator(d, tables, goal_priors).learning(
         goal, np.random.default_rng(seed), advised=advised, episodes=15, max_steps=80,
         keep_history=keep_history, kappa=kappa, window=40, strategy="guide",
-        guide_params=params, params=QParams(alpha=0.3, gamma=0.9, epsilon=0.2, ties=ties),
+        strategy_params=params, params=QParams(alpha=0.3, gamma=0.9, epsilon=0.2, ties=ties),
     )  # fmt: skip
     learner = QLearningExplorer(d, 0.3, 0.9, 0.2, ties)  # type: ignore[arg-type]
     advisor = make_advisor(

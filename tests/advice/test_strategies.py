@@ -11,9 +11,13 @@ from app.advice.advisor import Advisor, kl_divergence
 from app.advice.goals import GoalAwareAdvisor
 from app.advice.guide import GuideMap
 from app.advice.models import AdviceTables
+from app.advice.params import StrategyParams
 from app.advice.priors import ActionPrior, GoalPriors
-from app.advice.strategies import STRATEGIES, RuleAdvisor, StrategyParams, make_advisor
+from app.advice.rules import RULES, RuleAdvisor
 from app.domain.grid import GridDomain
+from app.strategies import make_advisor, names
+
+STRATEGIES = names()
 
 
 @st.composite
@@ -93,8 +97,8 @@ def test_rules_match_their_definitions(seed: int, threshold: float, n_steps: int
     theta = rng.dirichlet(np.full(4, 0.5), size=6)
     tables = AdviceTables.paper(theta)
     params = StrategyParams(n_steps=n_steps, threshold=threshold)
-    adv = {r: RuleAdvisor(tables, r, 0.5, 20, params) for r in ("always", "early", "importance")}
-    mistake = RuleAdvisor(tables, "mistake", 0.5, 20, StrategyParams(threshold=threshold / 2))
+    adv = {r: RULES[r](tables, 0.5, 20, params) for r in ("always", "early", "importance")}
+    mistake = RULES["mistake"](tables, 0.5, 20, StrategyParams(threshold=threshold / 2))
     decisions = {r: [a.start(0)] for r, a in adv.items()}
     assert not mistake.start(0).advise
     for _ in range(40):
@@ -115,7 +119,7 @@ def test_random_rule_rate_and_seed() -> None:
     tables = AdviceTables.paper(np.full((2, 4), 0.25))
 
     def run(rate: float, seed: int) -> list[bool]:
-        adv = RuleAdvisor(tables, "random", params=StrategyParams(rate=rate, seed=seed))
+        adv = RULES["random"](tables, params=StrategyParams(rate=rate, seed=seed))
         return [adv.start(0).advise] + [adv.observe(0, 1, 1).advise for _ in range(2000)]
 
     assert not any(run(0.0, 1)) and all(run(1.0, 1))
@@ -135,9 +139,9 @@ def test_a_restarted_rule_advisor_advises_as_a_fresh_one(rule: str) -> None:
         out = [adv.start(0)] + [adv.observe(s, a, s2) for s, a, s2 in moves]
         return [(d.advise, d.kl) for d in out]
 
-    reused = RuleAdvisor(tables, rule, params=params)
+    reused = RULES[rule](tables, params=params)
     episode(reused)  # a first explorer
-    assert episode(reused) == episode(RuleAdvisor(tables, rule, params=params))
+    assert episode(reused) == episode(RULES[rule](tables, params=params))
 
 
 def test_make_advisor_builds_each_strategy_and_rejects_unknown() -> None:
@@ -170,4 +174,4 @@ def test_make_advisor_builds_each_strategy_and_rejects_unknown() -> None:
 )
 def test_strategy_params_are_checked(params: StrategyParams, message: str) -> None:
     with pytest.raises(ValueError, match=message):
-        RuleAdvisor(AdviceTables.paper(np.full((1, 4), 0.25)), "early", params=params)
+        RULES["early"](AdviceTables.paper(np.full((1, 4), 0.25)), params=params)

@@ -19,7 +19,8 @@ from app.experiments.output import RunDir
 
 TINY: dict[str, Any] = {
     "tasks": 3, "buildings": (24,), "steps": 400, "q_tasks": 2, "episodes": 3, "workers": 1,
-    "progress": False, "kappas": (0.5,), "guide_kappas": (0.25, 0.5),
+    "progress": False, "paper_levels": (0.5,), "goal_aware_levels": (0.5,),
+    "guide_levels": (0.25, 0.5),
 }  # fmt: skip
 
 

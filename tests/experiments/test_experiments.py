@@ -13,7 +13,6 @@ from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 from app.cli import cli
-from app.domain.generate import generate_maze
 from app.domain.grid import GridDomain
 from app.experiments import difficulty, figure5, figure6, figure7, table1
 from app.experiments.common import moving_average, prepare, rng_for, wilson
@@ -21,15 +20,6 @@ from app.experiments.output import RunDir
 from app.experiments.traps import dead_end_masks, trap_goal
 
 TINY = {"tasks": 3, "steps": 300, "episodes": 6, "episode_steps": 40, "progress": False}
-
-
-@pytest.fixture(scope="module")
-def small_maze(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """Any valid map works: a generated 11x11 maze with 3 goals, not the shipped one."""
-    path = tmp_path_factory.mktemp("maze") / "small.txt"
-    rows = generate_maze(11, 11, np.random.default_rng(4), braid=0.3, n_goals=3)
-    path.write_text("\n".join(rows) + "\n")
-    return path
 
 
 def test_table1_writes_its_files_and_rows(small_maze: Path, tmp_path: Path) -> None:

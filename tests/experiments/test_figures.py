@@ -10,7 +10,6 @@ import pytest
 from matplotlib.colors import LogNorm
 from matplotlib.figure import Figure
 
-from app.domain.generate import generate_maze
 from app.experiments import figure6, table1
 from app.experiments.mazeplot import shared_log_norm
 from app.experiments.output import RunDir
@@ -28,14 +27,6 @@ class KeptFigures(RunDir):
     def figure(self, name: str, fig: Figure) -> Path:
         self.figures[name] = fig
         return super().figure(name, fig)
-
-
-@pytest.fixture(scope="module")
-def small_maze(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    path = tmp_path_factory.mktemp("maze") / "small.txt"
-    rows = generate_maze(11, 11, np.random.default_rng(4), braid=0.3, n_goals=3)
-    path.write_text("\n".join(rows) + "\n")
-    return path
 
 
 def test_failures_heat_map_has_one_labelled_colour_bar(small_maze: Path, tmp_path: Path) -> None:

@@ -13,20 +13,11 @@ import pytest
 from typer.testing import CliRunner
 
 from app.cli import cli
-from app.domain.generate import generate_maze
 from app.experiments import strategies, strategy_suite
+from app.experiments.curves import paired
 from app.experiments.output import RunDir
-from app.experiments.strategies import paired
 
 TINY = {"tasks": 2, "maps": 2, "map_size": 9, "steps": 120, "workers": 1, "progress": False}
-
-
-@pytest.fixture(scope="module")
-def small_maze(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    path = tmp_path_factory.mktemp("maze") / "small.txt"
-    rows = generate_maze(11, 11, np.random.default_rng(4), braid=0.3, n_goals=3)
-    path.write_text("\n".join(rows) + "\n")
-    return path
 
 
 @pytest.fixture(scope="module")
@@ -81,7 +72,7 @@ def test_strategies_rows_are_consistent(tiny_run: tuple[Path, dict]) -> None:  #
 
 def test_strategies_seeded_runs_are_reproducible(small_maze: Path, tmp_path: Path) -> None:
     args = strategy_suite.Args(maze=small_maze, **{**TINY, "maps": 1})  # type: ignore[arg-type]
-    args.goal_kappas, args.kappas, args.betas = (0.5,), (0.5,), ()
+    args.goal_aware_levels, args.paper_levels, args.variants = (0.5,), (0.5,), ()
     first = strategy_suite.run_all(args)
     again = strategy_suite.run_all(replace(args, workers=2))  # worker processes give the same
     other = strategy_suite.run_all(replace(args, seed=1))
@@ -97,7 +88,10 @@ def test_strategies_seeded_runs_are_reproducible(small_maze: Path, tmp_path: Pat
 
 
 def test_strategies_configs_include_every_default_level() -> None:
-    args = strategy_suite.Args(kappa=0.6, kappas=(0.25,), goal_kappas=(0.0,), betas=(0.0, 0.5))
+    args = strategy_suite.Args(
+        kappa=0.6, paper_levels=(0.25,), goal_aware_levels=(0.0,),
+        variants=("goal_aware beta=0", "goal_aware beta=0.5"),
+    )  # fmt: skip
     keys = [c.key for c in strategy_suite.configs(args)]
     assert keys[0] == "none" and "paper@0.6" in keys and "goal_aware@0.6" in keys
     assert "goal_aware beta=0.5@0.6" in keys and "goal_aware beta=0@0.6" not in keys

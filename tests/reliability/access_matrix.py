@@ -64,6 +64,7 @@ ROUTES = [
     Route("GET", "/overview", "anyone; sessions: operator"),
     Route("GET", "/viewer", "anyone"),
     Route("GET", "/metrics", "anyone"),
+    Route("GET", "/strategies", "anyone"),
     Route("GET", "/viewer/snapshot", "operator"),
     Route("GET", "/", "anyone"),
     Route("GET", "/walk", "anyone"),

@@ -14,7 +14,6 @@ import pytest
 from pydantic import BaseModel
 from websockets.sync.client import connect
 
-from app.advice.strategies import STRATEGIES
 from app.domain.grid import GridDomain
 from app.service.schemas import (
     DecisionPublic,
@@ -25,10 +24,13 @@ from app.service.schemas import (
     SessionCreated,
     SessionList,
     SessionPublic,
+    ViewerSnapshot,
 )
-from app.service.viewer_feed import ViewerSnapshot
+from app.strategies import names
 from tests.reliability.conftest import Live
 from tests.reliability.test_memory import walk
+
+STRATEGIES = names()
 
 
 def strict(text: str | bytes) -> Any:

@@ -17,7 +17,7 @@ import httpx
 import numpy as np
 
 from app.domain.grid import ACTIONS, GridDomain
-from app.viewer.controls import KAPPA_MAX, NONE
+from app.viewer.controls import NONE, SLIDER_KAPPA_HIGH
 from app.viewer.remote import RemoteFeed
 from app.viewer.scene import DETAIL_CELLS
 from app.viewer.viewer import Viewer
@@ -71,8 +71,13 @@ def test_forged_values_and_a_500_by_500_domain_against_the_viewer_of_a_live_serv
         assert controls.picked_session is None and controls.session.value == NONE
         assert controls.lost.value == controls.lost.options[0]
 
-        # kappa out of the slider's range, or not a number: put back in [0, KAPPA_MAX]
-        for sent, kept in ((math.nan, 0.5), (math.inf, 0.5), (-5.0, 0.0), (1e308, KAPPA_MAX)):
+        # kappa out of the slider's range, or not a number: put back in [0, SLIDER_KAPPA_HIGH]
+        for sent, kept in (
+            (math.nan, 0.5),
+            (math.inf, 0.5),
+            (-5.0, 0.0),
+            (1e308, SLIDER_KAPPA_HIGH),
+        ):
             update(attacker, controls.kappa, sent)
 
             def arrived(value: float = sent) -> bool:
@@ -84,7 +89,7 @@ def test_forged_values_and_a_500_by_500_domain_against_the_viewer_of_a_live_serv
             assert f"kappa = {kept:.2f}" in controls.shading_text.content
         update(attacker, controls.kappa, "x")  # viser cannot make a float of it: unchanged
         viewer.tick()
-        assert controls.picked_kappa == KAPPA_MAX
+        assert controls.picked_kappa == SLIDER_KAPPA_HIGH
 
         # the 500 x 500 domain, picked by the attacker: the map as an image, no prior arrows
         before = settled(attacker)

@@ -25,11 +25,12 @@ from advisor_client.api import Session
 from app.advice.advisor import Advisor
 from app.advice.guide import GuideMap
 from app.advice.models import AdviceTables
+from app.advice.params import StrategyParams
 from app.advice.priors import ActionPrior, GoalPriors
-from app.advice.strategies import StrategyParams, make_advisor
 from app.domain.grid import ACTIONS, GridDomain
 from app.service.data.store import Store
 from app.service.wire.encode import decision_dict
+from app.strategies import make_advisor
 from tests.client.conftest import free_port
 from tests.reliability.conftest import Live, start, stop
 from tests.service.conftest import REDIS_URL, drop_redis_keys, redis_prefix, redis_problem

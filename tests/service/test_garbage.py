@@ -27,8 +27,9 @@ CONTRACT = {
     ("POST", "/sessions/{session_id}/events"), ("POST", "/sessions/{session_id}/positions"),
     ("GET", "/sessions/{session_id}"),
     ("DELETE", "/sessions/{session_id}"), ("GET", "/sessions"), ("GET", "/overview"),
-    ("GET", "/viewer"),  # where the viser viewer runs (app/service/viewer_feed.py)
-    ("GET", "/metrics"),  # Prometheus text (app/service/metrics.py)
+    ("GET", "/viewer"),  # where the viser viewer runs (app/service/routes/viewer.py)
+    ("GET", "/metrics"),  # Prometheus text (app/service/routes/metrics.py)
+    ("GET", "/strategies"),  # the advising strategies (app/service/routes/strategies.py)
     ("GET", "/viewer/snapshot"),  # what the viewer process draws (operator key)
 }  # fmt: skip
 NAMES = ["default", "nowhere", "%E2%98%83", "a" * 100, "..", "%00"]

@@ -13,7 +13,7 @@ import math
 from collections.abc import Iterator
 from dataclasses import fields
 from pathlib import Path
-from typing import Any, get_args
+from typing import Any
 
 import numpy as np
 import pytest
@@ -22,17 +22,20 @@ from fastapi.testclient import TestClient
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from app import strategies
 from app.advice import guide as guide_module
 from app.advice.guide import GuideMap
+from app.advice.params import StrategyParams
 from app.advice.priors import GoalPriors
-from app.advice.strategies import READS, STRATEGIES, StrategyParams, make_advisor
 from app.domain.grid import ACTIONS, GridDomain
 from app.domain.paths import expert_trajectory
 from app.service.main import create_app
-from app.service.schemas import StrategyName
 from app.service.state import ServiceState
+from app.strategies import make_advisor, names
 from tests.service.conftest import make_settings, open_session
 from tests.service.test_decisions_property import core_tables, expected_json
+
+STRATEGIES = names()
 
 
 @pytest.fixture(scope="module")
@@ -110,7 +113,7 @@ def test_strategy_sessions_decide_as_the_core(
     grid = service.catalog.get("default").domain
     rng = np.random.default_rng(seed)
     start = grid.start if rng.random() < 0.5 else int(rng.integers(grid.n_states))
-    given = {name: params[name] for name in READS[strategy]}  # a strategy reads only its own
+    given = {name: params[name] for name in strategies.get(strategy).reads}  # its own only
     sid, auth, created = open_session(
         client, kappa=kappa, window=window, start=grid.cell(start), strategy=strategy,
         params=given,
@@ -290,8 +293,9 @@ def test_the_schema_s_strategies_and_parameters_are_the_core_s(
 ) -> None:
     """One source of truth: the request schema is made from the core's definitions."""
     client, _ = live
-    assert get_args(StrategyName) == STRATEGIES
-    schema = client.get("/openapi.json").json()["components"]["schemas"]["StrategyParams"]
+    schemas = client.get("/openapi.json").json()["components"]["schemas"]
+    assert schemas["SessionCreate"]["properties"]["strategy"]["enum"] == list(STRATEGIES)
+    schema = schemas["StrategyParams"]
     core = {f.name: f for f in fields(StrategyParams)}
     assert set(schema["properties"]) == set(core)
     assert schema["additionalProperties"] is False
@@ -301,7 +305,8 @@ def test_the_schema_s_strategies_and_parameters_are_the_core_s(
         assert prop["minimum"] == f.metadata["low"]
         assert prop.get("maximum", math.inf) == f.metadata["high"]
         assert f"Default {f.default}." in schema["properties"][name]["description"]
-    assert {s for names in READS.values() for s in names} == set(core)  # each is read by one
+    read = {p for e in strategies.STRATEGIES.values() for p in e.reads}
+    assert read == set(core)  # each is read by one
 
 
 def test_a_guide_session_on_a_map_too_big_for_guide_is_refused_saying_why(

@@ -22,11 +22,13 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from starlette.websockets import WebSocketDisconnect
 
+from app import strategies
 from app.advice.guide import GuideMap
-from app.advice.strategies import STRATEGIES, StrategyParams, make_advisor
+from app.advice.params import StrategyParams
 from app.domain.grid import ACTIONS
 from app.service.main import create_app
 from app.service.state import ServiceState
+from app.strategies import make_advisor, names
 from tests.service.conftest import (
     REDIS_URL,
     TINY,
@@ -38,6 +40,8 @@ from tests.service.conftest import (
 )
 from tests.service.test_decisions_property import core_tables, expected_json
 from tests.service.test_strategies import add_expert, core_goal_priors, moves
+
+STRATEGIES = names()
 
 PROBLEM = redis_problem()
 pytestmark = pytest.mark.skipif(PROBLEM is not None, reason=f"Redis at {REDIS_URL}: {PROBLEM}")
@@ -94,7 +98,7 @@ def test_events_hopping_between_workers_decide_as_the_core(
     rng = np.random.default_rng(seed)
     start = grid.start if rng.random() < 0.5 else int(rng.integers(grid.n_states))
     params = StrategyParams(beta=beta, rate=0.4, seed=seed % 1000, n_steps=7, threshold=0.3)
-    given = params.read_by(strategy)
+    given = strategies.get(strategy).in_force(params)
     maker = clients[int(rng.integers(2))]
     sid, auth, created = open_session(
         maker, kappa=kappa, window=window, start=grid.cell(start), strategy=strategy,

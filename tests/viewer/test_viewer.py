@@ -16,7 +16,7 @@ from viser import _messages
 from app.domain.generate import generate_domain
 from app.domain.grid import GridDomain
 from app.viewer import geometry as geo
-from app.viewer.controls import KAPPA_MAX, LOST_PICKED, NONE, PLOT_TITLE
+from app.viewer.controls import LOST_PICKED, NONE, PLOT_TITLE, SLIDER_KAPPA_HIGH
 from app.viewer.scene import DEFAULT_FOV, WALL_HEIGHT
 from app.viewer.state import DomainView, Snapshot
 from app.viewer.viewer import Viewer, pump_wait
@@ -323,7 +323,7 @@ def test_viewer_shows_a_goal_aware_sessions_goal_posterior(
 
 @pytest.mark.parametrize(
     ("sent", "kept"),
-    [(float("nan"), 0.5), (-5.0, 0.0), (1e308, KAPPA_MAX), (float("inf"), 0.5), ("x", 0.5),
+    [(float("nan"), 0.5), (-5.0, 0.0), (1e308, SLIDER_KAPPA_HIGH), (float("inf"), 0.5), ("x", 0.5),
      (True, 0.5), (0.3, 0.3)],
 )  # fmt: skip
 def test_a_kappa_no_slider_gives_is_put_back_in_range(

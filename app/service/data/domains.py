@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import itertools
 import threading
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from contextlib import nullcontext
 from dataclasses import dataclass, field
 from datetime import datetime
@@ -20,6 +20,7 @@ from app.advice.models import AdviceTables
 from app.advice.priors import ActionPrior, GoalPriors
 from app.domain.grid import Frame, GridDomain, MapError
 from app.service.data.store import POOLED, DomainRecord, Store, TableCounts, Trajectory
+from app.strategies import DomainData, Need
 
 
 class DomainNotFound(KeyError):
@@ -92,6 +93,11 @@ class DomainState:
     @property
     def map_text(self) -> str:
         return self.domain.to_text()
+
+    def data(self, table_key: str) -> DomainData:
+        """What an advisor reads of this domain: the tables of ``table_key`` (a key of the
+        current view) and what strategies need, as far as it is built."""
+        return DomainData(self.view.tables[table_key], self.goal_priors, self.guide_map)
 
 
 class DomainCatalog:
@@ -191,6 +197,16 @@ class DomainCatalog:
                     assert plain is not None and state.goal_priors is not None
                     state.guide_map = plain.replace_counts(state.goal_priors)
                 return state.guide_map
+
+    def prepare(self, state: DomainState, needs: Iterable[Need]) -> None:
+        """*Worker thread* the first time: build what a strategy ``needs`` of ``state``
+        (ValueError, such as :class:`GuideError`, says why a map cannot have it)."""
+        for need in needs:
+            self._builders[need](state)
+
+    @property
+    def _builders(self) -> dict[Need, Callable[[DomainState], object]]:
+        return {Need.GOAL_PRIORS: self.goal_priors, Need.GUIDE_MAP: self.guide_map}
 
     def delete(self, name: str) -> None:
         with self._lock:

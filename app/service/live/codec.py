@@ -4,7 +4,7 @@ service after a restart (through the database) needs to go on with it.
 The advisor's state is every slot of its class (the core's numbers: sums, counters, position,
 goals ruled out, a random rule's generator) except what the domain shares (the tables, the
 per-goal counts, the guide map), which the loading side attaches from its own catalog. A
-window of pair keys (:class:`~app.service.live.stream.KeyedWindow`) is written as its keys
+window of pair keys (:class:`~app.strategies.stream.KeyedWindow`) is written as its keys
 with the value each pair added (the numbers the core's ring holds), so the loaded advisor
 removes exactly what the saved one would have removed, whatever tables the loading side has
 by then. Everything is written with msgspec's MessagePack: float64 stays float64, so the
@@ -31,20 +31,21 @@ import msgspec
 import numpy as np
 import numpy.typing as npt
 
-from app.advice.advisor import Decision, DecisionBatch
+from app import strategies
+from app.advice.advisor import Advisor, Decision, DecisionBatch
 from app.advice.models import AdviceTables
-from app.advice.strategies import StrategyParams, strategy_params
 from app.domain.grid import GridDomain
 from app.service.data.domains import DomainState
 from app.service.live.history import AdviceLog, Recent
-from app.service.live.registry import RECENT_ADVICE, LiveSession, ServiceAdvisor, new_advisor
+from app.service.live.registry import RECENT_ADVICE, LiveSession
 from app.service.live.replay import Replay
-from app.service.live.stream import KeyedWindow, StreamGoalAware
+from app.strategies.stream import KeyedWindow
 
 FORMAT = 1
-#: slots the loading side attaches or derives, or a window written in its own form
-_SHARED = frozenset({
-    "tables", "priors", "guide", "_lam", "_theta_w", "_params", "_rng", "_rule",
+#: slots the loading side attaches or derives
+_SHARED = frozenset({"tables", "priors", "guide", "_lam", "_theta_w", "_params", "_rng", "_rule"})
+#: a window of pair keys, written in its own form (:meth:`KeyedWindow.window_state`)
+_KEYED = frozenset({
     "_ring", "_goal_ring", "_keys", "_kept", "_old", "_n_kept", "_keys_tables",
     "_goal_arrays", "_goal_kept", "_goal_old", "_goal_n_kept",
 })  # fmt: skip
@@ -77,9 +78,10 @@ def _slots(obj: object) -> list[str]:
     names = _SLOTS.get(type(obj))
     if names is None:
         names = []
+        skip = _SHARED | _KEYED if isinstance(obj, KeyedWindow) else _SHARED
         for cls in type(obj).__mro__:
             for name in getattr(cls, "__slots__", ()):
-                if name not in names and name not in _SHARED:
+                if name not in names and name not in skip:
                     names.append(name)
         _SLOTS[type(obj)] = names
     return names
@@ -113,61 +115,44 @@ def _unvalue(v: Any) -> Any:
     return v
 
 
-def advisor_state(adv: ServiceAdvisor) -> dict[str, Any]:
+def advisor_state(adv: Advisor) -> dict[str, Any]:
     """The advisor's own state (no shared table) in MessagePack's types."""
     out: dict[str, Any] = {
         "strategy": adv.strategy,
         "params": adv.params(),
         "slots": {name: _value(getattr(adv, name)) for name in _slots(adv)},
     }
-    if isinstance(adv, KeyedWindow):
-        keys = adv._keys.copy()
-        out["keys"] = keys.tobytes()
-        out["values"] = np.ascontiguousarray(adv._window).tobytes()  # (models, W) float64
-        if isinstance(adv, StreamGoalAware) and adv.beta > 0.0:
-            out["goal_values"] = np.ascontiguousarray(adv._goal_window.T).tobytes()  # (G, W)
+    if isinstance(adv, KeyedWindow):  # a window of pair keys, in its own form
+        out.update(adv.window_state())
     rng = getattr(adv, "_rng", None)
     if rng is not None:  # a random rule's draws go on where they were
         out["rng"] = json.dumps(rng.bit_generator.state)
     return out
 
 
-def restore_advisor(state: dict[str, Any], domain: DomainState, table_key: str) -> ServiceAdvisor:
-    """An advisor in the state :func:`advisor_state` wrote, on ``domain``'s current tables."""
-    strategy, slots = state["strategy"], state["slots"]
-    params: StrategyParams = strategy_params(strategy, state["params"])
-    tables = domain.view.tables.get(table_key)
-    if tables is None:
+def restore_advisor(state: dict[str, Any], domain: DomainState, table_key: str) -> Advisor:
+    """An advisor in the state :func:`advisor_state` wrote, on ``domain``'s current tables
+    (CodecError for a strategy this service does not know, or a state that does not fit)."""
+    slots = state["slots"]
+    try:
+        entry = strategies.get(state["strategy"])
+        settings = entry.settings(slots["kappa"], slots["window"], state["params"])
+    except ValueError as exc:
+        raise CodecError(str(exc)) from None
+    if table_key not in domain.view.tables:
         raise CodecError(f"domain {domain.name!r} has no prior table {table_key!r}")
-    adv = new_advisor(
-        strategy, tables, slots["kappa"], slots["window"], params, domain.goal_priors,
-        domain.guide_map,
-    )  # fmt: skip
+    adv = entry.service_advisor(domain.data(table_key), settings)
     for name, v in slots.items():
         setattr(adv, name, _unvalue(v))
     if isinstance(adv, KeyedWindow):
-        w, models = adv.window, tables.n_models
-        keys = np.frombuffer(state["keys"], dtype=np.int32).copy()
-        values = np.frombuffer(state["values"], dtype=np.float64).reshape(models, w).copy()
-        if keys.shape != (w,):
-            raise CodecError("the window does not have the session's length")
-        filled = keys >= 0
-        adv._keys = keys
-        adv._kept = filled.astype(np.uint8)
-        adv._n_kept = int(np.count_nonzero(filled))
-        adv._old = values if adv._n_kept else None
-        adv._keys_tables = tables
-        if isinstance(adv, StreamGoalAware) and adv.beta > 0.0:
-            g = adv.priors.n_goals
-            goal = np.frombuffer(state["goal_values"], dtype=np.float64).reshape(g, w).copy()
-            adv._goal_kept = filled.astype(np.uint8)
-            adv._goal_n_kept = adv._n_kept
-            adv._goal_old = goal if adv._goal_n_kept else None
-            adv._goal_arrays = adv.priors.arrays()
+        try:
+            adv.restore_window(state)
+        except ValueError as exc:
+            raise CodecError(str(exc)) from None
     if "rng" in state:
         rng = np.random.default_rng()
         rng.bit_generator.state = json.loads(state["rng"])
-        adv._rng = rng  # type: ignore[union-attr]  # the rules' generator
+        adv._rng = rng  # type: ignore[attr-defined]  # the random rule's generator
     return adv
 
 

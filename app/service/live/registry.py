@@ -19,7 +19,7 @@ import secrets
 import threading
 import time
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
 from typing import Any
@@ -27,17 +27,16 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from app.advice.advisor import Decision, DecisionBatch
-from app.advice.guide import GuideMap
+from app import strategies
+from app.advice.advisor import DEFAULT_KAPPA, DEFAULT_WINDOW, Advisor, Decision, DecisionBatch
 from app.advice.models import AdviceTables
-from app.advice.priors import GoalPriors
-from app.advice.strategies import StrategyParams, guide_params
+from app.advice.params import StrategyParams
 from app.arrays import Moves
 from app.service.data.domains import DomainState
 from app.service.live.history import Advice, AdviceLog, Recent
 from app.service.live.replay import DEFAULT_STEPS, Replay, retried
-from app.service.live.stream import StreamAdvisor, StreamGoalAware, StreamGuide, StreamRule
 from app.service.security import token_digest
+from app.strategies import AdvisorSettings
 
 RECENT_ADVICE = 50
 
@@ -76,29 +75,25 @@ class Limits:
     client_memory: int | None = None
 
 
-ServiceAdvisor = StreamAdvisor | StreamRule | StreamGoalAware | StreamGuide
+@dataclass(frozen=True, slots=True)
+class SessionSettings:
+    """A session's settings, checked, as one object from the request to the advisor: the
+    advisor's (strategy, kappa, window, the strategy's parameters), the agent type whose prior
+    serves it, and where it starts (None: the domain's start)."""
 
+    advisor: AdvisorSettings = field(default_factory=AdvisorSettings)
+    agent_type: str | None = None
+    start: int | None = None
 
-def new_advisor(
-    strategy: str, tables: AdviceTables, kappa: float, window: int,
-    params: StrategyParams | None, goal_priors: GoalPriors | None,
-    guide_map: GuideMap | None = None,
-) -> ServiceAdvisor:  # fmt: skip
-    """The advisor of a session (:mod:`app.service.live.stream`): the paper's rule, goal_aware
-    and guide with compiled batches, the other rules one call per event; every window as pair
-    keys."""
-    if strategy == "paper":
-        return StreamAdvisor(tables, kappa, window)
-    if strategy == "guide":
-        if guide_map is None:
-            raise ValueError("guide advice needs the map's destinations (a guide map)")
-        return StreamGuide(tables, guide_map, kappa, window, params=guide_params(params))
-    if strategy == "goal_aware":
-        if goal_priors is None:
-            raise ValueError("goal_aware advice needs the experts' goals (goal priors)")
-        beta = (params or StrategyParams()).beta
-        return StreamGoalAware(tables, goal_priors, kappa, window, beta)
-    return StreamRule(tables, strategy, kappa, window, params)
+    @classmethod
+    def of(
+        cls, strategy: str = "paper", kappa: float = DEFAULT_KAPPA, window: int = DEFAULT_WINDOW,
+        params: StrategyParams | Mapping[str, int | float] | None = None,
+        agent_type: str | None = None, start: int | None = None,
+    ) -> SessionSettings:  # fmt: skip
+        """Checked settings (ValueError: :meth:`Strategy.settings`)."""
+        advisor = strategies.get(strategy).settings(kappa, window, params)
+        return cls(advisor, agent_type, start)
 
 
 @dataclass(eq=False, slots=True)
@@ -110,7 +105,7 @@ class LiveSession:
     domain: DomainState
     agent_type: str | None
     table_key: str
-    advisor: ServiceAdvisor
+    advisor: Advisor  # its strategy's service form (app.strategies)
     position: int
     p_normal: float
     created_at: datetime
@@ -262,7 +257,7 @@ class SessionRegistry:
     def max_sessions(self, value: int) -> None:
         self.limits = replace(self.limits, max_sessions=value)
 
-    def reservation(self, advisor: ServiceAdvisor) -> int:
+    def reservation(self, advisor: Advisor) -> int:
         """Bytes a session with ``advisor`` reserves: the most its advisor's arrays can take,
         its history rings (int32 cells, float32 P(M1 | H)), the decisions it keeps for retries
         and :data:`SESSION_OVERHEAD`."""
@@ -279,29 +274,20 @@ class SessionRegistry:
         return len(self._sessions)
 
     def create(
-        self,
-        domain: DomainState,
-        kappa: float,
-        window: int,
-        agent_type: str | None,
-        start: int,
-        strategy: str = "paper",
-        params: StrategyParams | None = None,
-        client: str | None = None,
+        self, domain: DomainState, settings: SessionSettings, client: str | None = None
     ) -> tuple[LiveSession, Decision]:
-        """A new session and the decision for its start state (empty history). A goal_aware
-        session needs ``domain.goal_priors`` built (:meth:`DomainCatalog.goal_priors`), a guide
-        session ``domain.guide_map`` too (:meth:`DomainCatalog.guide_map`).
+        """A new session and the decision for its start state (empty history). The domain has
+        what the strategy needs built (:meth:`DomainCatalog.prepare`).
 
         Admitted within the :class:`Limits` (idle sessions are expired first when one is
         reached): :class:`TooManySessions`, :class:`SessionMemoryFull` or, for ``client``,
         :class:`ClientQuotaReached` otherwise."""
-        view = domain.view
-        key = view.resolve(agent_type)
-        tables = view.tables[key]
-        advisor = new_advisor(
-            strategy, tables, kappa, window, params, domain.goal_priors, domain.guide_map
-        )
+        key = domain.view.resolve(settings.agent_type)
+        data = domain.data(key)
+        tables = data.tables
+        advisor = strategies.get(settings.advisor.strategy).service_advisor(data, settings.advisor)
+        agent_type = settings.agent_type
+        start = domain.domain.start if settings.start is None else settings.start
         need = self.reservation(advisor)
         decision = advisor.start(start)
         now = time.monotonic()

@@ -16,12 +16,12 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Callable
+from typing import Protocol
 
 from starlette.concurrency import run_in_threadpool
 
+from app import strategies
 from app.advice.advisor import Decision, DecisionBatch
-from app.advice.strategies import StrategyParams
 from app.arrays import Moves
 from app.service.data.domains import DomainCatalog, DomainNotFound, DomainState
 from app.service.data.store import Store
@@ -30,6 +30,7 @@ from app.service.live.registry import (
     Aggregate,
     LiveSession,
     SessionRegistry,
+    SessionSettings,
     SessionSnapshot,
 )
 
@@ -40,15 +41,112 @@ class StoreUnavailable(RuntimeError):
     """Where the live sessions are kept (Redis) does not answer: nothing was applied."""
 
 
-#: what :meth:`LocalSessions.restore` needs of the catalog: a domain by name, and a domain made
-#: ready for a strategy (its goal priors or guide map built, for the strategies that read them)
-CatalogGet = Callable[[str], DomainState]
-Prepare = Callable[[DomainState, str], None]
+class Sessions(Protocol):
+    """The live sessions, as the routes, the MQTT bridge and the viewer's feed reach them:
+    :class:`LocalSessions` (this process) or ``SharedSessions`` (Redis). Every method that may
+    reach Redis is a coroutine."""
+
+    shared: bool  # whether other workers serve the same sessions
+    registry: SessionRegistry  # this process's sessions (with Redis: a cache of them)
+    catalog: DomainCatalog
+
+    @property
+    def max_sessions(self) -> int: ...
+
+    async def start(self) -> None:
+        """At start: reach where the sessions are kept."""
+        ...
+
+    async def close(self) -> None:
+        """At shutdown: let go of it."""
+        ...
+
+    # ---- domains as the routes read them ----------------------------------------------------
+    async def domain(self, name: str) -> DomainState:
+        """The domain ``name`` as the store holds it (DomainNotFound if there is none)."""
+        ...
+
+    async def sync_domain(self, name: str) -> None:
+        """Before this process changes ``name``: its state as the store holds it."""
+        ...
+
+    async def sync_catalog(self) -> None:
+        """Before listing domains: every one as the store holds it."""
+        ...
+
+    async def domain_changed(self, name: str, version: int, made_or_gone: bool) -> None:
+        """After this process changed ``name`` (to data ``version``): tell the others."""
+        ...
+
+    # ---- sessions ---------------------------------------------------------------------------
+    async def create(
+        self, domain: DomainState, settings: SessionSettings, client: str | None
+    ) -> tuple[LiveSession, Decision]:
+        """A new session and its start decision (the registry's refusals as they are)."""
+        ...
+
+    async def get(self, session_id: str) -> LiveSession:
+        """The live session (SessionNotFound when it never was, ended or expired)."""
+        ...
+
+    def touch(self, session: LiveSession) -> None:
+        """``session`` was seen now (it is not idle)."""
+        ...
+
+    async def observe_one(
+        self, session: LiveSession, state: int, action: int, next_state: int, step: int = -1
+    ) -> Decision:
+        """One checked move (``step``: the step it is meant to be, -1: the next)."""
+        ...
+
+    async def observe(
+        self, session: LiveSession, moves: Moves, first_step: int | None = None
+    ) -> DecisionBatch:
+        """Checked moves, a long batch in slices (``first_step``: the first one's step)."""
+        ...
+
+    async def describe(self, session: LiveSession) -> SessionSnapshot: ...
+
+    async def end(self, session: LiveSession) -> SessionSnapshot:
+        """End the session; its final figures."""
+        ...
+
+    async def snapshot(self, limit: int | None, domain: str | None = None) -> list[SessionSnapshot]:
+        """The ``limit`` most recently active sessions (of ``domain``)."""
+        ...
+
+    async def aggregates(self) -> dict[str, Aggregate]: ...
+
+    async def count_by_domain(self) -> dict[str, int]: ...
+
+    async def count(self) -> int: ...
+
+    async def retable(self, domain: DomainState) -> None:
+        """Sessions of ``domain`` follow its new prior (its map stayed)."""
+        ...
+
+    async def end_domain(self, name: str) -> int:
+        """End every session of ``name`` (deleted, or its map replaced)."""
+        ...
+
+    async def sweep(self) -> None:
+        """Idle sessions go; where explorers were is forgotten after the retention."""
+        ...
+
+    # ---- a graceful restart -----------------------------------------------------------------
+    def save(self, store: Store) -> int:
+        """*Worker thread, at shutdown.* Keep the live sessions for the next start (how many
+        were kept)."""
+        ...
+
+    def restore(self, store: Store) -> int:
+        """*Worker thread, at start.* Go on with what the last shutdown kept (how many)."""
+        ...
 
 
 class LocalSessions:
     """The sessions of this process (:class:`SessionRegistry`), kept over a graceful restart
-    in the database."""
+    in the database (a :class:`Sessions`)."""
 
     shared = False
 
@@ -79,13 +177,10 @@ class LocalSessions:
         return self.registry.max_sessions
 
     async def create(
-        self, domain: DomainState, kappa: float, window: int, agent_type: str | None,
-        start: int, strategy: str, params: StrategyParams, client: str | None,
-    ) -> tuple[LiveSession, Decision]:  # fmt: skip
+        self, domain: DomainState, settings: SessionSettings, client: str | None
+    ) -> tuple[LiveSession, Decision]:
         """A new session and its start decision (the registry's refusals as they are)."""
-        return self.registry.create(
-            domain, kappa, window, agent_type, start, strategy, params, client
-        )
+        return self.registry.create(domain, settings, client)
 
     async def get(self, session_id: str) -> LiveSession:
         """The live session (SessionNotFound when it never was, ended or expired)."""
@@ -152,7 +247,7 @@ class LocalSessions:
         store.save_sessions(written)
         return len(written)
 
-    def restore(self, store: Store, catalog_get: CatalogGet, prepare: Prepare) -> int:
+    def restore(self, store: Store) -> int:
         """*Worker thread, at start.* Read back the sessions the last shutdown wrote (and
         forget them there): those still within the idle timeout whose domain has the same
         map go on where they were; returns how many."""
@@ -163,8 +258,8 @@ class LocalSessions:
                 v = codec.peek(raw)
                 if now - v["last_seen"] > self.registry.idle_seconds:
                     continue
-                domain = catalog_get(v["domain"])
-                prepare(domain, v["advisor"]["strategy"])
+                domain = self.catalog.get(v["domain"])
+                self.catalog.prepare(domain, strategies.get(v["advisor"]["strategy"]).needs)
                 session = codec.load(v, domain, self.registry.replay_steps)
                 self.registry.put(session)
                 kept += 1

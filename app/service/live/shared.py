@@ -47,10 +47,11 @@ import numpy as np
 import redis.asyncio as aioredis
 from starlette.concurrency import run_in_threadpool
 
+from app import strategies
 from app.advice.advisor import Decision, DecisionBatch
-from app.advice.strategies import StrategyParams
 from app.arrays import Moves
 from app.service.data.domains import DomainCatalog, DomainNotFound, DomainState
+from app.service.data.store import POOLED, Store
 from app.service.live import codec
 from app.service.live.lanes import Lane
 from app.service.live.registry import (
@@ -60,12 +61,12 @@ from app.service.live.registry import (
     SessionMemoryFull,
     SessionNotFound,
     SessionRegistry,
+    SessionSettings,
     SessionSnapshot,
     TooManySessions,
     joined,
 )
 from app.service.live.replay import part, retried
-from app.service.live.sessions import LocalSessions
 
 log = logging.getLogger("advisor.shared")
 
@@ -220,9 +221,9 @@ def _summary(s: LiveSession) -> str:
     return f"{s.domain.name}|{a.steps}|{a.decisions}|{a.advice_count}|{s.p_normal!r}"
 
 
-class SharedSessions(LocalSessions):
+class SharedSessions:
     """Live sessions in Redis, this worker's registry a cache of the ones it used lately (see
-    the module)."""
+    the module; a :class:`~app.service.live.sessions.Sessions`)."""
 
     shared = True
 
@@ -230,7 +231,8 @@ class SharedSessions(LocalSessions):
         self, registry: SessionRegistry, catalog: DomainCatalog, url: str, prefix: str,
         replay_steps: int, limits: tuple[int, int, int, int],
     ):  # fmt: skip
-        super().__init__(registry, catalog)
+        self.registry = registry
+        self.catalog = catalog
         self.redis = aioredis.Redis.from_url(url)  # reads and rare writes: a pool
         # the scripts of events: a few single connections, which cost about half of a
         # pool's CPU a call (measured: docs/PERFORMANCE.md, "Workers")
@@ -354,10 +356,9 @@ class SharedSessions(LocalSessions):
 
     async def _prepare(self, domain: DomainState, strategy: str) -> None:
         """What ``strategy`` reads of ``domain`` built (in a worker thread, the first time)."""
-        if strategy == "goal_aware" and domain.goal_priors is None:
-            await run_in_threadpool(self.catalog.goal_priors, domain)
-        elif strategy == "guide" and domain.guide_map is None:
-            await run_in_threadpool(self.catalog.guide_map, domain)
+        entry = strategies.get(strategy)
+        if entry.missing(domain.data(POOLED)):
+            await run_in_threadpool(self.catalog.prepare, domain, entry.needs)
 
     # ---- sessions --------------------------------------------------------------------------
     def _lock(self, session_id: str) -> asyncio.Lock:
@@ -371,13 +372,10 @@ class SharedSessions(LocalSessions):
         return lock
 
     async def create(
-        self, domain: DomainState, kappa: float, window: int, agent_type: str | None,
-        start: int, strategy: str, params: StrategyParams, client: str | None,
-    ) -> tuple[LiveSession, Decision]:  # fmt: skip
+        self, domain: DomainState, settings: SessionSettings, client: str | None
+    ) -> tuple[LiveSession, Decision]:
         for _ in range(ATTEMPTS):
-            session, decision = self.registry.create(
-                domain, kappa, window, agent_type, start, strategy, params, client
-            )
+            session, decision = self.registry.create(domain, settings, client)
             now = int(time.time() * 1000)
             got = await self._run(
                 "create", session.id, codec.packed(codec.dump(session, replay=False)), domain.name,
@@ -390,7 +388,7 @@ class SharedSessions(LocalSessions):
             self.registry.forget(session.id)
             if verdict == "stale":
                 domain = await self._at_version(domain.name, int(got[1]))
-                await self._prepare(domain, strategy)
+                await self._prepare(domain, settings.advisor.strategy)
                 continue
             if verdict == "sessions":
                 raise TooManySessions(self.limits[0])
@@ -611,6 +609,14 @@ class SharedSessions(LocalSessions):
         await self.redis.aclose()
         for lane in self._lanes:
             await lane.close()
+
+    def save(self, store: Store) -> int:
+        """Nothing to keep at a shutdown: the sessions are in Redis."""
+        return 0
+
+    def restore(self, store: Store) -> int:
+        """Nothing to read back at a start: the sessions are in Redis."""
+        return 0
 
 
 def _covering(batches: list[DecisionBatch], first: int, n: int) -> DecisionBatch | None:

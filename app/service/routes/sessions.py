@@ -3,9 +3,7 @@ from __future__ import annotations
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, FastAPI, Query, Request, Response
-from starlette.concurrency import run_in_threadpool
 
-from app.advice.guide import GuideError
 from app.service import ops
 from app.service.deps import (
     BEARER,
@@ -21,7 +19,6 @@ from app.service.deps import (
     session_for,
 )
 from app.service.openapi import body
-from app.service.problems import BadInput
 from app.service.public import session_created, session_public
 from app.service.schemas import (
     DecisionPublic,
@@ -53,16 +50,8 @@ async def create_session(
     """Start watching an explorer: returns its id, its token (keep it: every session route
     needs it) and the decision for its start cell."""
     body = body or SessionCreate()
-    params = ops.session_params(state, domain, body)
-    if body.strategy == "goal_aware" and domain.goal_priors is None:
-        await run_in_threadpool(state.catalog.goal_priors, domain)  # first one: reads the store
-    if body.strategy == "guide" and domain.guide_map is None:
-        try:  # the first one: reads the store and runs a BFS from each destination
-            await run_in_threadpool(state.catalog.guide_map, domain)
-        except GuideError as exc:
-            raise BadInput(f"strategy guide: {exc}") from None
     client = client_of(request, state)
-    session, decision = await ops.create_session(state, domain, body, params, client)
+    session, decision = await ops.open_session(state, domain, body, client)
     return session_created(session, decision)
 
 

@@ -12,7 +12,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from app.advice.advisor import DecisionBatch
-from app.advice.strategies import STRATEGIES, StrategyParams
+from app.advice.params import StrategyParams
 from app.arrays import Moves
 from app.service.data.domains import DomainState
 from app.service.data.store import Trajectory
@@ -30,9 +30,12 @@ from app.service.live.codec import (
     replay_record,
     unpacked,
 )
-from app.service.live.registry import Limits, LiveSession, SessionRegistry
+from app.service.live.registry import Limits, LiveSession, SessionRegistry, SessionSettings
 from app.service.security import token_digest
 from app.service.state import ServiceState
+from app.strategies import names
+
+STRATEGIES = names()
 
 
 def walk(domain: DomainState, start: int, n: int, rng: np.random.Generator) -> Moves:
@@ -100,8 +103,10 @@ def test_a_loaded_session_decides_as_the_one_that_stayed(
     reg = SessionRegistry(Limits(100), 3600.0, replay_steps=32)
     start = domain.domain.start
     params = params_for(strategy)
-    stayed, d0 = reg.create(domain, kappa, window, None, start, strategy, params)
-    moved, d1 = reg.create(domain, kappa, window, None, start, strategy, params)
+    stayed, d0 = reg.create(
+        domain, SessionSettings.of(strategy, kappa, window, params, start=start)
+    )
+    moved, d1 = reg.create(domain, SessionSettings.of(strategy, kappa, window, params))
     assert d0 == d1
     here = start
     for i, n in enumerate(chunks):
@@ -143,7 +148,9 @@ def test_a_dump_holds_the_token_as_a_digest_only(
     service: ServiceState, domain: DomainState
 ) -> None:
     reg = SessionRegistry(Limits(10), 3600.0)
-    session, _ = reg.create(domain, 0.5, 300, None, domain.domain.start)
+    session, _ = reg.create(
+        domain, SessionSettings.of("paper", 0.5, 300, start=domain.domain.start)
+    )
     raw = dump(session)
     assert session.token.encode() not in raw
     assert peek(raw)["token_digest"] == token_digest(session.token)
@@ -153,7 +160,9 @@ def test_a_dump_holds_the_token_as_a_digest_only(
 
 def test_a_session_of_another_map_is_refused(service: ServiceState, domain: DomainState) -> None:
     reg = SessionRegistry(Limits(10), 3600.0)
-    session, _ = reg.create(domain, 0.5, 300, None, domain.domain.start)
+    session, _ = reg.create(
+        domain, SessionSettings.of("paper", 0.5, 300, start=domain.domain.start)
+    )
     raw = dump(session)
     with pytest.raises(CodecError, match="another map"):
         load(_renamed(raw), domain, 500)
@@ -167,7 +176,7 @@ def _renamed(raw: bytes) -> dict[str, Any]:
 
 def test_a_decisions_record_reads_back_as_its_batch_does(domain: DomainState) -> None:
     reg = SessionRegistry(Limits(10), 3600.0)
-    session, _ = reg.create(domain, 0.0, 30, None, domain.domain.start, "guide")
+    session, _ = reg.create(domain, SessionSettings.of("guide", 0.0, 30))
     rng = np.random.default_rng(2)
     grid = domain.domain
     s = grid.start
@@ -186,7 +195,7 @@ def test_records_written_one_after_another_read_back_in_order(domain: DomainStat
     """Batches of any length, advised or not, one after another in one string (as Redis keeps
     them): each reads back whole, and a string cut anywhere inside a record is refused."""
     reg = SessionRegistry(Limits(10), 3600.0)
-    session, _ = reg.create(domain, 0.0, 30, None, domain.domain.start, "paper")
+    session, _ = reg.create(domain, SessionSettings.of("paper", 0.0, 30))
     rng = np.random.default_rng(3)
     written, raw = [], b""
     for n in (1, 7, 0, 120, 3):
@@ -208,7 +217,7 @@ def test_packed_records_read_back_in_order_and_cut_ones_are_refused(domain: Doma
     length, one after another; they read back as written, and a string cut anywhere is
     refused rather than misread."""
     reg = SessionRegistry(Limits(10), 3600.0)
-    session, _ = reg.create(domain, 0.0, 30, None, domain.domain.start, "paper")
+    session, _ = reg.create(domain, SessionSettings.of("paper", 0.0, 30))
     rng = np.random.default_rng(4)
     written, raw = [], b""
     for n in (1, 500, 2, 37):
@@ -231,7 +240,9 @@ def test_a_packed_state_loads_as_the_plain_one_and_a_plain_one_still_loads(
     domain: DomainState,
 ) -> None:
     reg = SessionRegistry(Limits(10), 3600.0)
-    session, _ = reg.create(domain, 0.5, 300, None, domain.domain.start, "paper")
+    session, _ = reg.create(
+        domain, SessionSettings.of("paper", 0.5, 300, start=domain.domain.start)
+    )
     reg.observe_batch(session, walk(domain, session.position, 400, np.random.default_rng(5)))
     raw = dump(session, replay=False)
     small = packed(raw)

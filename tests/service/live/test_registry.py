@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from app.advice.advisor import Decision
-from app.advice.strategies import STRATEGIES, StrategyParams
+from app.advice.params import StrategyParams
 from app.service.config import Settings
 from app.service.data.domains import DomainState
 from app.service.data.store import Trajectory
@@ -22,9 +22,13 @@ from app.service.live.registry import (
     Limits,
     SessionMemoryFull,
     SessionRegistry,
+    SessionSettings,
     TooManySessions,
 )
 from app.service.state import ServiceState
+from app.strategies import names
+
+STRATEGIES = names()
 
 WINDOW = Settings.model_fields["max_window"].default  # the largest a session may ask: 10,000
 PER_STRATEGY = 4
@@ -55,7 +59,7 @@ def test_a_session_takes_no_more_than_it_reserves(service: ServiceState, strateg
     def session_lives() -> list[str]:
         ids = []
         for _ in range(PER_STRATEGY):
-            s, _ = registry.create(domain, 0.5, WINDOW, None, domain.domain.start, strategy, params)
+            s, _ = registry.create(domain, SessionSettings.of(strategy, 0.5, WINDOW, params))
             registry.observe_batch(s, moves)  # the window full, rings full, advice logged
             ids.append(s.id)
         return ids
@@ -68,7 +72,7 @@ def test_a_session_takes_no_more_than_it_reserves(service: ServiceState, strateg
         # one more session's life, traced: the interpreter's free lists (up to 2,000 tuples of
         # each size, which a rule's batch makes by the thousand) then hold traced objects, so
         # they are in ``before`` rather than counted as the sessions' (about 144 kB in all)
-        s, _ = registry.create(domain, 0.5, WINDOW, None, domain.domain.start, strategy, params)
+        s, _ = registry.create(domain, SessionSettings.of(strategy, 0.5, WINDOW, params))
         registry.observe_batch(s, moves)
         registry.end(s.id)
         before = tracemalloc.get_traced_memory()[0]
@@ -94,37 +98,36 @@ def test_a_session_takes_no_more_than_it_reserves(service: ServiceState, strateg
 def test_the_memory_budget_refuses_what_it_cannot_hold(service: ServiceState) -> None:
     domain = _prepared(service)
     probe = SessionRegistry(Limits(10), 3600.0)
-    s, _ = probe.create(domain, 0.5, 5000, None, domain.domain.start)
+    s, _ = probe.create(domain, SessionSettings.of("paper", 0.5, 5000))
     need = s.reserved
     assert need == probe.reserved > 5000 * 21  # keys, flags and two models' kept values
     registry = SessionRegistry(Limits(100, max_memory=3 * need), 3600.0)
-    made = [registry.create(domain, 0.5, 5000, None, domain.domain.start)[0] for _ in range(3)]
+    made = [registry.create(domain, SessionSettings.of("paper", 0.5, 5000))[0] for _ in range(3)]
     with pytest.raises(SessionMemoryFull):
-        registry.create(domain, 0.5, 5000, None, domain.domain.start)
+        registry.create(domain, SessionSettings.of("paper", 0.5, 5000))
     registry.end(made[0].id)
-    registry.create(domain, 0.5, 5000, None, domain.domain.start)
+    registry.create(domain, SessionSettings.of("paper", 0.5, 5000))
     assert len(registry) == 3
 
 
 def test_client_quotas_count_sessions_and_bytes_per_client(service: ServiceState) -> None:
     domain = _prepared(service)
-    start = domain.domain.start
     registry = SessionRegistry(Limits(100, client_sessions=2), 3600.0)
-    a = [registry.create(domain, 0.5, 300, None, start, client="a")[0] for _ in range(2)]
+    a = [registry.create(domain, SessionSettings.of(), client="a")[0] for _ in range(2)]
     with pytest.raises(ClientQuotaReached) as refused:
-        registry.create(domain, 0.5, 300, None, start, client="a")
+        registry.create(domain, SessionSettings.of(), client="a")
     assert refused.value.args == ("a", "sessions", 2)
-    registry.create(domain, 0.5, 300, None, start, client="b")  # another client is not held up
-    registry.create(domain, 0.5, 300, None, start)  # nor one without a quota (the admin)
+    registry.create(domain, SessionSettings.of(), client="b")  # another client is not held up
+    registry.create(domain, SessionSettings.of())  # nor one without a quota (the admin)
     registry.end(a[0].id)
-    registry.create(domain, 0.5, 300, None, start, client="a")
+    registry.create(domain, SessionSettings.of(), client="a")
     assert registry.client_usage("a")[0] == 2
     registry.end_domain("default")
     assert registry.client_usage("a") == (0, 0) and registry.reserved == 0
     with pytest.raises(TooManySessions):
         tight = SessionRegistry(Limits(1), 3600.0)
-        tight.create(domain, 0.5, 300, None, start)
-        tight.create(domain, 0.5, 300, None, start)
+        tight.create(domain, SessionSettings.of())
+        tight.create(domain, SessionSettings.of())
 
 
 def test_a_long_batch_runs_in_slices_and_an_event_meanwhile_waits_for_it(
@@ -135,9 +138,8 @@ def test_a_long_batch_runs_in_slices_and_an_event_meanwhile_waits_for_it(
     batch; the decisions are those of one batch in one go."""
     domain = _prepared(service)
     registry = SessionRegistry(Limits(10), 3600.0)
-    start = domain.domain.start
-    sliced, _ = registry.create(domain, 0.3, 300, None, start, "mistake")
-    whole, _ = registry.create(domain, 0.3, 300, None, start, "mistake")
+    sliced, _ = registry.create(domain, SessionSettings.of("mistake", 0.3, 300))
+    whole, _ = registry.create(domain, SessionSettings.of("mistake", 0.3, 300))
     moves = _moves(domain, 2300, 4)
     s, a, s2 = (int(v[0]) for v in moves)
     ticks = 0

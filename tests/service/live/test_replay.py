@@ -11,12 +11,14 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from app.advice.advisor import Decision, DecisionBatch
-from app.advice.strategies import STRATEGIES
 from app.service.data.domains import DomainState
-from app.service.live.registry import Limits, SessionRegistry
+from app.service.live.registry import Limits, SessionRegistry, SessionSettings
 from app.service.live.replay import Replay, StepConflict, part
 from app.service.state import ServiceState
+from app.strategies import names
 from tests.service.live.test_codec import columns, figures, params_for, walk
+
+STRATEGIES = names()
 
 
 def _decision(step: int, rng: np.random.Generator, count: int, benefit: float) -> Decision:
@@ -111,8 +113,8 @@ def test_retried_steps_are_answered_again_and_applied_once(
     rng = np.random.default_rng(seed)
     reg = SessionRegistry(Limits(10), 3600.0, replay_steps=64)
     start, params = domain.domain.start, params_for(strategy)
-    once, _ = reg.create(domain, 0.3, 20, None, start, strategy, params)
-    retried, _ = reg.create(domain, 0.3, 20, None, start, strategy, params)
+    once, _ = reg.create(domain, SessionSettings.of(strategy, 0.3, 20, params, start=start))
+    retried, _ = reg.create(domain, SessionSettings.of(strategy, 0.3, 20, params, start=start))
     here, step, sent = start, 1, []
     for n in sizes:
         moves = walk(domain, here, n, rng)
@@ -139,7 +141,7 @@ def test_retried_steps_are_answered_again_and_applied_once(
 
 def test_a_step_out_of_turn_or_with_another_move_is_refused(domain: DomainState) -> None:
     reg = SessionRegistry(Limits(10), 3600.0, replay_steps=4)
-    session, _ = reg.create(domain, 0.5, 20, None, domain.domain.start)
+    session, _ = reg.create(domain, SessionSettings.of("paper", 0.5, 20))
     rng = np.random.default_rng(0)
     moves = walk(domain, domain.domain.start, 10, rng)
     reg.observe_batch(session, moves, 1)

@@ -14,9 +14,9 @@ from app.advice.advisor import Advisor, DecisionBatch
 from app.advice.goals import GoalAwareAdvisor
 from app.advice.priors import GoalPriors
 from app.domain.generate import generate_domain
-from app.service.live.stream import StreamAdvisor
 from app.service.schemas import DecisionPublic
 from app.service.wire.encode import batch_binary, batch_json, decision_dict, decision_json
+from app.strategies.stream import StreamAdvisor
 from tests.tables import random_tables
 
 DOMAIN = generate_domain(15, 17, 4, braid=0.3, n_goals=3)

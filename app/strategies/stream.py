@@ -1,4 +1,5 @@
-"""The advisors of live sessions: the core's, with windows of pair keys and batches compiled.
+"""The strategies' advisors as a service runs them: the core's, with windows of pair keys and
+batches compiled.
 
 Every strategy's session keeps its window as pair keys into tables the domain shares
 (:class:`KeyedWindow`), so a session's memory is bounded by its window, not by the size of the
@@ -16,6 +17,7 @@ decision equals the core's bit for bit (``tests/service/live/test_stream.py``).
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -26,7 +28,7 @@ from app.advice.advisor import Advisor, Decision, DecisionBatch, resync_period
 from app.advice.goals import GoalAwareAdvisor
 from app.advice.guide import GuideAdvisor, GuideParams, kernel_params
 from app.advice.models import AdviceTables
-from app.advice.strategies import RuleAdvisor
+from app.advice.rules import RuleAdvisor
 from app.arrays import FloatArray, IntArray
 from app.domain.grid import N_ACTIONS
 
@@ -74,6 +76,29 @@ class KeyedWindow(Advisor):
     def footprint(self) -> int:
         """Bytes the window's arrays can take at most (keys, flags, kept values)."""
         return self.window * (4 + 1 + 8 * self.tables.n_models)
+
+    def window_state(self) -> dict[str, bytes]:
+        """The window as a saved session keeps it: its keys, and the value each pair added
+        (models x W float64, the numbers the core's ring holds), whatever tables gave them."""
+        return {
+            "keys": self._keys.tobytes(),
+            "values": np.ascontiguousarray(self._window).tobytes(),
+        }
+
+    def restore_window(self, state: Mapping[str, bytes]) -> None:
+        """The window :meth:`window_state` wrote, on this advisor's tables: every pair's value
+        kept as a number until it leaves (ValueError for a window of another length)."""
+        w, models = self.window, self.tables.n_models
+        keys = np.frombuffer(state["keys"], dtype=np.int32).copy()
+        if keys.shape != (w,):
+            raise ValueError("the window does not have the session's length")
+        values = np.frombuffer(state["values"], dtype=np.float64).reshape(models, w).copy()
+        filled = keys >= 0
+        self._keys = keys
+        self._kept = filled.astype(np.uint8)
+        self._n_kept = int(np.count_nonzero(filled))
+        self._old = values if self._n_kept else None
+        self._keys_tables = self.tables
 
     def batch_slice(self) -> int:
         """Events of a batch to run at once, about 2 ms of work (the rest waits its turn on the
@@ -186,11 +211,13 @@ class StreamAdvisor(KeyedWindow):
         )  # fmt: skip
 
 
-class StreamRule(KeyedWindow, RuleAdvisor):
-    """A :class:`RuleAdvisor` (early, importance, mistake, random, always) with its window as
-    pair keys: the core's decisions, one Python call per event."""
-
-    __slots__ = KEYED_SLOTS
+def keyed(rule: type[RuleAdvisor]) -> type[RuleAdvisor]:
+    """The rule advisor ``rule`` (early, importance, mistake, random, always) with its window
+    as pair keys: the core's decisions, one Python call per event."""
+    made: type[RuleAdvisor] = type(
+        f"Keyed{rule.__name__}", (KeyedWindow, rule), {"__slots__": KEYED_SLOTS}
+    )
+    return made
 
 
 class StreamGoalAware(KeyedWindow, GoalAwareAdvisor):
@@ -236,6 +263,23 @@ class StreamGoalAware(KeyedWindow, GoalAwareAdvisor):
 
     def batch_slice(self) -> int:
         return max(64, 40_000 // (self.priors.n_goals + 1))  # compiled: 0.05 us a goal
+
+    def window_state(self) -> dict[str, bytes]:
+        """Both windows: with beta > 0 also each goal's value of each pair (G x W float64)."""
+        out = super().window_state()
+        if self.beta > 0.0:
+            out["goal_values"] = np.ascontiguousarray(self._goal_window.T).tobytes()
+        return out
+
+    def restore_window(self, state: Mapping[str, bytes]) -> None:
+        super().restore_window(state)
+        if self.beta > 0.0:
+            g, w = self.priors.n_goals, self.window
+            goal = np.frombuffer(state["goal_values"], dtype=np.float64).reshape(g, w).copy()
+            self._goal_kept = self._kept.copy()
+            self._goal_n_kept = self._n_kept
+            self._goal_old = goal if self._goal_n_kept else None
+            self._goal_arrays = self.priors.arrays()
 
     def _sync_goals(self) -> None:
         """After new goal counts, keep each goal's values of the pairs added with the old."""

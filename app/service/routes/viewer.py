@@ -1,0 +1,62 @@
+"""The API's side of the viewer, which runs in a process of its own (``python -m app viewer``,
+started by ``serve``) and reads the service over HTTP like any client:
+
+* ``GET /viewer/snapshot`` (the admin or the read-only operator key): the domains, each with
+  the version of its prior (the viewer fetches a domain's map and prior, ``GET /domains/{name}``
+  and ``/prior``, only when they change), and the 64 most recently active sessions with their
+  recent history; made at most 20 times a second, in a worker thread;
+* ``GET /viewer``: where the viewer runs, for pages that link to it.
+
+Nothing a browser sends to the viewer reaches this process.
+"""
+
+from __future__ import annotations
+
+from functools import partial
+
+from fastapi import APIRouter, Request, Response
+
+from app.service import ops
+from app.service.deps import OperatorDep, StateDep
+from app.service.metrics import viewer_tick
+from app.service.schemas import ErrorPublic, ViewerSnapshot, ViewerStatus
+
+router = APIRouter(tags=["pages"])
+
+
+@router.get(
+    "/viewer/snapshot",
+    dependencies=[OperatorDep],
+    response_model=ViewerSnapshot,
+    responses={code: {"model": ErrorPublic} for code in (401, 403)},
+)
+async def viewer_snapshot(state: StateDep, request: Request) -> Response:
+    """What the viewer draws (the admin or the read-only operator key): the domains with the
+    version of their prior, and the most recently active sessions with where each is and was.
+    The viewer reports its last tick's duration in seconds as ``X-Viewer-Tick`` (counted in
+    ``advisor_viewer_tick_seconds``; a value that is not a number from 0 to 3600 is ignored)."""
+    tick = request.headers.get("x-viewer-tick")
+    if tick is not None and state.settings.metrics_enabled:
+        seconds = _seconds(tick)
+        if seconds is not None:
+            viewer_tick(seconds)
+    age = min(0.05, state.settings.overview_seconds)
+    text = await state.fresh.get(("viewer",), age, partial(ops.viewer_snapshot, state))
+    return Response(text, media_type="application/json")
+
+
+def _seconds(text: str) -> float | None:
+    try:
+        value = float(text[:32])
+    except ValueError:
+        return None
+    return value if 0.0 <= value <= 3600.0 else None  # NaN fails both comparisons
+
+
+@router.get("/viewer")
+async def viewer_status(request: Request) -> ViewerStatus:
+    """Where the 3D viewer is: this host, this port (``serve`` starts it unless --no-viewer)."""
+    settings = request.app.state.settings
+    if not settings.viewer_enabled:
+        return ViewerStatus(enabled=False, port=None, host=None)
+    return ViewerStatus(enabled=True, port=settings.viewer_port, host=settings.viewer_host)

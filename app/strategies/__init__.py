@@ -1,0 +1,20 @@
+"""The advising strategies: one entry each, in one table (:mod:`app.strategies.table`), with
+what an entry is (:mod:`app.strategies.entry`) and the forms a service runs
+(:mod:`app.strategies.stream`)."""
+
+from app.strategies.entry import AdvisorSettings, DomainData, Level, Need, Strategy
+from app.strategies.table import STRATEGIES, get, make_advisor, names, register, unregister
+
+__all__ = [
+    "STRATEGIES",
+    "AdvisorSettings",
+    "DomainData",
+    "Level",
+    "Need",
+    "Strategy",
+    "get",
+    "make_advisor",
+    "names",
+    "register",
+    "unregister",
+]
