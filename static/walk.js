@@ -21,14 +21,8 @@
     decision: null, advice: null, advisedCells: [], background: null,
     history: [], // {step, p, advised} of every decision of this walk, oldest first
   };
-  const NOTES = {
-    paper: "The experts' action prior θ for this cell: how often people who know the building " +
-      "moved each way here.",
-    goal_aware: "The experts' prior for this cell, narrowed to the destinations you may still " +
-      "be heading for.",
-    guide: "The way to the destination you most likely want (or the nearest one left): the " +
-      "moves along a shortest path there.",
-  };
+  // What each strategy's advice is, in plain words (GET /strategies: its entry says it).
+  const NOTES = {};
 
   // The walls and floor drawn once per walk (a 256 x 256 map is 65,536 cells), then copied.
   function background() {
@@ -302,7 +296,7 @@
         history: [],
       });
       walk.cell = fitCanvas(canvas, domain.rows, domain.cols, 640);
-      $("advice-note").textContent = NOTES[created.strategy] || NOTES.paper;
+      $("advice-note").textContent = NOTES[created.strategy] || "";
       $("session").textContent = `Session ${created.session_id} · ${created.strategy} · ` +
         `κ = ${created.kappa} · window ${created.window}`;
       document.body.dataset.pending = 0;
@@ -316,14 +310,27 @@
     }
   }
 
+  /** The strategies the service offers (GET /strategies), the page's ?strategy= picked. */
+  async function loadStrategies() {
+    const listed = await fetchJSON("/strategies");
+    const options = listed.map((s) => {
+      NOTES[s.name] = s.advice;
+      const option = new Option(s.name, s.name);
+      option.title = s.summary;
+      return option;
+    });
+    $("strategy").replaceChildren(...options);
+    const wanted = new URLSearchParams(location.search).get("strategy");
+    const names = listed.map((s) => s.name);
+    $("strategy").value = names.includes(wanted) ? wanted : names[0];
+  }
+
   async function loadDomains() {
     const select = $("domain");
     const listed = await fetchJSON("/domains");
     const domains = Array.isArray(listed) ? listed : listed.domains;
     const query = new URLSearchParams(location.search);
     const wanted = query.get("domain");
-    const strategy = query.get("strategy");
-    if ([...$("strategy").options].some((o) => o.value === strategy)) $("strategy").value = strategy;
     select.replaceChildren(...domains.map((d) => new Option(d.name, d.name)));
     const names = domains.map((d) => d.name);
     select.value = names.includes(wanted) ? wanted : (names.includes("default") ? "default" : names[0]);
@@ -388,7 +395,7 @@
   $("domain").addEventListener("change", newWalk);
   $("strategy").addEventListener("change", newWalk);
 
-  loadDomains()
+  Promise.all([loadStrategies(), loadDomains()])
     .then(newWalk)
     .catch((err) => setStatus(`Could not load the mazes: ${err.message}`, true));
   fetchJSON("/viewer").then((v) => MazeUI.showViewerLink($("viewer-link"), v)).catch(() => {});

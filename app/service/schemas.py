@@ -491,6 +491,7 @@ class StrategyPublic(BaseModel):
 
     name: str
     summary: str = Field(description="What it does, in plain words.")
+    advice: str = Field(description="What a piece of its advice is, in plain words.")
     params: list[StrategyParamPublic] = Field(description="The parameters it reads (params).")
     needs: list[str] = Field(
         description="What it reads of a domain besides the prior: 'goal_priors' (the experts' "

@@ -88,6 +88,11 @@ class Strategy:
     kappa_max: float | None = None
     #: whether a session keeps a value per destination and pair of its window
     goal_window: Callable[[StrategyParams], bool] = field(default=lambda _p: False)
+    #: what a piece of its advice is, in plain words (the pages show it)
+    advice: str = (
+        "The experts' action prior θ for this cell: how often people who know the building "
+        "moved each way here."
+    )
 
     def __post_init__(self) -> None:
         known = {f.name for f in fields(StrategyParams)}
@@ -168,7 +173,7 @@ class Strategy:
                 "description": m["doc"],
             })  # fmt: skip
         return {
-            "name": self.name, "summary": self.summary, "params": params,
+            "name": self.name, "summary": self.summary, "advice": self.advice, "params": params,
             "needs": sorted(n.name.lower() for n in self.needs), "kappa_max": self.kappa_max,
             "compiled": self.kernel is not None or self.served is not None,
         }  # fmt: skip

@@ -139,6 +139,8 @@ register(Strategy(
     served=_goal_aware_served, kernel=kernels.GOAL_AWARE,
     level=Level("kappa", (0.0, 0.25, 0.5, 0.75, 1.0)), kappa_max=KL_MAX,
     goal_window=lambda p: p.beta > 0.0,
+    advice="The experts' prior for this cell, narrowed to the destinations you may still be "
+    "heading for.",
 ))  # fmt: skip
 for _name, _summary, _cls, _kernel, _level in (
     ("early", "Advise at the first n_steps decisions of a session.", EarlyAdvisor,
@@ -161,4 +163,6 @@ register(Strategy(
     readable=_guide, reads=("p_lost", "slack", "spread"), needs=frozenset({Need.GUIDE_MAP}),
     served=_guide_served, kernel=kernels.GUIDE, learns=True,
     level=Level("kappa", (0.1, 0.25, 0.5, 0.75, 1.0, 1.25, 1.4, 1.6)), kappa_max=GUIDE_KAPPA_MAX,
+    advice="The way to the destination you most likely want (or the nearest one left): the "
+    "moves along a shortest path there.",
 ))  # fmt: skip

@@ -149,3 +149,21 @@ def test_walk_draws_a_256_map_and_answers_moves(service: Service, page: Page) ->
     page.wait_for_function("document.body.dataset.pending === '0'")
     moved = json.loads(page.evaluate("document.body.dataset.position"))
     assert grid.state(*moved) == grid.next_state[grid.state(*start), open_way]
+
+
+def test_walk_lists_the_service_s_strategies_and_says_what_their_advice_is(
+    service: Service, page: Page
+) -> None:
+    """The strategy picker is the service's table (GET /strategies), each with its summary;
+    the advice note is the picked strategy's own."""
+    listed = service.http.get("/strategies").json()
+    page.goto(service.base + "/walk?strategy=goal_aware")
+    options = page.locator("#strategy option")
+    expect(options).to_have_count(len(listed))
+    assert [o.get_attribute("value") for o in options.all()] == [s["name"] for s in listed]
+    expect(page.locator("#strategy")).to_have_value("goal_aware")
+    picked = next(s for s in listed if s["name"] == "goal_aware")
+    expect(page.locator("#strategy option[value=goal_aware]")).to_have_attribute(
+        "title", picked["summary"]
+    )
+    expect(page.locator("#advice-note")).to_have_text(picked["advice"])
