@@ -206,7 +206,7 @@ def bench_parts(tmp: Path, repeats: int) -> dict[str, float]:
 
     @njit(cache=False)
     def libm_only(x: Any) -> float:  # pragma: no cover - compiled
-        """One exp and four logs per value: the calls each decision makes (eqs. 5 and 6)."""
+        """One exp and four logs per value: the calls each decision makes (eqs. (5) and (6))."""
         total = 0.0
         for v in x:
             total += np.exp(-v) + np.log(v) + np.log(v + 1) + np.log(v + 2) + np.log(v + 3)

@@ -1,6 +1,6 @@
 """The advisor's decision for one explorer (Section IV): window, posterior, KL-vs-kappa, cost.
 
-One step (METHOD.md): the explorer at ``s`` takes ``a`` and reaches ``s'``; the advisor appends
+One step (docs/METHOD.md): the explorer at ``s`` takes ``a`` and reaches ``s'``; the advisor appends
 ``(s, a)`` to its window H, then decides for ``s'``::
 
     log P(H | M)  = sum over H of log P(a_i | s_i, M)            kept in O(1) per event
@@ -54,7 +54,7 @@ class Decision(NamedTuple):
     p_normal: float  # P(M1 | H)
     advice_count: int
     total_cost: float  # kappa x advice_count
-    benefit: float  # sum of KL at advised states (eq. 3: Delta U(s) ~ KL)
+    benefit: float  # sum of KL at advised states (eq. (3): Delta U(s) ~ KL)
 
 
 @dataclass(frozen=True, slots=True)
@@ -249,7 +249,7 @@ class Advisor:
         return list(self._loglik)
 
     def posterior(self) -> list[float]:
-        """P(M | H) for each model (eq. 5); the prior weights when H is empty."""
+        """P(M | H) for each model (eq. (5)); the prior weights when H is empty."""
         z = [ll + lw for ll, lw in zip(self._loglik, self.tables.log_weight_list, strict=True)]
         mx = max(z)
         # exp(0) is exactly 1 (C99 F.9.3.1): the largest term needs no call
@@ -262,7 +262,7 @@ class Advisor:
         return self.posterior()[0]
 
     def expected_behaviour(self, state: int) -> list[float]:
-        """P(A | s, H) (eq. 4)."""
+        """P(A | s, H) (eq. (4))."""
         self._check(state)
         return self._mixture(self.posterior(), state)
 

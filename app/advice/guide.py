@@ -51,7 +51,7 @@ out. With P(lost | H) the sum over L4, LO, WL, WR::
   its own moves first.
 * ``delta_T(s)``: how far a random open move from ``s`` takes a lost explorer from T, on
   average (BFS distance); advice saves 1 + delta_T moves where it saves 1 in the open, so the
-  paper's KL (eq. 3's stand-in for the benefit) is weighted by it.
+  paper's KL (eq. (3)'s stand-in for the benefit) is weighted by it.
 
 A competent explorer is explained by some D_g, so the prediction already is what it should do
 and nothing is said; a lost one is explained by a lost model and is led, most insistently

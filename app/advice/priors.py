@@ -1,6 +1,6 @@
 """Action priors: Dirichlet counts over actions per state, learned from experts (Section III).
 
-``alpha_s(a) = alpha0(a) + |{pi : pi(s, a) > delta}|`` (eq. 2). A trajectory is treated as one
+``alpha_s(a) = alpha0(a) + |{pi : pi(s, a) > delta}|`` (eq. (2)). A trajectory is treated as one
 sampled policy: ``pi_hat(s, a)`` is the fraction of its visits to ``s`` in which it took ``a``, so
 with ``delta = 0`` each *distinct* (s, a) in a trajectory adds 1, however often it recurs.
 A full policy (shape states x actions) counts every state where ``pi(s, a) > delta``.
@@ -54,8 +54,8 @@ def as_pairs(trajectory: TrajectoryLike, n_states: int) -> IntArray:
 def trajectory_counts(
     trajectories: Sequence[TrajectoryLike], n_states: int, delta: float = 0.0
 ) -> FloatArray:
-    """Eq. (1) summed over ``trajectories``: how many of them took ``a`` in ``s`` with
-    ``pi_hat(s, a) > delta``. Shape (n_states, 4)."""
+    """The counts of eq. (1) summed over ``trajectories``: how many of them took ``a`` in
+    ``s`` with ``pi_hat(s, a) > delta``. Shape (n_states, 4)."""
     pairs = [as_pairs(t, n_states) for t in trajectories]
     lengths = np.fromiter((len(p) for p in pairs), dtype=np.int64, count=len(pairs))
     if lengths.sum() == 0:
@@ -76,7 +76,7 @@ def trajectory_counts(
 
 
 def policy_counts(policies: npt.ArrayLike, delta: float = 0.0) -> FloatArray:
-    """Eq. (2) for full policies, shape (k, n_states, 4) or (n_states, 4)."""
+    """The counts of eq. (2) for full policies, shape (k, n_states, 4) or (n_states, 4)."""
     pi = np.asarray(policies, dtype=np.float64)
     if pi.ndim == 2:
         pi = pi[None]
@@ -96,7 +96,7 @@ class ActionPrior:
     alpha0 : float or array broadcastable to (n_states, 4)
         The hyperprior alpha0(a) > 0 (keeps every probability positive, so logs are finite).
     delta : float in [0, 1)
-        A policy counts for (s, a) when ``pi(s, a) > delta`` (eq. 1).
+        A policy counts for (s, a) when ``pi(s, a) > delta`` (eq. (1)).
 
     Learned attributes (after ``fit``/``partial_fit``): ``n_states_``, ``increments_`` (per
     agent type), ``pooled_increments_``, ``n_trajectories_`` (per type, and ``"*"`` pooled).
@@ -212,7 +212,7 @@ class ActionPrior:
         return self.POOLED
 
     def counts(self, agent_type: str | None = None) -> FloatArray:
-        """alpha_s(a) (eq. 2) for ``agent_type`` (pooled if None or without data)."""
+        """alpha_s(a) (eq. (2)) for ``agent_type`` (pooled if None or without data)."""
         key = self.resolve_type(agent_type)
         inc = self.pooled_increments_ if key == self.POOLED else self.increments_[key]
         out: FloatArray = self.alpha0_ + inc

@@ -3,7 +3,7 @@
 Plain Python, one step at a time: the obvious version the compiled kernels in
 :mod:`app.kernels` are tested against, and readable documentation of the protocol.
 
-One step (METHOD.md): the advisor has decided for the explorer's state ``s``; the explorer
+One step (docs/METHOD.md): the advisor has decided for the explorer's state ``s``; the explorer
 acts (sampling the advice, ``decision.advice``, if advised and ``advised`` is on), moves to
 ``s'``; reaching its goal ends the episode; otherwise the advisor appends (s, a) to its
 window and decides for ``s'``. Any advisor of :mod:`app.strategies` can watch.

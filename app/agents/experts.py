@@ -1,6 +1,6 @@
 """Action priors learned from simulated experts (:mod:`app.domain.paths`) on a map.
 
-Where the experts start is a choice the paper leaves open (METHOD.md): ``"start"`` (all at the
+Where the experts start is a choice the paper leaves open (docs/METHOD.md): ``"start"`` (all at the
 start cell), ``"anywhere"`` (uniformly random free cells) or ``"policy"`` (the full optimal
 policy of each goal, every state counted).
 """

@@ -36,7 +36,9 @@ def train(
         float,
         typer.Option(callback=_positive, help="Dirichlet hyperprior alpha0, > 0 (every count)."),
     ] = 1.0,
-    delta: Annotated[float, typer.Option(min=0.0, max=1.0, help="Policy threshold (eq. 1).")] = 0.0,
+    delta: Annotated[
+        float, typer.Option(min=0.0, max=1.0, help="Policy threshold (eq. (1)).")
+    ] = 0.0,
     epsilon: Annotated[
         float, typer.Option(min=0.0, max=1.0, help="Experts' chance of a random move per step.")
     ] = 0.0,

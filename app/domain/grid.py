@@ -1,4 +1,4 @@
-"""Grid domains from ASCII maps (METHOD.md, "Domain").
+"""Grid domains from ASCII maps (docs/METHOD.md, "Domain").
 
 A map is a list of equal-length strings, row 0 at the top::
 

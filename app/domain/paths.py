@@ -3,7 +3,7 @@
 What the building knows of its own map: from any cell, which moves lie on a shortest path to a
 destination. Simulated experts (Section V-B: "expert trajectories from agents moving towards
 each of the eight goals") walk such paths; where they start is a choice the paper leaves open
-(METHOD.md): at the start cell (``"start"``) or at uniformly random free cells
+(docs/METHOD.md): at the start cell (``"start"``) or at uniformly random free cells
 (``"anywhere"``). The service learns a new domain's prior from them; the experiments and the
 ``train`` command do too (:mod:`app.agents.experts`).
 """
@@ -40,7 +40,8 @@ def optimal_actions(domain: GridDomain, goal: int) -> BoolArray:
 
 
 def optimal_policy(domain: GridDomain, goal: int) -> FloatArray:
-    """pi*(s, a): uniform over the optimal actions (ties all count, METHOD.md); 0 at the goal."""
+    """pi*(s, a): uniform over the optimal actions (ties all count: docs/METHOD.md); 0 at the
+    goal."""
     opt = optimal_actions(domain, goal).astype(np.float64)
     n = opt.sum(axis=1, keepdims=True)
     out: FloatArray = np.divide(opt, n, out=np.zeros_like(opt), where=n > 0)

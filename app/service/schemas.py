@@ -303,7 +303,7 @@ class GoalBelief(BaseModel):
 class CostPublic(BaseModel):
     advice_count: int
     total: float = Field(description="kappa x advice_count.")
-    benefit: float = Field(description="Sum of KL at advised states (eq. 3).")
+    benefit: float = Field(description="Sum of KL at advised states (eq. (3)).")
 
 
 class AdvicePublic(BaseModel):

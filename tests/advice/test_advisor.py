@@ -37,7 +37,7 @@ def streams(draw: st.DrawFn) -> tuple[np.ndarray, list[tuple[int, int, int]], in
 
 
 def slow_decision(theta: np.ndarray, window_pairs: list[tuple[int, int]], s: int):  # type: ignore[no-untyped-def]
-    """METHOD.md from scratch: sums over H, P(M1|H) = 1/(1+exp(L2-L1)), mixture, KL."""
+    """docs/METHOD.md from scratch: sums over H, P(M1|H) = 1/(1+exp(L2-L1)), mixture, KL."""
     l1 = sum(math.log(theta[si, ai]) for si, ai in window_pairs)
     l2 = len(window_pairs) * math.log(0.25)
     p1 = 1.0 / (1.0 + math.exp(l2 - l1))

@@ -13,7 +13,7 @@ from app.advice.priors import ActionPrior, NotFittedError, policy_counts, trajec
 
 
 def slow_trajectory_counts(trajs: list[np.ndarray], n_states: int, delta: float) -> np.ndarray:
-    """Eq. (1) applied trajectory by trajectory, with dicts: obviously right, slow."""
+    """The counts of eq. (1) applied trajectory by trajectory, with dicts: obviously right, slow."""
     out = np.zeros((n_states, 4))
     for t in trajs:
         visits: dict[int, int] = {}
@@ -51,7 +51,7 @@ def test_trajectory_counts_match_eq1_slow_version(
 
 
 def test_trajectory_counts_each_trajectory_counts_once_per_pair() -> None:
-    # one trajectory going E three times in state 0 adds 1, not 3 (eq. 2 counts policies)
+    # one trajectory going E three times in state 0 adds 1, not 3 (eq. (2) counts policies)
     t = np.array([[0, 1], [0, 1], [0, 1], [1, 2]])
     counts = trajectory_counts([t, t], n_states=2)
     assert counts[0].tolist() == [0, 2, 0, 0]
@@ -67,7 +67,7 @@ def test_policy_counts_match_eq2_on_hand_made_policies() -> None:
         [0, 1, 2, 0],
         [1, 1, 1, 1],
     ]
-    # delta = 0.2 drops the 0.1 entry (eq. 1 threshold)
+    # delta = 0.2 drops the 0.1 entry (eq. (1) threshold)
     assert policy_counts(np.stack([pi1, pi2]), delta=0.2)[1].tolist() == [0, 0, 2, 0]
     prior = ActionPrior(alpha0=0.5).fit_policies(np.stack([pi1, pi2]))
     np.testing.assert_allclose(prior.counts()[0], [2.5, 1.5, 0.5, 0.5])

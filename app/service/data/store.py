@@ -9,7 +9,7 @@ Tables (the same on every database; only the engine's connect options differ):
   above any version of an earlier domain of the same name;
 * ``trajectories``: domain, agent type, steps as a compact blob of little-endian int32
   (state, action) pairs, optional goal state, the data version that added it;
-* ``prior_counts``: per (domain, table) the eq. (1)-(2) increments as an int32 (states x 4) blob
+* ``prior_counts``: per (domain, table) the eqs. (1)-(2) increments as an int32 (states x 4) blob
   and the number of trajectories; table ``"*"`` is pooled over all agent types.
 
 A trajectory and the counts it adds are written in one transaction, so the counts always equal
