@@ -23,6 +23,7 @@ from advisor_client.types import Decision
 from tqdm import tqdm
 
 from app import strategies
+from app.advice.advisor import DEFAULT_KAPPA, DEFAULT_WINDOW
 from app.agents.explorers import FIXED_EXPLORERS, make_explorer
 from app.cli.options import choice
 from app.domain.grid import ACTIONS, GridDomain
@@ -163,8 +164,10 @@ def simulate(
     episodes: Annotated[int, typer.Option(min=1, help="Episodes (tasks) in all.")] = 10,
     explorers: Annotated[int, typer.Option(min=1, help="Explorers walking at once.")] = 1,
     steps: Annotated[int, typer.Option(min=1, help="Moves per episode at most.")] = 5000,
-    kappa: Annotated[float, typer.Option(min=0.0, help="Cost of one piece of advice.")] = 0.5,
-    window: Annotated[int, typer.Option(min=1, help="History window W.")] = 300,
+    kappa: Annotated[
+        float, typer.Option(min=0.0, help="Cost of one piece of advice.")
+    ] = DEFAULT_KAPPA,
+    window: Annotated[int, typer.Option(min=1, help="History window W.")] = DEFAULT_WINDOW,
     seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
     domain: Annotated[str, typer.Option(help="Domain to walk.")] = "default",
     delay: Annotated[float, typer.Option(min=0.0, help="Seconds between moves (to watch).")] = 0.0,

@@ -106,8 +106,7 @@ class Args(CommonArgs, LearningArgs, StrategyOptions):  # type: ignore[valid-typ
 
     def check(self) -> None:
         super().check()
-        if self.experts == "policy":
-            raise ValueError("buildings needs expert trajectories: experts start or anywhere")
+        self.check_trajectories("buildings")
         if self.steps < 1 or self.workers < 1 or self.q_tasks < 0 or self.episodes < 1:
             raise ValueError("need steps >= 1, workers >= 1, q-tasks >= 0 and episodes >= 1")
         if self.episode_steps < 0:

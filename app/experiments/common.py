@@ -16,6 +16,7 @@ from typing import Literal
 import numpy as np
 import numpy.typing as npt
 
+from app.advice.advisor import DEFAULT_KAPPA, DEFAULT_WINDOW
 from app.advice.models import AdviceTables
 from app.advice.priors import ActionPrior
 from app.agents.experts import EXPERT_SOURCES, ExpertSource, train_prior
@@ -35,11 +36,11 @@ class CommonArgs:
     """Seeds every random choice (expert data, task goals, explorers)."""
     tasks: int = 20
     """Random one-shot tasks (goal drawn uniformly from the map's goals) per explorer."""
-    kappa: float = 0.5
+    kappa: float = DEFAULT_KAPPA
     """Cost of one piece of advice: advise iff KL[theta_s || P(A|s,H)] >= kappa (nats)."""
     alpha0: float = 1.0
     """Dirichlet hyperprior: pseudo-count added to every action of every state."""
-    window: int = 300
+    window: int = DEFAULT_WINDOW
     """Length W of the history H the posterior P(M|H) is computed over."""
     experts: ExpertSource = "start"
     """Expert data: 'start' (trajectories from the start cell, as every agent in the paper
@@ -63,6 +64,11 @@ class CommonArgs:
             raise ValueError(f"window must be at least 1, got {self.window}")
         if isinstance(self, LearningArgs):
             self.q_params()  # validates the Q-learner's settings
+
+    def check_trajectories(self, experiment: str) -> None:
+        """ValueError unless the experts are trajectories (the goal of each is needed)."""
+        if self.experts == "policy":
+            raise ValueError(f"{experiment} needs expert trajectories: experts start or anywhere")
 
     def prior_settings(self) -> dict[str, object]:
         return {

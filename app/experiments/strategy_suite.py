@@ -59,8 +59,7 @@ class Args(CommonArgs, StrategyOptions):  # type: ignore[valid-type,misc]
 
     def check(self) -> None:
         super().check()
-        if self.experts == "policy":
-            raise ValueError("strategies needs expert trajectories: experts start or anywhere")
+        self.check_trajectories("strategies")
         if self.maps < 0 or self.map_size < 5 or self.workers < 1 or self.steps < 1:
             raise ValueError("need maps >= 0, map-size >= 5, workers >= 1 and steps >= 1")
         if not 0.0 <= self.braid <= 1.0:

@@ -5,6 +5,7 @@ its threadpool, and the thread hops cost more than the lookups."""
 
 from __future__ import annotations
 
+from collections.abc import Awaitable, Callable
 from typing import Annotated, Any
 
 from fastapi import Depends, Path
@@ -111,32 +112,36 @@ async def session_for(
     return session
 
 
-async def get_session_or_admin(
-    conn: HTTPConnection,
-    session_id: SessionId,
-    state: StateDep,
-    credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(bearer)] = None,
-    key: Annotated[str | None, Depends(api_key_header)] = None,
-) -> LiveSession:
-    """As :func:`get_session`, or any session for the admin key (to read or end it)."""
-    if key and not credentials:
-        check_admin(key, state.admin_key)
-        return await state.sessions.get(session_id)
-    return await get_session(conn, session_id)
+SessionLookup = Callable[..., Awaitable[LiveSession]]
 
 
-async def get_session_or_operator(
-    conn: HTTPConnection,
-    session_id: SessionId,
-    state: StateDep,
-    credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(bearer)] = None,
-    key: Annotated[str | None, Depends(api_key_header)] = None,
-) -> LiveSession:
-    """As :func:`get_session`, or any session for the admin or operator key (to read it)."""
-    if key and not credentials:
-        is_operator(key, state.admin_key, state.operator_key)
-        return await state.sessions.get(session_id)
-    return await get_session(conn, session_id)
+def session_or_key(check: Callable[[str, ServiceState], object], who: str) -> SessionLookup:
+    """A dependency: as :func:`get_session`, or any session for a key that passes ``check``
+    (which raises for another key)."""
+
+    async def lookup(
+        conn: HTTPConnection,
+        session_id: SessionId,
+        state: StateDep,
+        credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(bearer)] = None,
+        key: Annotated[str | None, Depends(api_key_header)] = None,
+    ) -> LiveSession:
+        if key and not credentials:
+            check(key, state)
+            return await state.sessions.get(session_id)
+        return await get_session(conn, session_id)
+
+    lookup.__doc__ = f"As :func:`get_session`, or any session for {who}."
+    return lookup
+
+
+get_session_or_admin = session_or_key(
+    lambda key, state: check_admin(key, state.admin_key), "the admin key (to read or end it)"
+)
+get_session_or_operator = session_or_key(
+    lambda key, state: is_operator(key, state.admin_key, state.operator_key),
+    "the admin or operator key (to read it)",
+)
 
 
 def client_of(conn: HTTPConnection, state: ServiceState) -> str | None:

@@ -29,7 +29,7 @@ from app.advice.goals import GoalAwareAdvisor
 from app.advice.guide import GuideAdvisor, GuideParams, kernel_params
 from app.advice.models import AdviceTables
 from app.advice.rules import RuleAdvisor
-from app.arrays import FloatArray, IntArray
+from app.arrays import BoolArray, FloatArray, IntArray
 from app.domain.grid import N_ACTIONS
 
 _NO_RING = np.zeros((0, 0))  # no value kept: the window's values are those of the tables
@@ -38,6 +38,33 @@ _NO_ADVICE = np.zeros((0, N_ACTIONS))
 
 #: what a window of pair keys holds, on each class using :class:`KeyedWindow`
 KEYED_SLOTS = ("_kept", "_keys", "_keys_tables", "_n_kept", "_old")
+
+#: a batch's columns as a kernel fills them: KL, P(M1 | H), advise, the advice count and the
+#: benefit after each decision (and each decision's advice, for advisors whose advice is their
+#: own: ``rows``)
+Columns = tuple[FloatArray, FloatArray, BoolArray, IntArray, FloatArray]
+
+
+def columns(n: int) -> Columns:
+    """Empty columns for a batch of ``n`` decisions."""
+    return (np.empty(n), np.empty(n), np.empty(n, dtype=np.bool_), np.empty(n, dtype=np.int64),
+            np.empty(n))  # fmt: skip
+
+
+def decided(
+    adv: Advisor, next_states: IntArray, out: Columns, advice: FloatArray,
+    before: tuple[int, float], advised_from: AdviceTables | None,
+) -> DecisionBatch:  # fmt: skip
+    """The batch a kernel decided into ``out`` (the advisor's counters moved on by it):
+    ``advice`` the advising decisions' rows, ``before`` the advice count and benefit before."""
+    n = len(next_states)
+    adv.steps += n
+    adv.decisions += n
+    kl, p_normal, advise, count, benefit = out
+    return DecisionBatch(
+        adv.steps - n + 1, next_states, advise, kl, p_normal, count, benefit, advice, adv.kappa,
+        before[0], before[1], advised_from,
+    )  # fmt: skip
 
 
 class KeyedWindow(Advisor):
@@ -191,24 +218,18 @@ class StreamAdvisor(KeyedWindow):
         self._sync_tables()
         tables = self.tables
         loglik = np.array(self._loglik, dtype=np.float64)
-        kl, p_normal, benefit = np.empty(n), np.empty(n), np.empty(n)
-        advise, count = np.empty(n, dtype=np.bool_), np.empty(n, dtype=np.int64)
+        out = columns(n)
         old = self._old if self._old is not None else _NO_RING
         pos, self.advice_count, self.benefit, gone = kernels.observe_stream(
             (self._keys, self._kept, old), loglik, self._pos, self.steps,
             resync_period(self.window), tables.arrays, self.kappa, count_before,
-            benefit_before, (states, actions, next_states), (kl, p_normal, advise, count, benefit),
+            benefit_before, (states, actions, next_states), out,
         )  # fmt: skip
         self._loglik, self._pos = loglik.tolist(), pos
         if gone:
             self._left(gone)
-        self.steps += n
-        self.decisions += n
-        advice = tables.theta[next_states[advise]] if n else _NO_ADVICE
-        return DecisionBatch(
-            self.steps - n + 1, next_states, advise, kl, p_normal, count, benefit, advice,
-            self.kappa, count_before, benefit_before, tables,
-        )  # fmt: skip
+        advice = tables.theta[next_states[out[2]]] if n else _NO_ADVICE
+        return decided(self, next_states, out, advice, (count_before, benefit_before), tables)
 
 
 def keyed(rule: type[RuleAdvisor]) -> type[RuleAdvisor]:
@@ -367,26 +388,19 @@ class StreamGoalAware(KeyedWindow, GoalAwareAdvisor):
         n = len(states)
         count_before, benefit_before = self.advice_count, self.benefit
         window, goal_window, loglik = self._windows()
-        kl, p_normal, benefit = np.empty(n), np.empty(n), np.empty(n)
-        advise, count = np.empty(n, dtype=np.bool_), np.empty(n, dtype=np.int64)
-        rows = np.empty((n, N_ACTIONS))
+        out, rows = columns(n), np.empty((n, N_ACTIONS))
         pos, self.advice_count, self.benefit, gone, goal_gone = kernels.goal_stream(
             window, goal_window, (loglik, self._goal_ll, self.alive), self._pos, self.steps,
             resync_period(self.window), self.beta, self.tables.arrays, self._goal_arrays,
             self.kappa, count_before, benefit_before, (states, actions, next_states),
-            (kl, p_normal, advise, count, benefit, rows),
+            (*out, rows),
         )  # fmt: skip
         self._loglik, self._pos = loglik.tolist(), pos
         if gone:
             self._left(gone)
         if goal_gone:
             self._goal_left(goal_gone)
-        self.steps += n
-        self.decisions += n
-        return DecisionBatch(
-            self.steps - n + 1, next_states, advise, kl, p_normal, count, benefit, rows[advise],
-            self.kappa, count_before, benefit_before, None,
-        )  # fmt: skip
+        return decided(self, next_states, out, rows[out[2]], (count_before, benefit_before), None)
 
     def observe(self, state: int, action: int, next_state: int) -> Decision:
         self._check(state, action)
@@ -421,23 +435,16 @@ class StreamGuide(GuideAdvisor):
         ll = np.array(self._loglik, dtype=np.float64)
         alive = np.array(self.alive, dtype=np.bool_)
         last_advice = np.array(self._last_advice, dtype=np.float64)
-        kl, p_normal, benefit = np.empty(n), np.empty(n), np.empty(n)
-        advise, count = np.empty(n, dtype=np.bool_), np.empty(n, dtype=np.int64)
-        rows = np.empty((n, N_ACTIONS))
+        out, rows = columns(n), np.empty((n, N_ACTIONS))
         params = kernel_params(self.window, GuideParams(self.p_lost, self.slack, self.spread))
         got = kernels.guide_stream(
             g.arrays, params, g.goal_states, ll, alive, self._target, self._last, self._heading,
             last_advice, self.kappa, count_before, benefit_before,
-            (states, actions, next_states), (kl, p_normal, advise, count, benefit, rows),
+            (states, actions, next_states), (*out, rows),
         )  # fmt: skip
         self._target, self._last, self._heading, self.advice_count, self.benefit = got
         self._loglik = ll.tolist()
         self.alive = alive.tolist()
         a = last_advice.tolist()
         self._last_advice = (a[0], a[1], a[2], a[3])
-        self.steps += n
-        self.decisions += n
-        return DecisionBatch(
-            self.steps - n + 1, next_states, advise, kl, p_normal, count, benefit, rows[advise],
-            self.kappa, count_before, benefit_before, None,
-        )  # fmt: skip
+        return decided(self, next_states, out, rows[out[2]], (count_before, benefit_before), None)
