@@ -11,6 +11,7 @@ import typer
 
 from app.domain.grid import Frame, GridDomain, MapError
 from app.domain.maps import DEFAULT_MAP
+from app.mapio.budget import DEFAULT_MAX_MEMORY_MIB
 
 
 class Kind(StrEnum):
@@ -204,30 +205,52 @@ def maze_import(
         int, typer.Option(min=1, help="How many goals to pick (spread out; rooms, dead ends).")
     ] = 8,
     seed: Annotated[int, typer.Option(help="Random seed for the picks' ties.")] = 0,
+    max_memory: Annotated[
+        int,
+        typer.Option(
+            min=1,
+            metavar="MIB",
+            help="Memory the import may take, in MiB: estimated from the file's header "
+            "(pixels and cells times what each step holds of them) and refused past it "
+            "before anything is decoded.",
+        ),
+    ] = DEFAULT_MAX_MEMORY_MIB,
 ) -> None:
     """Import a map: keep its largest connected region, place a start and goals, write it as
     an ASCII map (with the resolution and origin when the format has them)."""
     from app.domain.place import largest_region, parse_cells, place
     from app.mapio import read_map
+    from app.mapio.budget import MemoryBudget
 
     try:
         starts = parse_cells(start, "--start") if start is not None else [None]
         if len(starts) != 1:
             raise ValueError("--start takes one cell ROW,COL")
         goal_list = parse_cells(goal_cells, "--goal-cells") if goal_cells is not None else None
-        imported = read_map(file, fmt.value, merge=merge, threshold=threshold, seal=seal)
+        budget = MemoryBudget.of_mib(max_memory, len(goal_list) if goal_list else goals)
+        imported = read_map(
+            file, fmt.value, merge=merge, threshold=threshold, seal=seal, budget=budget
+        )
         kept, dropped = largest_region(imported.free)
         rows = place(
             kept, np.random.default_rng(seed), start=starts[0], goals=goal_list, n_goals=goals
         )
+        for note in imported.notes:
+            typer.echo(note, err=out is None)
+        total = int(imported.free.sum())
+        typer.echo(
+            f"kept the largest connected region: {total - dropped} of {total} free cells "
+            f"({dropped} dropped)",
+            err=out is None,
+        )
+        _write(rows, out, imported.frame)
     except ValueError as exc:  # MapError is one
         _fail(str(exc))
-    for note in imported.notes:
-        typer.echo(note, err=out is None)
-    total = int(imported.free.sum())
-    typer.echo(
-        f"kept the largest connected region: {total - dropped} of {total} free cells "
-        f"({dropped} dropped)",
-        err=out is None,
-    )
-    _write(rows, out, imported.frame)
+    except MemoryError:
+        _fail(
+            f"{file}: ran out of memory while importing it: the machine (or a limit on this "
+            f"process) gave less than the memory budget of {max_memory} MiB; give a smaller "
+            "--max-memory to be refused before decoding, or --merge K for fewer cells"
+        )
+    except OSError as exc:  # writing the map (the readers turn theirs into MapImportError)
+        _fail(f"cannot write {out or 'the map'}: {exc.strerror or exc}")

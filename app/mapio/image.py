@@ -15,6 +15,7 @@ import numpy as np
 from app.arrays import BoolArray
 from app.domain.place import components
 from app.mapio import Imported, MapImportError
+from app.mapio.budget import MemoryBudget
 from app.mapio.raster import merge_cells, read_image
 
 
@@ -44,21 +45,35 @@ def outside(free: BoolArray, seal: int = 0) -> BoolArray:
     return out
 
 
-def read_plan(path: Path, *, merge: int = 1, threshold: int = 128, seal: int = 0) -> Imported:
+def read_plan(
+    path: Path,
+    *,
+    merge: int = 1,
+    threshold: int = 128,
+    seal: int = 0,
+    budget: MemoryBudget | None = None,
+) -> Imported:
     if not 1 <= threshold <= 255:
         raise MapImportError(f"threshold must be a grey level from 1 to 255, got {threshold}")
     if seal < 0:
         raise MapImportError(f"seal must be 0 or more cells, got {seal}")
-    grey, opaque = read_image(path)
-    wall = opaque & (grey < threshold)
-    light = opaque & ~wall
+    grey, opaque = read_image(path, budget or MemoryBudget(), merge)
+    height, width = grey.shape
+    wall = grey < threshold
+    if opaque is not None:
+        wall &= opaque
+    light = ~wall
+    del grey  # the pixels' masks are all that is kept
+    if opaque is not None:
+        light &= opaque
+    n_dark = int(wall.sum())
+    n_transparent = 0 if opaque is None else int(opaque.size - opaque.sum())
+    del opaque
     cells = merge_cells(light, wall, merge)
+    del light, wall
     out = outside(cells, seal)
     inside = cells & ~out
-    notes = [
-        f"floor plan {grey.shape[1]}x{grey.shape[0]} pixels ({int(wall.sum())} dark, "
-        f"{int((~opaque).sum())} transparent)"
-    ]
+    notes = [f"floor plan {width}x{height} pixels ({n_dark} dark, {n_transparent} transparent)"]
     if merge > 1:
         notes.append(
             f"merged {merge}x{merge} pixels per cell: {cells.shape[1]}x{cells.shape[0]} cells"

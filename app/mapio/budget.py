@@ -1,0 +1,142 @@
+"""How much memory one import may take, estimated from a file's header before anything is decoded.
+
+An import holds, at its peak, about
+
+    pixels x (bytes a pixel) + cells x (bytes a cell) + one band of pixels being converted
+
+where a pixel costs, while it is decoded, what the decoder keeps (Pillow: 1 byte for 1-bit,
+grey and palette images, 2 for 16-bit grey, 4 for the rest) and the grey level read from it,
+then (the decoder's image freed) the reader's masks (wall and floor, or occupied and free, and
+their padded copies while pixels are merged: 4 bytes), and 1 byte more for opacity when the
+image has transparency; a Moving AI map's character costs its text, rows and terrain masks
+(12 bytes); and a cell (pixels / merge^2 of them, or a Moving AI map's characters) costs what
+region labelling, placing the start and goals, the written map's checks and its distances to
+every goal hold at once (544 bytes with up to 8 goals, 10 more for each goal beyond).
+
+The constants are peak RSS over a tiny import's, measured with ``python -m
+tests.reliability.map_import_figures`` (every Pillow mode the readers take, ROS and Moving AI
+maps, 1,000 x 1,000 to 20,000 x 20 cells, merged and not) and rounded up: the peaks were 67 to
+91 % of the estimate. The estimate is checked against :class:`MemoryBudget` before decoding,
+and the import refused past it with a message naming the size, the estimate, the budget and
+how to raise it (``--max-memory``) or to need less (``--merge``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from app.mapio import MapImportError
+
+MIB = 1 << 20
+#: the default budget of an import (``maze import --max-memory``), in MiB
+DEFAULT_MAX_MEMORY_MIB = 768
+
+#: bytes a cell of the imported grid costs until the map is written, with up to
+#: :data:`GOALS_INCLUDED` goals (measured on maps all floor, 1 to 8 goals, the pixels' cost
+#: included: 380 to 494, depending on the shape)
+CELL_BYTES = 544
+GOALS_INCLUDED = 8
+#: bytes a cell costs for each goal beyond those: the written map's distances to it (int64)
+#: and the searches' frontiers (measured with 100 and 400 goals: 7.7)
+GOAL_CELL_BYTES = 10
+#: bytes a pixel costs once decoded into grey levels, the decoder's image freed: the reader's
+#: masks (wall and floor, or occupied and free) and their padded copies while cells are merged
+READ_PIXEL_BYTES = 4
+#: pixels converted at a time (a band of whole rows), and what each holds meanwhile (the cropped
+#: band, its RGB(A) or float copy, the conversion's temporaries)
+BAND_PIXELS = 1 << 18
+BAND_PIXEL_BYTES = 64
+#: a Moving AI map: bytes a character costs while the text is read and parsed (the file's bytes,
+#: its text, the rows, joined and encoded, the terrain masks), and each row's string and places
+TEXT_CELL_BYTES = 12
+TEXT_ROW_BYTES = 128
+#: the smallest cost of a pixel (a grey image merged into few cells): Pillow's own limit on an
+#: image's pixels (``Image.MAX_IMAGE_PIXELS``) is the budget divided by it while decoding
+CHEAPEST_PIXEL_BYTES = READ_PIXEL_BYTES
+
+
+def decoded_bytes(mode: str) -> int:
+    """Bytes a pixel of a Pillow image of ``mode`` takes once decoded."""
+    if mode in ("1", "L", "P"):
+        return 1
+    if mode.startswith("I;16"):
+        return 2
+    return 4
+
+
+def mib(n: int) -> str:
+    """``n`` bytes in whole MiB, rounded up, with thousands separators."""
+    return f"{-(-n // MIB):,} MiB"
+
+
+@dataclass(frozen=True)
+class MemoryBudget:
+    """At most ``limit`` bytes for one import, whose written map gets ``goals`` goals."""
+
+    limit: int = DEFAULT_MAX_MEMORY_MIB * MIB
+    goals: int = 8
+
+    @classmethod
+    def of_mib(cls, mebibytes: int, goals: int = 8) -> MemoryBudget:
+        return cls(mebibytes * MIB, goals)
+
+    @property
+    def cell_bytes(self) -> int:
+        return CELL_BYTES + GOAL_CELL_BYTES * max(0, self.goals - GOALS_INCLUDED)
+
+    @property
+    def max_pixels(self) -> int:
+        """The most pixels any image can have under this budget (Pillow's limit)."""
+        return max(1, self.limit // CHEAPEST_PIXEL_BYTES)
+
+    def image_estimate(
+        self, width: int, height: int, mode: str, merge: int, alpha: bool = False
+    ) -> int:
+        """Bytes an import of a ``width`` x ``height`` image of Pillow ``mode`` holds at most,
+        read with ``merge`` x ``merge`` pixels a cell (``alpha``: the image has transparency)."""
+        # decoding: Pillow's image, the grey levels and opacity; then (Pillow's image freed)
+        # the opacity and the reader's masks
+        per_pixel = int(alpha) + max(decoded_bytes(mode) + 1, READ_PIXEL_BYTES)
+        band = max(BAND_PIXELS, width) * BAND_PIXEL_BYTES
+        return width * height * per_pixel + band + _cells(width, height, merge) * self.cell_bytes
+
+    def text_estimate(self, width: int, height: int) -> int:
+        """Bytes an import of a Moving AI map of ``height`` rows of ``width`` holds at most."""
+        return width * height * (TEXT_CELL_BYTES + self.cell_bytes) + height * TEXT_ROW_BYTES
+
+    def check_image(
+        self, where: str, width: int, height: int, mode: str, merge: int, alpha: bool = False
+    ) -> None:
+        """Refuse an image whose import would take more than the budget, before decoding."""
+        need = self.image_estimate(width, height, mode, merge, alpha)
+        if need <= self.limit:
+            return
+        hint = ""
+        lo, hi = merge + 1, max(width, height, merge + 1)  # cells only fall as merge grows
+        if self.image_estimate(width, height, mode, hi, alpha) <= self.limit:
+            while lo < hi:
+                mid = (lo + hi) // 2
+                if self.image_estimate(width, height, mode, mid, alpha) <= self.limit:
+                    hi = mid
+                else:
+                    lo = mid + 1
+            hint = f", or read {lo} x {lo} pixels a cell with --merge {lo}"
+        raise MapImportError(
+            f"{where}: a {width} x {height} pixel image (mode {mode}) would need about "
+            f"{mib(need)} to import at --merge {merge}, more than the memory budget of "
+            f"{mib(self.limit)}: raise the budget with --max-memory MIB{hint}"
+        )
+
+    def check_text(self, where: str, width: int, height: int) -> None:
+        """Refuse a Moving AI map whose import would take more than the budget."""
+        need = self.text_estimate(width, height)
+        if need > self.limit:
+            raise MapImportError(
+                f"{where}: a {width} x {height} map would need about {mib(need)} to import, "
+                f"more than the memory budget of {mib(self.limit)}: raise the budget with "
+                "--max-memory MIB"
+            )
+
+
+def _cells(width: int, height: int, merge: int) -> int:
+    return -(-width // merge) * -(-height // merge)
