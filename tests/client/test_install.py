@@ -17,7 +17,7 @@ from packaging.requirements import Requirement
 
 REPO = Path(__file__).resolve().parents[2]
 #: what the client may need at run time (its dependencies and theirs)
-ALLOWED = {"httpx", "websockets", "numpy"}
+ALLOWED = {"httpx", "websockets", "numpy", "tenacity"}
 
 
 def closure(names: set[str]) -> set[str]:
