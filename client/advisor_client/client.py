@@ -131,6 +131,11 @@ class _Base:
         self.retries = retries
         self.backoff = backoff
 
+    def __deepcopy__(self, memo: dict[int, Any]) -> Self:
+        """The same client: one holds connections, not values (Gymnasium copies the specs of
+        environments, whose arguments name the client)."""
+        return self
+
     def _delay(self, attempt: int) -> float:
         """The wait before try ``attempt + 2`` (``attempt`` 0 after the first failure)."""
         return float(min(self.backoff * 2**attempt, MAX_DELAY))
@@ -308,6 +313,15 @@ class AdvisorClient(_Base):
         ``experts`` (``{"source", "per_goal", "seed"}``) as the PUT body has them."""
         call = api.put_domain(name, rows, alpha0, **frame_and_experts)
         return cast(DomainInfo, self.call(call))
+
+    def put_domain_created(
+        self, name: str, rows: Sequence[str], alpha0: float = 1.0, **frame_and_experts: Any
+    ) -> tuple[DomainInfo, bool]:
+        """:meth:`put_domain`, and whether this PUT created the domain (201) rather than
+        replacing one (200). A PUT retried after a lost answer finds the domain it made: it
+        says False then."""
+        response = self._respond(api.put_domain(name, rows, alpha0, **frame_and_experts))
+        return cast(DomainInfo, _parse(response)), response.status_code == 201
 
     def delete_domain(self, name: str) -> None:
         self.call(api.delete_domain(name))
@@ -487,6 +501,12 @@ class AsyncAdvisorClient(_Base):
     ) -> DomainInfo:
         call = api.put_domain(name, rows, alpha0, **frame_and_experts)
         return cast(DomainInfo, await self.call(call))
+
+    async def put_domain_created(
+        self, name: str, rows: Sequence[str], alpha0: float = 1.0, **frame_and_experts: Any
+    ) -> tuple[DomainInfo, bool]:
+        response = await self._respond(api.put_domain(name, rows, alpha0, **frame_and_experts))
+        return cast(DomainInfo, _parse(response)), response.status_code == 201
 
     async def delete_domain(self, name: str) -> None:
         await self.call(api.delete_domain(name))
