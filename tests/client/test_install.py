@@ -144,7 +144,7 @@ def test_pip_install_dot_needs_no_index_and_gives_the_service_and_the_client(
     """``pip install .`` from a clone: every requirement of the service resolved offline
     (``--no-index``: nothing from an index, where the client's name is not registered), the
     client coming with the service's distribution. About 15 s: the build and the imports."""
-    source = copy_sources(tmp_path, "pyproject.toml", "README.md", "app", "client")
+    source = copy_sources(tmp_path, "pyproject.toml", "README.md", "LICENSE", "app", "client")
     project = tomllib.loads((REPO / "pyproject.toml").read_text(encoding="utf-8"))["project"]
     build = {"setuptools", "wheel"}  # --no-build-isolation: the backend from the environment
     python, site = fresh_venv(tmp_path, set(project["dependencies"]) | build)
@@ -161,6 +161,7 @@ files = {str(f) for f in md.distribution("hidden-goal-advisor").files or []}
 print(json.dumps({"app": app.__file__, "client": advisor_client.__file__,
                   "requires": md.requires("hidden-goal-advisor"),
                   "typed": "advisor_client/py.typed" in files,
+                  "licence": md.metadata("hidden-goal-advisor")["License-Expression"],
                   "map": "app/domain/maps/default.txt" in files}))
 """
     env = {"PATH": os.environ.get("PATH", ""), "PYTHONNOUSERSITE": "1"}
@@ -170,7 +171,7 @@ print(json.dumps({"app": app.__file__, "client": advisor_client.__file__,
     assert out.returncode == 0, out.stderr
     got = json.loads(out.stdout)
     assert got["app"].startswith(str(site)) and got["client"].startswith(str(site))
-    assert got["typed"] and got["map"]
+    assert got["typed"] and got["map"] and got["licence"] == "MIT"
     names = {Requirement(r).name for r in got["requires"]}
     assert "hidden-goal-advisor-client" not in names and names >= ALLOWED
     version = subprocess.run(
