@@ -9,18 +9,22 @@ SRC := app tests benchmarks client
 
 .PHONY: run test venv run-venv chromium wrk lint format bench screenshots clean
 
-## What running needs: the client (client/, its own distribution) and the service.
+## What running needs: the service's distribution, which holds the client (advisor_client) too.
+## The client's own distribution (client/) is for agents without the service: a .venv made
+## before it came with the service has it installed twice, so it goes.
 $(RUN_STAMP): pyproject.toml client/pyproject.toml
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
-	$(BIN)/python -m pip install -q -e ./client -e .
+	-@$(BIN)/python -m pip uninstall -q -y hidden-goal-advisor-client 2>/dev/null
+	$(BIN)/python -m pip install -q -e .
 	@touch $(RUN_STAMP)
 
-## The same with the dev tools (tests, linters, the browser driver, MiniGrid).
+## The same with the dev tools (tests, linters, the browser driver, Gymnasium and MiniGrid).
 $(STAMP): pyproject.toml client/pyproject.toml
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
-	$(BIN)/python -m pip install -q -e './client[gym,minigrid]' -e '.[dev]'
+	-@$(BIN)/python -m pip uninstall -q -y hidden-goal-advisor-client 2>/dev/null
+	$(BIN)/python -m pip install -q -e '.[dev]'
 	@touch $(STAMP) $(RUN_STAMP)
 
 venv: $(STAMP)

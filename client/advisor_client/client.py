@@ -9,14 +9,23 @@ websocket stream over ``websockets``. Talks HTTP only; imports nothing of the se
 
 from __future__ import annotations
 
-import asyncio
 import json
-import time
 from collections.abc import Awaitable, Callable, Mapping, Sequence
 from types import TracebackType
 from typing import Any, Self, cast
 
 import httpx
+from tenacity import (
+    AsyncRetrying,
+    RetryCallState,
+    Retrying,
+    retry_base,
+    retry_if_exception,
+    retry_if_exception_type,
+    retry_if_result,
+    stop_after_attempt,
+    wait_exponential,
+)
 from websockets.asyncio.client import ClientConnection as AsyncConnection
 from websockets.asyncio.client import connect as async_connect
 from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidStatus
@@ -53,6 +62,24 @@ def _lost(exc: ConnectionClosed) -> bool:
     return not (frame is not None and 4000 <= frame.code < 5000)
 
 
+def _last_outcome(state: RetryCallState) -> Any:
+    """After the last try: its exception raised again, or its answer (a response that was
+    worth another try, given back as it is)."""
+    assert state.outcome is not None
+    return state.outcome.result()
+
+
+def _policy(
+    retries: int, wait: Callable[[RetryCallState], float], retry: retry_base
+) -> dict[str, Any]:
+    """tenacity's arguments: ``retry`` says what is worth another try, at most ``retries``
+    more, after ``wait``; after the last, :func:`_last_outcome`."""
+    return {
+        "stop": stop_after_attempt(retries + 1), "wait": wait, "retry": retry,
+        "retry_error_callback": _last_outcome,
+    }  # fmt: skip
+
+
 def _closed(exc: ConnectionClosed) -> AdvisorError:
     frame = exc.rcvd
     code = frame.code if frame else 1006
@@ -86,7 +113,7 @@ def _ws_failure(url: str, exc: Exception) -> AdvisorError:
 
 
 class _Base:
-    """What both clients share: credentials, and when to try a call again.
+    """What both clients share: credentials, and when to try a call again (tenacity).
 
     ``retries``: how many more times a call is tried after a failure worth retrying, waiting
     ``backoff`` seconds, then twice that, and so on (at most 4 s): a call that could not
@@ -104,16 +131,38 @@ class _Base:
         self.retries = retries
         self.backoff = backoff
 
+    def __deepcopy__(self, memo: dict[int, Any]) -> Self:
+        """The same client: one holds connections, not values (Gymnasium copies the specs of
+        environments, whose arguments name the client)."""
+        return self
+
     def _delay(self, attempt: int) -> float:
+        """The wait before try ``attempt + 2`` (``attempt`` 0 after the first failure)."""
         return float(min(self.backoff * 2**attempt, MAX_DELAY))
 
-    def _again(self, call: Call, attempt: int, failure: Exception | int) -> bool:
-        """Whether ``call`` is tried again after ``failure`` (an error or a status)."""
-        if attempt >= self.retries:
-            return False
-        if isinstance(failure, int):
-            return call.idempotent and failure in RETRY_STATUSES
-        return isinstance(failure, NOT_SENT) or call.idempotent
+    def _wait(self) -> wait_exponential:
+        return wait_exponential(multiplier=self.backoff, max=MAX_DELAY)  # = _delay
+
+    def _call_policy(self, call: Call) -> dict[str, Any]:
+        """When ``call`` is tried again: an error in which nothing was sent, or, if it is
+        idempotent, any transport error and the statuses of :data:`RETRY_STATUSES`."""
+
+        def failed(exc: BaseException) -> bool:
+            return isinstance(exc, httpx.TransportError) and (
+                call.idempotent or isinstance(exc, NOT_SENT)
+            )
+
+        def refused(response: httpx.Response) -> bool:
+            return call.idempotent and response.status_code in RETRY_STATUSES
+
+        return _policy(
+            self.retries, self._wait(), retry_if_exception(failed) | retry_if_result(refused)
+        )
+
+    def _connect_policy(self) -> dict[str, Any]:
+        """A websocket that could not be opened (refused, timed out: nothing was sent) is
+        tried again; one the service refused (an HTTP answer, a close) is not."""
+        return _policy(self.retries, self._wait(), retry_if_exception_type(OSError))
 
     def _request(self, call: Call) -> dict[str, Any]:
         headers = dict(call.headers)
@@ -127,6 +176,19 @@ class _Base:
         if call.json is not None:
             kwargs["json"] = call.json
         return kwargs
+
+
+def _stream_policy(stream: Stream | AsyncStream) -> dict[str, Any]:
+    """A frame whose stream went (not one the service closed to refuse it) is sent again on a
+    new stream, at most ``stream.retries`` times, after ``stream.delay(n)`` seconds."""
+
+    def went(exc: BaseException) -> bool:
+        return isinstance(exc, ConnectionClosed) and stream.reopen is not None and _lost(exc)
+
+    def wait(state: RetryCallState) -> float:
+        return stream.delay(state.attempt_number - 1)
+
+    return _policy(stream.retries, wait, retry_if_exception(went))
 
 
 class Stream:
@@ -159,19 +221,22 @@ class Stream:
         one. AdvisorError for a refused batch (the stream stays usable), a stream the service
         closed, or one that could not be replaced."""
         body = json.dumps(api.numbered(self.session, events))
-        attempt = 0
-        while True:
-            try:
-                self.connection.send(body)
-                answer = api.frame_answer(self.connection.recv())
-                break
-            except ConnectionClosed as exc:
-                if self.reopen is None or not _lost(exc) or attempt >= self.retries:
-                    raise _closed(exc) from None
-            time.sleep(self.delay(attempt))
-            attempt += 1
-            self.connection = self.reopen()
-            self.reconnects += 1
+        attempts = 0
+
+        def exchange() -> Any:
+            nonlocal attempts
+            attempts += 1
+            if attempts > 1:  # the stream went: a new one (its own retries)
+                assert self.reopen is not None
+                self.connection = self.reopen()
+                self.reconnects += 1
+            self.connection.send(body)
+            return api.frame_answer(self.connection.recv())
+
+        try:
+            answer = Retrying(**_stream_policy(self))(exchange)
+        except ConnectionClosed as exc:
+            raise _closed(exc) from None
         self.session.answered(answer)
         return answer
 
@@ -203,21 +268,23 @@ class AdvisorClient(_Base):
 
     def call(self, call: Call) -> Any:
         """Send ``call`` (tried again as :class:`_Base` says); its answer's body."""
+        return _parse(self._respond(call))
+
+    def _respond(self, call: Call) -> httpx.Response:
+        """Send ``call`` (tried again as :class:`_Base` says); the service's last answer."""
         kwargs = self._request(call)
-        attempt = 0
-        while True:
-            try:
-                response = self.http.request(call.method, call.path, **kwargs)
-            except httpx.TransportError as exc:
-                if not self._again(call, attempt, exc):
-                    raise AdvisorUnreachable(
-                        self.base_url + call.path, _problem(exc), attempt + 1
-                    ) from exc
-            else:
-                if not self._again(call, attempt, response.status_code):
-                    return _parse(response)
-            time.sleep(self._delay(attempt))
-            attempt += 1
+        attempts = 0
+
+        def send() -> httpx.Response:
+            nonlocal attempts
+            attempts += 1
+            return self.http.request(call.method, call.path, **kwargs)
+
+        try:
+            response: httpx.Response = Retrying(**self._call_policy(call))(send)
+        except httpx.TransportError as exc:
+            raise AdvisorUnreachable(self.base_url + call.path, _problem(exc), attempts) from exc
+        return response
 
     def close(self) -> None:
         self.http.close()
@@ -246,6 +313,15 @@ class AdvisorClient(_Base):
         ``experts`` (``{"source", "per_goal", "seed"}``) as the PUT body has them."""
         call = api.put_domain(name, rows, alpha0, **frame_and_experts)
         return cast(DomainInfo, self.call(call))
+
+    def put_domain_created(
+        self, name: str, rows: Sequence[str], alpha0: float = 1.0, **frame_and_experts: Any
+    ) -> tuple[DomainInfo, bool]:
+        """:meth:`put_domain`, and whether this PUT created the domain (201) rather than
+        replacing one (200). A PUT retried after a lost answer finds the domain it made: it
+        says False then."""
+        response = self._respond(api.put_domain(name, rows, alpha0, **frame_and_experts))
+        return cast(DomainInfo, _parse(response)), response.status_code == 201
 
     def delete_domain(self, name: str) -> None:
         self.call(api.delete_domain(name))
@@ -310,16 +386,14 @@ class AdvisorClient(_Base):
         )  # fmt: skip
 
     def _connect(self, url: str, headers: dict[str, str]) -> ClientConnection:
-        for attempt in range(self.retries + 1):
-            try:
-                return connect(url, compression=None, max_size=None, additional_headers=headers)
-            except (OSError, TimeoutError) as exc:  # refused: nothing was sent, try again
-                if attempt == self.retries:
-                    raise _ws_failure(url, exc) from None
-            except (ConnectionClosed, InvalidHandshake) as exc:
-                raise _ws_failure(url, exc) from None
-            time.sleep(self._delay(attempt))
-        raise AssertionError("unreachable")
+        def open_() -> ClientConnection:
+            return connect(url, compression=None, max_size=None, additional_headers=headers)
+
+        try:
+            connection: ClientConnection = Retrying(**self._connect_policy())(open_)
+        except (OSError, ConnectionClosed, InvalidHandshake) as exc:
+            raise _ws_failure(url, exc) from None
+        return connection
 
 
 class AsyncStream:
@@ -340,19 +414,22 @@ class AsyncStream:
 
     async def send(self, events: EventLike | Sequence[EventLike]) -> Any:
         body = json.dumps(api.numbered(self.session, events))
-        attempt = 0
-        while True:
-            try:
-                await self.connection.send(body)
-                answer = api.frame_answer(await self.connection.recv())
-                break
-            except ConnectionClosed as exc:
-                if self.reopen is None or not _lost(exc) or attempt >= self.retries:
-                    raise _closed(exc) from None
-            await asyncio.sleep(self.delay(attempt))
-            attempt += 1
-            self.connection = await self.reopen()
-            self.reconnects += 1
+        attempts = 0
+
+        async def exchange() -> Any:
+            nonlocal attempts
+            attempts += 1
+            if attempts > 1:  # the stream went: a new one (its own retries)
+                assert self.reopen is not None
+                self.connection = await self.reopen()
+                self.reconnects += 1
+            await self.connection.send(body)
+            return api.frame_answer(await self.connection.recv())
+
+        try:
+            answer: Any = await AsyncRetrying(**_stream_policy(self))(exchange)
+        except ConnectionClosed as exc:
+            raise _closed(exc) from None
         self.session.answered(answer)
         return answer
 
@@ -383,21 +460,23 @@ class AsyncAdvisorClient(_Base):
 
     async def call(self, call: Call) -> Any:
         """Send ``call`` (tried again as :class:`_Base` says); its answer's body."""
+        return _parse(await self._respond(call))
+
+    async def _respond(self, call: Call) -> httpx.Response:
+        """Send ``call`` (tried again as :class:`_Base` says); the service's last answer."""
         kwargs = self._request(call)
-        attempt = 0
-        while True:
-            try:
-                response = await self.http.request(call.method, call.path, **kwargs)
-            except httpx.TransportError as exc:
-                if not self._again(call, attempt, exc):
-                    raise AdvisorUnreachable(
-                        self.base_url + call.path, _problem(exc), attempt + 1
-                    ) from exc
-            else:
-                if not self._again(call, attempt, response.status_code):
-                    return _parse(response)
-            await asyncio.sleep(self._delay(attempt))
-            attempt += 1
+        attempts = 0
+
+        async def send() -> httpx.Response:
+            nonlocal attempts
+            attempts += 1
+            return await self.http.request(call.method, call.path, **kwargs)
+
+        try:
+            response: httpx.Response = await AsyncRetrying(**self._call_policy(call))(send)
+        except httpx.TransportError as exc:
+            raise AdvisorUnreachable(self.base_url + call.path, _problem(exc), attempts) from exc
+        return response
 
     async def aclose(self) -> None:
         await self.http.aclose()
@@ -422,6 +501,12 @@ class AsyncAdvisorClient(_Base):
     ) -> DomainInfo:
         call = api.put_domain(name, rows, alpha0, **frame_and_experts)
         return cast(DomainInfo, await self.call(call))
+
+    async def put_domain_created(
+        self, name: str, rows: Sequence[str], alpha0: float = 1.0, **frame_and_experts: Any
+    ) -> tuple[DomainInfo, bool]:
+        response = await self._respond(api.put_domain(name, rows, alpha0, **frame_and_experts))
+        return cast(DomainInfo, _parse(response)), response.status_code == 201
 
     async def delete_domain(self, name: str) -> None:
         await self.call(api.delete_domain(name))
@@ -479,15 +564,13 @@ class AsyncAdvisorClient(_Base):
         return AsyncStream(await reopen(), session, reopen, self.retries, self._delay)
 
     async def _connect(self, url: str, headers: dict[str, str]) -> AsyncConnection:
-        for attempt in range(self.retries + 1):
-            try:
-                return await async_connect(
-                    url, compression=None, max_size=None, additional_headers=headers
-                )
-            except (OSError, TimeoutError) as exc:  # refused: nothing was sent, try again
-                if attempt == self.retries:
-                    raise _ws_failure(url, exc) from None
-            except (ConnectionClosed, InvalidHandshake) as exc:
-                raise _ws_failure(url, exc) from None
-            await asyncio.sleep(self._delay(attempt))
-        raise AssertionError("unreachable")
+        async def open_() -> AsyncConnection:
+            return await async_connect(
+                url, compression=None, max_size=None, additional_headers=headers
+            )
+
+        try:
+            connection: AsyncConnection = await AsyncRetrying(**self._connect_policy())(open_)
+        except (OSError, ConnectionClosed, InvalidHandshake) as exc:
+            raise _ws_failure(url, exc) from None
+        return connection

@@ -12,6 +12,15 @@ advice (as the paper's advised explorers do), drawn from the environment's ``np_
 >>> env = AdvisedEnv(MazeEnv(client.domain("default")["map"]), client, "default")
 >>> obs, info = env.reset(seed=0)
 >>> obs, reward, terminated, truncated, info = env.step(1)   # info["decision"]["advise"]
+
+Importing this module registers Gymnasium ids (:func:`register_envs`):
+``HiddenGoalAdvisor/Maze-v0`` (:func:`make_maze`: a domain's map as a :class:`MazeEnv`,
+advised; 5000 steps at most, ``max_episode_steps`` to change it) and
+``HiddenGoalAdvisor/MiniGrid-v0`` (:func:`advisor_client.minigrid.make_minigrid`). Their vector
+form is Gymnasium's (each copy an explorer of its own, with its own session):
+
+>>> envs = gym.make_vec("HiddenGoalAdvisor/Maze-v0", num_envs=4, vectorization_mode="sync",
+...                     url="http://127.0.0.1:8000")
 """
 
 from __future__ import annotations
@@ -25,13 +34,17 @@ import numpy.typing as npt
 from gymnasium import spaces
 
 from advisor_client.api import AdvisorError, Session
-from advisor_client.client import AdvisorClient, Stream
+from advisor_client.client import DEFAULT_URL, AdvisorClient, Stream
 from advisor_client.types import Decision
 
 ACTIONS = ("N", "E", "S", "W")
 MOVES = ((-1, 0), (0, 1), (1, 0), (0, -1))
 GOAL_REWARD = 1000.0
 Obs = npt.NDArray[np.int64]
+#: the ids :func:`register_envs` registers, and the steps of an episode at most
+MAZE_ID = "HiddenGoalAdvisor/Maze-v0"
+MINIGRID_ID = "HiddenGoalAdvisor/MiniGrid-v0"
+MAZE_STEPS = 5000
 
 
 class MazeEnv(gym.Env[Obs, int]):
@@ -41,12 +54,18 @@ class MazeEnv(gym.Env[Obs, int]):
     * Actions: ``Discrete(4)``: 0 N, 1 E, 2 S, 3 W. A move into a wall or off the map stays.
     * Goal: one of the map's goals, drawn at ``reset`` (or ``options={"goal": [r, c]}``);
       reaching it gives reward 1000 and ends the episode; every other step gives 0.
-    * Truncation after ``max_steps`` steps.
+    * Truncation after ``max_steps`` steps (``None``: never; ``gym.make`` of
+      ``HiddenGoalAdvisor/Maze-v0`` truncates with its ``max_episode_steps`` instead).
     """
 
     metadata = {"render_modes": ["ansi"]}  # noqa: RUF012  (Gymnasium's own convention)
 
-    def __init__(self, rows: Sequence[str], max_steps: int = 5000, render_mode: str | None = None):
+    def __init__(
+        self,
+        rows: Sequence[str],
+        max_steps: int | None = MAZE_STEPS,
+        render_mode: str | None = None,
+    ):
         self.rows = [r.rstrip() for r in rows]
         self.shape = (len(self.rows), len(self.rows[0]))
         self.start = next(
@@ -80,7 +99,8 @@ class MazeEnv(gym.Env[Obs, int]):
         done = self.cell == self.goal
         return (
             np.array(self.cell), GOAL_REWARD if done else 0.0, done,
-            self.steps >= self.max_steps and not done, {"goal": self.goal},
+            self.max_steps is not None and self.steps >= self.max_steps and not done,
+            {"goal": self.goal},
         )  # fmt: skip
 
     def render(self) -> str:
@@ -119,14 +139,24 @@ def cell_of_observation(obs: Any) -> tuple[int, int]:
         ) from None
 
 
+def _given(decision: Decision) -> dict[str, Any]:
+    """A decision without its null entries: Gymnasium's vector environments stack each entry
+    of their copies' infos into an array, which a null in one copy and a dict in another
+    breaks; an entry missing is masked (``info["decision"]["_advice"]``)."""
+    return {k: v for k, v in decision.items() if v is not None}
+
+
 class AdvisedEnv(gym.Wrapper[Any, Any, Any, Any], gym.utils.RecordConstructorArgs):
-    """Reports each step to the advice service; the decision goes in ``info["decision"]``.
+    """Reports each step to the advice service; the decision goes in ``info["decision"]``
+    (without the entries the service gives as null: ``advice`` when it does not advise, so
+    that a vector environment's infos stack; :attr:`decision` has them all).
 
     ``cell_of`` maps an observation to ``(row, col)`` (default: :func:`cell_of_observation`,
     a dict's ``"cell"`` or the first two entries; :class:`NoCell` says what to pass otherwise);
     ``action_names`` names the wrapped environment's actions as compass moves (e.g.
     FrozenLake's ``("W", "S", "E", "N")``). ``info["followed_advice"]`` says whether the step
-    took an action sampled from the advice instead of the agent's.
+    took an action sampled from the advice instead of the agent's. ``close_client``: closing
+    the environment closes ``client`` too (the registered ids' own clients).
     """
 
     def __init__(
@@ -141,14 +171,16 @@ class AdvisedEnv(gym.Wrapper[Any, Any, Any, Any], gym.utils.RecordConstructorArg
         follow_advice: bool = False,
         cell_of: Callable[[Any], tuple[int, int]] = cell_of_observation,
         action_names: Sequence[str] = ACTIONS,
+        close_client: bool = False,
     ):
         gym.utils.RecordConstructorArgs.__init__(
             self, _disable_deepcopy=True, client=client, domain=domain, kappa=kappa,
             window=window, agent_type=agent_type, follow_advice=follow_advice, cell_of=cell_of,
-            action_names=action_names,
+            action_names=action_names, close_client=close_client,
         )  # fmt: skip
         gym.Wrapper.__init__(self, env)
         self.client = client
+        self.close_client = close_client
         self.domain = domain
         self.options = {"kappa": kappa, "window": window, "agent_type": agent_type}
         self.follow_advice = follow_advice
@@ -169,7 +201,11 @@ class AdvisedEnv(gym.Wrapper[Any, Any, Any, Any], gym.utils.RecordConstructorArg
         self.session = self.client.create_session(self.domain, start=self.cell, **self.options)  # type: ignore[arg-type]
         self.stream = self.client.stream(self.session)
         self.decision = self.session.decision
-        return obs, {**info, "decision": self.decision, "session_id": self.session.session_id}
+        return obs, {
+            **info,
+            "decision": _given(self.decision),
+            "session_id": self.session.session_id,
+        }
 
     def domain_for(self, obs: Any, info: dict[str, Any], seed: int | None) -> str:
         """The domain of the episode that ``reset`` began (here: always the one given;
@@ -195,7 +231,7 @@ class AdvisedEnv(gym.Wrapper[Any, Any, Any, Any], gym.utils.RecordConstructorArg
         event = {"state": self.cell, "action": self.action_names[int(action)], "next_state": cell}
         self.decision = self.stream.send(event)
         self.cell = cell
-        info = {**info, "decision": self.decision, "followed_advice": advised is not None}
+        info = {**info, "decision": _given(self.decision), "followed_advice": advised is not None}
         return obs, reward, terminated, truncated, info
 
     def _end_session(self) -> None:
@@ -210,5 +246,50 @@ class AdvisedEnv(gym.Wrapper[Any, Any, Any, Any], gym.utils.RecordConstructorArg
         self.session = self.stream = None
 
     def close(self) -> None:
-        self._end_session()
-        super().close()
+        try:
+            self._end_session()
+        finally:
+            if self.close_client:
+                self.client.close()
+            super().close()
+
+
+def make_maze(
+    domain: str = "default",
+    client: AdvisorClient | None = None,
+    *,
+    url: str = DEFAULT_URL,
+    admin_key: str | None = None,
+    **options: Any,
+) -> AdvisedEnv:
+    """The entry point of ``HiddenGoalAdvisor/Maze-v0``: ``domain``'s map (read from the
+    service) as a :class:`MazeEnv` without a step limit of its own, in an :class:`AdvisedEnv`
+    (``options``: its keywords, e.g. ``kappa``, ``follow_advice``). Through ``client``, or a
+    client of its own for ``url`` (closed with the environment: give ``url`` to vector forms
+    whose copies run in other processes)."""
+    owned = client is None
+    client = client or AdvisorClient(url, admin_key=admin_key)
+    try:
+        rows = client.domain(domain)["map"]
+    except BaseException:
+        if owned:
+            client.close()
+        raise
+    return AdvisedEnv(MazeEnv(rows, max_steps=None), client, domain, close_client=owned, **options)
+
+
+def register_envs() -> None:
+    """Register ``HiddenGoalAdvisor/Maze-v0`` (:func:`make_maze`, ``max_episode_steps``
+    :data:`MAZE_STEPS`) and ``HiddenGoalAdvisor/MiniGrid-v0``
+    (:func:`advisor_client.minigrid.make_minigrid`; MiniGrid truncates its episodes itself)
+    with Gymnasium. Importing this module does it; doing it again changes nothing."""
+    ids = (
+        (MAZE_ID, "advisor_client.gym:make_maze", MAZE_STEPS),
+        (MINIGRID_ID, "advisor_client.minigrid:make_minigrid", None),
+    )
+    for env_id, entry_point, steps in ids:
+        if env_id not in gym.registry:
+            gym.register(env_id, entry_point=entry_point, max_episode_steps=steps)
+
+
+register_envs()

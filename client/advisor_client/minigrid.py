@@ -13,7 +13,11 @@
   :class:`CompassActions`, with one domain per layout: at each ``reset(seed=s)`` the layout's
   domain (``<env id>-s<s>``; without a seed, named by the map's hash) is PUT once, with
   simulated experts (the PUT's ``experts``) walking shortest paths to its goals, so advice
-  works at once. PUT needs the admin key.
+  works at once. PUT needs the admin key. Closing it deletes the domains its PUTs created
+  (not those that were there before).
+* :func:`make_minigrid`: the entry point of ``HiddenGoalAdvisor/MiniGrid-v0``
+  (``gym.make("HiddenGoalAdvisor/MiniGrid-v0", env_id="MiniGrid-FourRooms-v0", url=...,
+  admin_key=...)``, and ``gym.make_vec`` for several at once).
 
 >>> env = AdvisedMiniGrid(gym.make("MiniGrid-FourRooms-v0"), client, follow_advice=True)
 >>> obs, info = env.reset(seed=1)
@@ -34,7 +38,8 @@ from gymnasium import spaces
 from minigrid.core.actions import Actions
 from minigrid.core.world_object import Door, Goal, Lava
 
-from advisor_client.client import AdvisorClient
+from advisor_client.api import AdvisorError
+from advisor_client.client import DEFAULT_URL, AdvisorClient
 from advisor_client.gym import AdvisedEnv
 
 COMPASS = ("N", "E", "S", "W")
@@ -131,9 +136,17 @@ class CompassActions(
         return self._with_cell(obs), reward + float(r), terminated, truncated, info
 
 
-def layout_name(env: gym.Env[Any, Any], seed: int | None, rows: list[str]) -> str:
-    """A domain name for this layout: ``<env id>-s<seed>`` (lower case), else the map's hash."""
-    spec = env.spec.id if env.spec is not None else type(_minigrid(env)).__name__
+def env_name(env: gym.Env[Any, Any]) -> str:
+    """The id ``env`` was made with (``gym.make``), else its class's name."""
+    return env.spec.id if env.spec is not None else type(_minigrid(env)).__name__
+
+
+def layout_name(
+    env: gym.Env[Any, Any], seed: int | None, rows: list[str], env_id: str | None = None
+) -> str:
+    """A domain name for this layout: ``<env id>-s<seed>`` (lower case), else the map's hash.
+    ``env_id``: the environment's id if not :func:`env_name`'s."""
+    spec = env_id or env_name(env)
     base = re.sub(r"[^a-z0-9_.-]+", "-", spec.lower()).strip("-")[:40]
     if seed is not None:
         return f"{base}-s{seed}"
@@ -148,6 +161,11 @@ class AdvisedMiniGrid(AdvisedEnv):
     :class:`CompassActions`; ``experts``: the simulated experts of each new layout's domain
     (:data:`EXPERTS`); the other options are :class:`~advisor_client.gym.AdvisedEnv`'s
     (``follow_advice=True``: an advised step takes an action sampled from the advice).
+
+    ``created``: the domains its PUTs created (201), which :meth:`close` deletes; a layout's
+    domain that was there already (another environment's, or one kept from before) is left.
+    Environments that share layouts (copies of a vector environment) should close together,
+    as a vector environment's do: a deleted domain ends the sessions of the others.
     """
 
     def __init__(
@@ -161,15 +179,53 @@ class AdvisedMiniGrid(AdvisedEnv):
         gym.utils.RecordConstructorArgs.__init__(
             self, _disable_deepcopy=True, client=client, experts=experts, **options
         )
+        self.env_id = env_name(env)  # now: gym.make of a registered id sets it anew
         compass = env if isinstance(env, CompassActions) else CompassActions(env)
         super().__init__(compass, client, "", action_names=COMPASS, **options)
         self.experts = dict(experts)
         self.known: set[str] = set()
+        self.created: list[str] = []
 
     def domain_for(self, obs: Any, info: dict[str, Any], seed: int | None) -> str:
         rows = grid_map(self.env)
-        name = layout_name(self.env, seed, rows)
+        name = layout_name(self.env, seed, rows, self.env_id)
         if name not in self.known:
-            self.client.put_domain(name, rows, experts=self.experts)
+            _, created = self.client.put_domain_created(name, rows, experts=self.experts)
             self.known.add(name)
+            if created:
+                self.created.append(name)
         return name
+
+    def close(self) -> None:
+        """End the session, delete the domains this environment created, close."""
+        try:
+            self._end_session()
+            while self.created:
+                name = self.created.pop()
+                self.known.discard(name)
+                try:
+                    self.client.delete_domain(name)
+                except AdvisorError as exc:
+                    if exc.status != 404:  # deleted already: nothing to do
+                        raise
+        finally:
+            super().close()
+
+
+def make_minigrid(
+    env_id: str = "MiniGrid-FourRooms-v0",
+    client: AdvisorClient | None = None,
+    *,
+    url: str = DEFAULT_URL,
+    admin_key: str | None = None,
+    env_kwargs: Mapping[str, Any] | None = None,
+    **options: Any,
+) -> AdvisedMiniGrid:
+    """The entry point of ``HiddenGoalAdvisor/MiniGrid-v0``: ``gym.make(env_id,
+    **env_kwargs)`` in an :class:`AdvisedMiniGrid` (``options``: its keywords), through
+    ``client`` or a client of its own for ``url`` with ``admin_key`` (needed: it PUTs the
+    layouts' domains; closed with the environment)."""
+    owned = client is None
+    client = client or AdvisorClient(url, admin_key=admin_key)
+    env = gym.make(env_id, **dict(env_kwargs or {}))
+    return AdvisedMiniGrid(env, client, close_client=owned, **options)

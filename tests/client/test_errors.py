@@ -4,6 +4,7 @@ are tried again with a backoff when that is safe (no server needed: httpx's Mock
 from __future__ import annotations
 
 import socket
+import time
 
 import httpx
 import pytest
@@ -103,6 +104,30 @@ def test_events_are_sent_again_with_their_steps_after_a_lost_answer() -> None:
     with client_for(explicit) as client:
         client.events(session, [{"state": [28, 0], "action": "E", "step": 1}])
     assert b'"step":1' in explicit.bodies[0].replace(b" ", b"")  # a step given is kept
+
+
+def test_retries_wait_the_backoff_doubling_up_to_4_s(monkeypatch: pytest.MonkeyPatch) -> None:
+    waits: list[float] = []
+    monkeypatch.setattr(time, "sleep", waits.append)  # tenacity sleeps with time.sleep
+    script = Script(503, 503, 503, 503, 503, 200)
+    transport = httpx.MockTransport(script)
+    with AdvisorClient(
+        "http://advisor.test", transport=transport, retries=5, backoff=1.0
+    ) as client:
+        assert client.health()["status"] == "ok"
+    assert waits == [1.0, 2.0, 4.0, 4.0, 4.0] and len(script.calls) == 6
+    assert [client._delay(n) for n in range(5)] == waits  # the streams' waits too
+
+
+def test_a_refusal_is_not_retried_and_an_error_of_another_kind_goes_through() -> None:
+    refused = Script(404)
+    with client_for(refused) as client, pytest.raises(AdvisorError) as err:
+        client.health()
+    assert err.value.status == 404 and refused.calls == ["GET"]
+    broken = Script(ValueError("not a transport error"))
+    with client_for(broken) as client, pytest.raises(ValueError):
+        client.health()
+    assert broken.calls == ["GET"]
 
 
 def test_the_async_client_retries_alike() -> None:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 import pytest
-from advisor_client import AdvisorClient
+from advisor_client import AdvisorClient, AdvisorError
 from advisor_client.minigrid import (
     AdvisedMiniGrid,
     CompassActions,
@@ -103,5 +103,63 @@ def test_advised_minigrid_makes_a_domain_per_layout_and_advises(server: Server) 
         env.reset(seed=3)  # the same layout: the same domain, not put again
         assert env.domain == "minigrid-fourrooms-v0-s3" and env.known == {env.domain}
         check_env(env, skip_render_check=True)  # through the service, sessions and all
+        layouts = list(env.created)  # s3, and the layouts check_env reset without a seed
+        assert layouts[0] == "minigrid-fourrooms-v0-s3" and len(layouts) > 1
         env.close()
-        client.delete_domain("minigrid-fourrooms-v0-s3")
+        for name in layouts:  # it made them: it deleted them
+            with pytest.raises(AdvisorError) as err:
+                client.domain(name)
+            assert err.value.status == 404
+
+
+def test_closing_deletes_the_domains_it_created_and_only_those(server: Server) -> None:
+    """Layouts 5 and 6 are new: their domains go when the environment closes; layout 7's
+    domain was there before it (PUT by someone else): it stays."""
+    with AdvisorClient(server.url, admin_key=server.admin_key) as client:
+        seven = gym.make("MiniGrid-FourRooms-v0")
+        seven.reset(seed=7)
+        client.put_domain("minigrid-fourrooms-v0-s7", grid_map(seven), experts={"per_goal": 5})
+        env = AdvisedMiniGrid(gym.make("MiniGrid-FourRooms-v0"), client)
+        for seed in (5, 6, 7, 5):
+            env.reset(seed=seed)
+            env.step(1)
+        assert env.known == {f"minigrid-fourrooms-v0-s{s}" for s in (5, 6, 7)}
+        assert env.created == ["minigrid-fourrooms-v0-s5", "minigrid-fourrooms-v0-s6"]
+        client.delete_domain("minigrid-fourrooms-v0-s6")  # gone already: not an error
+        env.close()
+        names = {d["name"] for d in client.domains()}
+        assert "minigrid-fourrooms-v0-s7" in names
+        assert not names & {"minigrid-fourrooms-v0-s5", "minigrid-fourrooms-v0-s6"}
+        assert env.created == [] and env.known == {"minigrid-fourrooms-v0-s7"}
+        env.close()  # again: nothing more to do
+        client.delete_domain("minigrid-fourrooms-v0-s7")
+
+
+def test_the_minigrid_id_and_its_vector_form(server: Server) -> None:
+    """``HiddenGoalAdvisor/MiniGrid-v0`` names its layouts after the MiniGrid id it wraps (not
+    its own); two copies of a vector environment, their layouts' domains deleted at close."""
+    env = gym.make(
+        "HiddenGoalAdvisor/MiniGrid-v0", env_id="MiniGrid-MultiRoom-N4-S5-v1", url=server.url,
+        admin_key=server.admin_key, kappa=0.0, follow_advice=True,
+    )  # fmt: skip
+    obs, info = env.reset(seed=2)
+    assert env.get_wrapper_attr("domain") == "minigrid-multiroom-n4-s5-v1-s2"
+    obs, _, _, _, info = env.step(0)
+    assert info["followed_advice"] and info["decision"]["state"] == obs["cell"].tolist()
+    env.close()
+    envs = gym.make_vec(
+        "HiddenGoalAdvisor/MiniGrid-v0", num_envs=2, vectorization_mode="sync",
+        url=server.url, admin_key=server.admin_key,
+    )  # fmt: skip
+    assert isinstance(envs, gym.vector.SyncVectorEnv)
+    obs, infos = envs.reset(seed=10)  # copies seeded 10 and 11
+    assert envs.get_attr("domain") == ("minigrid-fourrooms-v0-s10", "minigrid-fourrooms-v0-s11")
+    for _ in range(3):
+        obs, _, _, _, infos = envs.step(envs.action_space.sample())
+    assert obs["cell"].shape == (2, 2) and infos["decision"]["step"].tolist() == [3, 3]
+    envs.close()
+    with AdvisorClient(server.url) as client:
+        assert not {d["name"] for d in client.domains()} & {
+            "minigrid-multiroom-n4-s5-v1-s2", "minigrid-fourrooms-v0-s10",
+            "minigrid-fourrooms-v0-s11",
+        }  # fmt: skip
