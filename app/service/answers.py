@@ -10,48 +10,29 @@ while it is being built wait for that one build (:func:`once`):
 * a domain's public description: per domain state and prior view (a PUT makes a new state, new
   trajectories a new view);
 * the overview: made at most once per ``max_age`` seconds for each kind of reader
-  (:class:`Fresh`), since it changes with every event.
+  (:class:`~app.service.cache.Fresh`), since it changes with every event.
 """
 
 from __future__ import annotations
 
-import asyncio
-import inspect
-import time
 import weakref
-from collections.abc import Awaitable, Callable
-from typing import Any
 
 import numpy as np
 import orjson
-from starlette.concurrency import run_in_threadpool
 
 from app.advice.models import AdviceTables
 from app.domain.grid import ACTIONS, GridDomain
+from app.service.cache import once
 from app.service.data.domains import DomainState, PriorView
 from app.service.public import domain_public
 
 NUMPY = orjson.OPT_SERIALIZE_NUMPY
 WALL = b"[null,null,null,null]"  # orjson writes NaN as null: a wall's row, never a free cell's
 
-_building: dict[object, asyncio.Future[bytes]] = {}
 _theta: weakref.WeakKeyDictionary[AdviceTables, bytes] = weakref.WeakKeyDictionary()
 _domains: weakref.WeakKeyDictionary[DomainState, tuple[PriorView, bytes]] = (
     weakref.WeakKeyDictionary()
 )
-
-
-async def once(key: object, build: Callable[[], bytes | Awaitable[bytes]]) -> bytes:
-    """``build()`` in a worker thread (or, a coroutine function, awaited), once for all who
-    ask for ``key`` while it runs (a reader that goes away does not cancel it for the
-    others)."""
-    running = _building.get(key)
-    if running is None:
-        work = build() if inspect.iscoroutinefunction(build) else run_in_threadpool(build)
-        running = asyncio.ensure_future(work)  # type: ignore[arg-type]
-        _building[key] = running
-        running.add_done_callback(lambda _: _building.pop(key, None))
-    return await asyncio.shield(running)
 
 
 def theta_json(grid: GridDomain, tables: AdviceTables) -> bytes:
@@ -94,23 +75,3 @@ async def domain(d: DomainState) -> bytes:
 async def domains(states: list[DomainState]) -> bytes:
     """``GET /domains``: every domain's answer, as a list."""
     return b"[" + b",".join([await domain(d) for d in states]) + b"]"
-
-
-class Fresh:
-    """Answers made at most once per ``max_age`` seconds for each key (one per service)."""
-
-    def __init__(self) -> None:
-        self._made: dict[Any, tuple[float, bytes]] = {}
-
-    async def get(self, key: Any, max_age: float, build: Callable[[], Awaitable[bytes]]) -> bytes:
-        """``await build()`` (which makes its text in a worker thread), once for all who ask
-        meanwhile, or its answer if made less than ``max_age`` ago."""
-        made = self._made.get(key)
-        if made is not None and time.monotonic() - made[0] < max_age:
-            return made[1]
-        text = await once(("fresh", id(self), key), build)
-        self._made[key] = (time.monotonic(), text)
-        if len(self._made) > 64:  # keys are few (limits and domains asked for): the newest
-            for old in sorted(self._made, key=lambda k: self._made[k][0])[:32]:
-                del self._made[old]
-        return text

@@ -65,7 +65,7 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
     gauges = None
     if settings.metrics_enabled:
         metrics.forget_dead_workers()  # a worker that takes a killed one's place
-        gauges = asyncio.create_task(metrics.keep_gauges(state))
+        gauges = asyncio.create_task(metrics.keep_gauges(state.sessions))
     stops = await start_background(app, settings)
     try:
         yield

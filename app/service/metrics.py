@@ -29,7 +29,6 @@ import os
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 from prometheus_client import (
     REGISTRY,
@@ -43,10 +42,8 @@ from prometheus_client import (
 from prometheus_client import multiprocess as mp
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
+from app.service.live.sessions import Sessions
 from app.service.logs import REQUEST_ID, new_request_id
-
-if TYPE_CHECKING:
-    from app.service.state import ServiceState
 
 disable_created_metrics()  # type: ignore[no-untyped-call]  # no ``_created`` series beside each counter (half the text)
 UNMATCHED = "<unmatched>"
@@ -168,17 +165,17 @@ def viewer_tick(seconds: float) -> None:
     VIEWER_TICK.observe(seconds)
 
 
-async def refresh_sessions(state: ServiceState) -> None:
+async def refresh_sessions(sessions: Sessions) -> None:
     """Set the live-sessions gauge (domains without sessions show 0)."""
-    counts = await state.sessions.count_by_domain()
-    for d in state.catalog.states():
+    counts = await sessions.count_by_domain()
+    for d in sessions.catalog.states():
         SESSIONS.labels(d.name).set(counts.get(d.name, 0))
 
 
-async def keep_gauges(state: ServiceState) -> None:
+async def keep_gauges(sessions: Sessions) -> None:
     """Refresh this worker's gauge now and then (other workers' scrapes read it)."""
     while True:
-        await refresh_sessions(state)
+        await refresh_sessions(sessions)
         await asyncio.sleep(GAUGE_SECONDS)
 
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 
-from app.service.answers import Fresh
+from app.service.cache import Fresh
 from app.service.clients import OPERATOR, ClientKeys, Network, networks
 from app.service.config import Settings
 from app.service.data.bootstrap import bootstrap

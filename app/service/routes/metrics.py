@@ -14,5 +14,5 @@ router = APIRouter(tags=["operations"])
 @router.get("/metrics", response_class=Response, responses={200: {"content": {"text/plain": {}}}})
 async def metrics(state: StateDep) -> Response:
     """Prometheus metrics in the text exposition format (README, "Operations")."""
-    await refresh_sessions(state)
+    await refresh_sessions(state.sessions)
     return Response(exposition(), media_type=CONTENT_TYPE_LATEST)
