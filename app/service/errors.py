@@ -28,7 +28,7 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 from app.service.data.domains import DomainChanged, DomainNotFound
 from app.service.data.store import COUNT_MAX, CountsFull
 from app.service.live.lanes import LaneError
-from app.service.live.registry import SessionNotFound
+from app.service.live.registry import SessionNotFound, SessionUnreadable
 from app.service.live.sessions import StoreUnavailable
 from app.service.problems import BadInput, describe_errors
 from app.service.security import AuthError
@@ -111,6 +111,14 @@ async def _no_session(_: Request, exc: Exception) -> JSONResponse:
     return _json(404, f"no live session {exc.args[0]!r} (it never existed, ended or expired)")
 
 
+async def _unreadable(_: Request, exc: Exception) -> JSONResponse:
+    return _json(
+        410,
+        f"live session {exc.args[0]!r} was kept by a version of this service that this one "
+        f"cannot read ({exc.args[1]}): start a new session",
+    )
+
+
 async def _domain_changed(_: Request, exc: Exception) -> JSONResponse:
     return _json(
         409,
@@ -167,6 +175,7 @@ def install_error_handlers(app: FastAPI) -> None:
     app.add_exception_handler(DomainNotFound, _no_domain)
     app.add_exception_handler(DomainChanged, _domain_changed)
     app.add_exception_handler(SessionNotFound, _no_session)
+    app.add_exception_handler(SessionUnreadable, _unreadable)
     app.add_exception_handler(RecursionError, _too_deep)
     app.add_exception_handler(ClientDisconnect, _gone)
     app.add_exception_handler(CountsFull, _counts_full)

@@ -349,3 +349,29 @@ def test_every_key_of_a_session_lives_no_longer_than_its_time_to_live(tmp_path: 
         for c in clients:
             c.__exit__(None, None, None)
         drop_redis_keys(prefix)
+
+
+@pytest.mark.parametrize("kept", ["retired strategy", "garbled"])
+def test_a_session_another_version_kept_in_redis_is_410_with_a_log_line(
+    workers: Workers, kept: str, caplog: pytest.LogCaptureFixture
+) -> None:
+    """A session Redis holds that this service cannot read (a strategy it does not know, or
+    bytes of another format) is refused 410 saying so, and logged; never a 500."""
+    import msgspec
+    import redis
+
+    from app.service.live import codec
+
+    clients, service = workers
+    sid, auth, _ = open_session(clients[0])  # the other worker has never seen it
+    r = redis.Redis.from_url(REDIS_URL)
+    key = f"{service.sessions.prefix}:s:{sid}"  # type: ignore[attr-defined]
+    v = codec.peek(codec.unpacked(r.hget(key, "blob")))  # type: ignore[arg-type]
+    v["advisor"]["strategy"] = "retired"
+    blob = codec.packed(msgspec.msgpack.encode(v)) if kept != "garbled" else b"\x05garbled"
+    r.hset(key, "blob", blob)  # type: ignore[arg-type]  # redis-py takes bytes too
+    with caplog.at_level("WARNING", logger="advisor.shared"):
+        got = clients[1].get(f"/sessions/{sid}", headers=auth)
+    assert got.status_code == 410, got.text
+    assert "cannot read" in got.json()["detail"] and "start a new session" in got.json()["detail"]
+    assert any("cannot be read" in m for m in caplog.messages)

@@ -45,6 +45,11 @@ class SessionNotFound(KeyError):
     """No live session with that id (never created, ended, or expired)."""
 
 
+class SessionUnreadable(SessionNotFound):
+    """A session kept elsewhere (Redis) that this service cannot read: written by a version
+    whose format, strategy or parameters it does not know (``args``: id, why)."""
+
+
 class TooManySessions(RuntimeError):
     """The registry holds ``max_sessions`` live sessions already."""
 

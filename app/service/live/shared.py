@@ -63,6 +63,7 @@ from app.service.live.registry import (
     SessionRegistry,
     SessionSettings,
     SessionSnapshot,
+    SessionUnreadable,
     TooManySessions,
     joined,
 )
@@ -414,13 +415,21 @@ class SharedSessions:
     async def _adopt(self, blob: bytes, version: int) -> LiveSession:
         """This worker's copy of the session Redis holds as ``blob`` (``version``: the data
         version of its domain's prior there)."""
-        v = codec.peek(codec.unpacked(blob))
+        try:
+            v = codec.peek(codec.unpacked(blob))
+        except codec.CodecError as exc:
+            log.warning("a session in Redis cannot be read: %s", exc)
+            raise SessionUnreadable("?", str(exc)) from None
         try:
             domain = await self._at_version(v["domain"], version)
         except DomainNotFound:
             raise SessionNotFound(v["id"]) from None
-        await self._prepare(domain, v["advisor"]["strategy"])
-        session = codec.load(v, domain, 0)
+        try:
+            await self._prepare(domain, v["advisor"]["strategy"])
+            session = codec.load(v, domain, 0)
+        except (codec.CodecError, ValueError, KeyError, TypeError) as exc:
+            log.warning("session %s in Redis cannot be read: %s", v.get("id"), exc)
+            raise SessionUnreadable(v.get("id"), str(exc)) from None
         self.registry.put(session)
         return session
 
@@ -540,7 +549,12 @@ class SharedSessions:
             for sid in ids:
                 pipe.hget(f"{self.prefix}:s:{sid.decode()}", "blob")
             blobs = [b for b in await pipe.execute() if b is not None]  # None: ended meanwhile
-        peeked = [codec.peek(codec.unpacked(b)) for b in blobs]
+        peeked = []
+        for b in blobs:
+            try:
+                peeked.append(codec.peek(codec.unpacked(b)))
+            except codec.CodecError:  # kept by a version this one cannot read: not listed
+                continue
         ready: dict[tuple[str, str], DomainState | None] = {}
         for v in peeked:  # what their strategies read of their domains, built
             key = (v["domain"], v["advisor"]["strategy"])
@@ -548,7 +562,7 @@ class SharedSessions:
                 try:
                     ready[key] = self.catalog.get(key[0])
                     await self._prepare(ready[key], key[1])  # type: ignore[arg-type]
-                except DomainNotFound:
+                except (DomainNotFound, ValueError):  # gone, or a strategy not known here
                     ready[key] = None
 
         def made() -> list[SessionSnapshot]:
@@ -559,8 +573,8 @@ class SharedSessions:
                     continue
                 try:
                     out.append(self.registry.describe(codec.load(v, domain, 0)))
-                except codec.CodecError:  # its domain's map was replaced meanwhile
-                    continue
+                except (codec.CodecError, ValueError, KeyError, TypeError):
+                    continue  # its domain's map was replaced meanwhile, or unreadable here
             return out
 
         return await run_in_threadpool(made)
