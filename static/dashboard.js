@@ -88,7 +88,7 @@
 
   // The advising strategy; goal_aware sessions also list the goals still possible.
   function strategy(s) {
-    const td = cell(s.strategy || "paper", "left");
+    const td = cell(s.strategy, "left");
     if (s.goals) {
       const open = s.goals.filter((g) => !g.ruled_out).length;
       td.textContent += ` (${open}/${s.goals.length} goals)`;
@@ -145,7 +145,7 @@
     { key: "session", label: "Session", left: true, draw: (s) => cell(s.session_id, "left mono"), value: (s) => s.session_id },
     { key: "domain", label: "Domain", left: true, draw: (s) => cell(s.domain, "left"), value: (s) => s.domain },
     { key: "type", label: "Type", left: true, draw: (s) => cell(s.agent_type || "–", "left"), value: (s) => s.agent_type || "" },
-    { key: "strategy", label: "Strategy", left: true, draw: strategy, value: (s) => s.strategy || "paper" },
+    { key: "strategy", label: "Strategy", left: true, draw: strategy, value: (s) => s.strategy },
     { key: "kappa", label: "κ", unit: "nats", draw: (s) => cell(s.kappa), value: (s) => s.kappa },
     { key: "steps", label: "Steps", unit: "moves", draw: (s) => cell(s.steps), value: (s) => s.steps },
     { key: "position", label: "Position", unit: "[row, col]", draw: (s) => cell(`[${s.position.join(", ")}]`), value: (s) => s.position[0] * 1e6 + s.position[1] },

@@ -33,6 +33,8 @@ from app.domain.grid import N_ACTIONS
 
 DEFAULT_KAPPA = 0.5
 DEFAULT_WINDOW = 300
+#: the strategy a session follows unless it asks for another: the paper's rule, this class
+DEFAULT_STRATEGY = "paper"
 #: The window sums are recomputed exactly when the ring wraps, at most once per this many pairs
 #: (a short window would otherwise pay an O(W) re-sum every W steps for nothing).
 RESYNC_PAIRS = 1024
@@ -142,7 +144,7 @@ class Advisor:
     """
 
     #: the advising strategy this advisor follows (its entry's name, :mod:`app.strategies`)
-    strategy: ClassVar[str] = "paper"
+    strategy: ClassVar[str] = DEFAULT_STRATEGY
     #: True when the advice is not theta_s of the tables (goal-aware advice narrows it)
     own_advice: ClassVar[bool] = False
 

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from app import kernels, strategies
-from app.advice.advisor import DEFAULT_KAPPA, DEFAULT_WINDOW, resync_period
+from app.advice.advisor import DEFAULT_KAPPA, DEFAULT_STRATEGY, DEFAULT_WINDOW, resync_period
 from app.advice.guide import GuideError, GuideMap, GuideParams, kernel_params
 from app.advice.models import AdviceTables
 from app.advice.params import StrategyParams
@@ -191,7 +191,7 @@ class Simulator:
         rng: np.random.Generator,
         *,
         advised: bool,
-        strategy: str = "paper",
+        strategy: str = DEFAULT_STRATEGY,
         kappa: float = DEFAULT_KAPPA,
         window: int = DEFAULT_WINDOW,
         params: StrategyParams | None = None,
@@ -270,7 +270,7 @@ class Simulator:
         kappa: float = DEFAULT_KAPPA,
         window: int = DEFAULT_WINDOW,
         step_budget: int = 0,
-        strategy: str = "paper",
+        strategy: str = DEFAULT_STRATEGY,
         strategy_params: StrategyParams | None = None,
     ) -> LearningRun:
         """``episodes`` episodes of one Q-learning task (a fresh Q-table), advised by

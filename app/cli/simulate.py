@@ -23,7 +23,7 @@ from advisor_client.types import Decision
 from tqdm import tqdm
 
 from app import strategies
-from app.advice.advisor import DEFAULT_KAPPA, DEFAULT_WINDOW
+from app.advice.advisor import DEFAULT_KAPPA, DEFAULT_STRATEGY, DEFAULT_WINDOW
 from app.agents.explorers import FIXED_EXPLORERS, make_explorer
 from app.cli.options import choice
 from app.domain.grid import ACTIONS, GridDomain
@@ -52,7 +52,7 @@ class Plan:
     window: int
     delay: float
     keep: bool
-    strategy: str = "paper"
+    strategy: str = DEFAULT_STRATEGY
 
 
 def _advice(decision: Decision) -> npt.NDArray[np.float64] | None:
@@ -174,7 +174,7 @@ def simulate(
     keep: Annotated[bool, typer.Option(help="Leave sessions open after each episode.")] = False,
     strategy: Annotated[
         str, choice(strategies.names(), "When to advise (the strategy's default parameters).")
-    ] = "paper",
+    ] = DEFAULT_STRATEGY,
     progress: Annotated[bool, typer.Option(help="A progress bar (on stderr).")] = True,
 ) -> None:
     """Drive simulated explorers through the live service and print their outcomes."""

@@ -45,6 +45,7 @@ from matplotlib.figure import Figure
 from tqdm import tqdm
 
 from app import strategies
+from app.advice.advisor import DEFAULT_STRATEGY
 from app.advice.models import AdviceTables
 from app.agents.experts import train_goal_priors
 from app.agents.explorers import FIXED_EXPLORERS
@@ -240,7 +241,7 @@ def run_learning(args: Args, spec: MapSpec) -> dict[str, dict[str, FloatArray]]:
                 goal, rng_for(args.seed, "buildings-q", spec.index, i), advised=curve != "none",
                 params=args.q_params(), episodes=args.episodes, max_steps=world.q_steps,
                 kappa=args.kappa, window=args.window,
-                strategy="paper" if curve == "none" else curve, strategy_params=base,
+                strategy=DEFAULT_STRATEGY if curve == "none" else curve, strategy_params=base,
             )  # fmt: skip
             m["success"][i] = run.success.mean()
             m["steps"][i] = run.steps.sum()

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from app import strategies
+from app.advice.advisor import DEFAULT_STRATEGY
 from app.advice.params import StrategyParams
 from app.arrays import FloatArray
 
@@ -90,7 +91,7 @@ class Config:
     """One point of one curve: a strategy at one cost level (``none``: no advice)."""
 
     curve: str  # a strategy's name, "none", or a variant "<strategy> <param>=<value>"
-    strategy: str  # the strategy run ("paper" for ``none``, which gives no advice)
+    strategy: str  # the strategy run (the default one for ``none``, which gives no advice)
     level: float  # the curve's cost level (nan: none, or a strategy without a level)
     kappa: float
     params: StrategyParams = field(default_factory=StrategyParams)
@@ -110,7 +111,7 @@ def configs(args: Any, variants: tuple[str, ...] = ()) -> list[Config]:
     ascending (its default level among them), then ``variants`` ("<strategy> <param>=<value>",
     at the default kappa; one that sets the value the options set is the strategy's own)."""
     base, k0 = base_params(args), float(args.kappa)
-    out = [Config("none", "paper", math.nan, k0, base, True)]
+    out = [Config("none", DEFAULT_STRATEGY, math.nan, k0, base, True)]
     for name in args.strategies:
         entry = strategies.get(name)
         if entry.level is None:

@@ -25,7 +25,7 @@ from pydantic import (
 from typing_extensions import TypedDict
 
 from app import strategies
-from app.advice.advisor import DEFAULT_KAPPA, DEFAULT_WINDOW
+from app.advice.advisor import DEFAULT_KAPPA, DEFAULT_STRATEGY, DEFAULT_WINDOW
 from app.advice.params import StrategyParams as CoreStrategyParams
 
 NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
@@ -280,7 +280,7 @@ class SessionCreate(Strict):
     window: Window = DEFAULT_WINDOW
     agent_type: AgentType | None = None
     start: Cell | None = Field(None, description="Start cell (default: the domain's start).")
-    strategy: StrategyName = Field("paper", description=STRATEGY_DOC)
+    strategy: StrategyName = Field(DEFAULT_STRATEGY, description=STRATEGY_DOC)
     params: StrategyParams | None = Field(
         None, description="The strategy's parameters: only those it reads (see StrategyParams)."
     )

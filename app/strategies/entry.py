@@ -16,7 +16,13 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
-from app.advice.advisor import DEFAULT_KAPPA, DEFAULT_WINDOW, Advisor, check_kappa_window
+from app.advice.advisor import (
+    DEFAULT_KAPPA,
+    DEFAULT_STRATEGY,
+    DEFAULT_WINDOW,
+    Advisor,
+    check_kappa_window,
+)
 from app.advice.guide import GuideMap
 from app.advice.models import AdviceTables
 from app.advice.params import StrategyParams
@@ -51,7 +57,7 @@ class AdvisorSettings:
     """One advisor's settings, checked (:meth:`Strategy.settings` makes them): the strategy,
     the cost of a piece of advice, the window and the strategy's parameters."""
 
-    strategy: str = "paper"
+    strategy: str = DEFAULT_STRATEGY
     kappa: float = DEFAULT_KAPPA
     window: int = DEFAULT_WINDOW
     params: StrategyParams = field(default_factory=StrategyParams)

@@ -13,6 +13,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
+from app.advice.advisor import DEFAULT_STRATEGY
 from app.arrays import FloatArray
 from app.domain.grid import GridDomain
 
@@ -64,7 +65,7 @@ class SessionView:
     p_normal_history: Sequence[float] = ()
     advice: Sequence[tuple[int, Cell, Probabilities]] = ()
     agent_type: str | None = None
-    strategy: str = "paper"
+    strategy: str = DEFAULT_STRATEGY
     # goal_aware: (goal cell, P(goal | H), ruled out) for each goal of the map
     goals: Sequence[tuple[Cell, float, bool]] | None = None
 

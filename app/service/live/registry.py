@@ -28,7 +28,14 @@ import numpy as np
 import numpy.typing as npt
 
 from app import strategies
-from app.advice.advisor import DEFAULT_KAPPA, DEFAULT_WINDOW, Advisor, Decision, DecisionBatch
+from app.advice.advisor import (
+    DEFAULT_KAPPA,
+    DEFAULT_STRATEGY,
+    DEFAULT_WINDOW,
+    Advisor,
+    Decision,
+    DecisionBatch,
+)
 from app.advice.models import AdviceTables
 from app.advice.params import StrategyParams
 from app.arrays import Moves
@@ -92,7 +99,8 @@ class SessionSettings:
 
     @classmethod
     def of(
-        cls, strategy: str = "paper", kappa: float = DEFAULT_KAPPA, window: int = DEFAULT_WINDOW,
+        cls, strategy: str = DEFAULT_STRATEGY, kappa: float = DEFAULT_KAPPA,
+        window: int = DEFAULT_WINDOW,
         params: StrategyParams | Mapping[str, int | float] | None = None,
         agent_type: str | None = None, start: int | None = None,
     ) -> SessionSettings:  # fmt: skip
