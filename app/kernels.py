@@ -243,6 +243,7 @@ def observe_stream(
     kappa: float,
     count: int,
     benefit: float,
+    cap: int,
     moves: tuple[IntArray, IntArray, IntArray],
     out: tuple[FloatArray, FloatArray, BoolArray, IntArray, FloatArray],
 ) -> tuple[int, int, float, int]:  # pragma: no cover - compiled
@@ -252,8 +253,9 @@ def observe_stream(
     ``old`` because the tables changed since it was added; those values): a leaving pair is
     subtracted with the value the core stored, and the exact re-sum (after ``steps`` +
     i + 1 pairs, a multiple of ``period``, at a wrap) sums the values the core's ring holds,
-    in its order. Fills ``out`` (kl, p_normal, advise, count, benefit); returns (position,
-    advice count, benefit, kept values that left the window)."""
+    in its order. A decision advises only while the advice count is below ``cap``. Fills
+    ``out`` (kl, p_normal, advise, count, benefit); returns (position, advice count, benefit,
+    kept values that left the window)."""
     keys, kept, old = window
     log_probs = tables[0]
     states, actions, next_states = moves
@@ -287,7 +289,7 @@ def observe_stream(
                         ring[p] = old[m, p] if kept[p] else log_probs[m, keys[p]]
                     loglik[m] = fsum(ring)
         kl, p0 = decide(loglik, tables, next_states[i], z)
-        if kl >= kappa:
+        if kl >= kappa and count < cap:
             count += 1
             benefit += kl
             advise_out[i] = True
@@ -425,6 +427,7 @@ def goal_stream(
     kappa: float,
     count: int,
     benefit: float,
+    cap: int,
     moves: tuple[IntArray, IntArray, IntArray],
     out: tuple[FloatArray, FloatArray, BoolArray, IntArray, FloatArray, FloatArray],
 ) -> tuple[int, int, float, int, int]:  # pragma: no cover - compiled
@@ -450,7 +453,7 @@ def goal_stream(
         goal_gone += g2
         goal_posterior(goal_ll, alive, beta, w)
         kl, p0 = goal_decide(loglik, tables, goals, w, next_states[i], theta_w, z)
-        if kl >= kappa:
+        if kl >= kappa and count < cap:
             count += 1
             benefit += kl
             advise_out[i] = True
@@ -847,6 +850,7 @@ def guide_stream(
     kappa: float,
     count: int,
     benefit: float,
+    cap: int,
     moves: tuple[IntArray, IntArray, IntArray],
     out: tuple[FloatArray, FloatArray, BoolArray, IntArray, FloatArray, FloatArray],
 ) -> tuple[int, int, int, int, float]:  # pragma: no cover - compiled
@@ -868,7 +872,7 @@ def guide_stream(
         kl, p0, target = guide_decide(
             gmap, params, goals, ll, alive, target, heading, next_states[i], theta, scratch
         )
-        if kl >= kappa:
+        if kl >= kappa and count < cap:
             count += 1
             benefit += kl
             advise_out[i] = True

@@ -35,6 +35,8 @@ DEFAULT_KAPPA = 0.5
 DEFAULT_WINDOW = 300
 #: the strategy a session follows unless it asks for another: the paper's rule, this class
 DEFAULT_STRATEGY = "paper"
+#: an advisor's cap on its advice count when nothing caps it (:attr:`Advisor.cap`)
+NO_CAP = 2**62
 #: The window sums are recomputed exactly when the ring wraps, at most once per this many pairs
 #: (a short window would otherwise pay an O(W) re-sum every W steps for nothing).
 RESYNC_PAIRS = 1024
@@ -154,6 +156,7 @@ class Advisor:
         "_ring",
         "advice_count",
         "benefit",
+        "cap",
         "decisions",
         "kappa",
         "steps",
@@ -168,6 +171,10 @@ class Advisor:
         self.tables = tables
         self.kappa = float(kappa)
         self.window = int(window)
+        #: the advice count the advisor may reach at most: a decision that would advise once
+        #: it is reached does not (what a session's advice budget, or a muted visitor, allows;
+        #: the service sets it before each event or batch)
+        self.cap = NO_CAP
         self.reset()
 
     def params(self) -> dict[str, int | float]:
@@ -334,7 +341,7 @@ class Advisor:
         kl, p0 = self._divergence(state)
         self.decisions += 1
         advice = None
-        if kl >= self.kappa:
+        if kl >= self.kappa and self.advice_count < self.cap:
             self.advice_count += 1
             self.benefit += kl
             b = state * N_ACTIONS
@@ -349,7 +356,9 @@ class Advisor:
         self, state: int, advise: bool, advice: tuple[float, float, float, float] | None,
         kl: float, p_normal: float,
     ) -> Decision:  # fmt: skip
-        """Account for a decision taken by another rule (see :mod:`app.advice.rules`)."""
+        """Account for a decision taken by another rule (see :mod:`app.advice.rules`); it
+        advises only below :attr:`cap`."""
+        advise = advise and self.advice_count < self.cap
         self.decisions += 1
         if advise:
             self.advice_count += 1

@@ -520,7 +520,7 @@ class GuideAdvisor(Advisor):
         for a in range(N_ACTIONS):
             theta[a] = (1.0 - spread) * (1.0 if a == best else 0.0) + spread / 4.0
         row = (theta[0], theta[1], theta[2], theta[3])
-        advise = kl >= self.kappa
+        advise = kl >= self.kappa and self.advice_count < self.cap
         self._last = state if advise else -1
         if advise:
             self._last_advice = row

@@ -223,7 +223,7 @@ class StreamAdvisor(KeyedWindow):
         pos, self.advice_count, self.benefit, gone = kernels.observe_stream(
             (self._keys, self._kept, old), loglik, self._pos, self.steps,
             resync_period(self.window), tables.arrays, self.kappa, count_before,
-            benefit_before, (states, actions, next_states), out,
+            benefit_before, self.cap, (states, actions, next_states), out,
         )  # fmt: skip
         self._loglik, self._pos = loglik.tolist(), pos
         if gone:
@@ -392,7 +392,7 @@ class StreamGoalAware(KeyedWindow, GoalAwareAdvisor):
         pos, self.advice_count, self.benefit, gone, goal_gone = kernels.goal_stream(
             window, goal_window, (loglik, self._goal_ll, self.alive), self._pos, self.steps,
             resync_period(self.window), self.beta, self.tables.arrays, self._goal_arrays,
-            self.kappa, count_before, benefit_before, (states, actions, next_states),
+            self.kappa, count_before, benefit_before, self.cap, (states, actions, next_states),
             (*out, rows),
         )  # fmt: skip
         self._loglik, self._pos = loglik.tolist(), pos
@@ -439,7 +439,7 @@ class StreamGuide(GuideAdvisor):
         params = kernel_params(self.window, GuideParams(self.p_lost, self.slack, self.spread))
         got = kernels.guide_stream(
             g.arrays, params, g.goal_states, ll, alive, self._target, self._last, self._heading,
-            last_advice, self.kappa, count_before, benefit_before,
+            last_advice, self.kappa, count_before, benefit_before, self.cap,
             (states, actions, next_states), (*out, rows),
         )  # fmt: skip
         self._target, self._last, self._heading, self.advice_count, self.benefit = got

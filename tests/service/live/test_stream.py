@@ -8,7 +8,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from app.advice.advisor import Advisor, DecisionBatch, resync_period
+from app.advice.advisor import NO_CAP, Advisor, DecisionBatch, resync_period
 from app.advice.goals import GoalAwareAdvisor
 from app.advice.guide import GuideAdvisor, GuideMap, GuideParams
 from app.advice.models import AdviceTables
@@ -19,6 +19,15 @@ from app.domain.generate import generate_building_domain, generate_domain
 from app.domain.grid import GridDomain
 from app.strategies.stream import KeyedWindow, StreamAdvisor, StreamGoalAware, StreamGuide, keyed
 from tests.tables import random_tables, split_weight_tables
+
+
+def _maybe_cap(rng: np.random.Generator, *advisors: Advisor) -> None:
+    """Now and then a cap on the advice count a few pieces ahead (a session's budget, or a
+    muted visitor: the cap where the count is), else none, the same for every advisor."""
+    u = rng.random()
+    extra = int(rng.integers(0, 4))
+    for adv in advisors:
+        adv.cap = adv.advice_count + extra if u < 0.4 else NO_CAP
 
 
 def _same_state(fast: KeyedWindow, core: Advisor) -> None:
@@ -48,6 +57,7 @@ def test_observe_batch_equals_core_observe(
     for n in batches:
         if rng.random() < 0.2:  # the prior changed: new tables mid-session
             core.tables = fast.tables = random_tables(rng, n_states, n_models)
+        _maybe_cap(rng, core, fast)
         s, a, s2 = (rng.integers(0, n_states, n), rng.integers(0, 4, n),
                     rng.integers(0, n_states, n))  # fmt: skip
         count, benefit = core.advice_count, core.benefit
@@ -147,6 +157,7 @@ def test_guide_batches_equal_the_core_guide(
             _, more = train_goal_priors(d, rng, "anywhere", 1, 1.0)
             core.use_tables(tables, more)
             fast.use_tables(tables, more)
+        _maybe_cap(rng, core, fast)
         states, actions, nexts = [], [], []
         decided = []
         for _ in range(n):
@@ -220,6 +231,7 @@ def test_goal_aware_batches_equal_the_core_goal_aware_advisor(
             new = random_tables(rng, d.n_states) if rng.random() < 0.5 else tables
             core.use_tables(new, more)
             fast.use_tables(new, more)
+        _maybe_cap(rng, core, fast)
         states, actions, nexts, s = _moves(rng, d, s, n, follow)
         decided = [core.observe(*m) for m in zip(states, actions, nexts, strict=True)]
         got = fast.observe_batch(*(np.array(v, dtype=np.int64) for v in (states, actions, nexts)))
@@ -257,6 +269,7 @@ def test_rule_advisors_with_pair_keys_equal_the_core_rules(
     for n in batches:
         if rng.random() < 0.3:
             core.tables = fast.tables = random_tables(rng, n_states)
+        _maybe_cap(rng, core, fast)
         s, a, s2 = (rng.integers(0, n_states, n), rng.integers(0, 4, n),
                     rng.integers(0, n_states, n))  # fmt: skip
         expected = [core.observe(int(x), int(y), int(z)) for x, y, z in zip(s, a, s2, strict=True)]
