@@ -97,6 +97,24 @@
     return td;
   }
 
+  // What the session may still be advised: muted, its budget's pieces left, or no limit.
+  function adviceLeft(s) {
+    if (s.muted) return "muted";
+    const b = s.budget;
+    if (!b) return "no limit";
+    const parts = [];
+    if (b.left !== null) parts.push(`${b.left} of ${b.total}`);
+    if (b.left_this_minute !== null) parts.push(`${b.left_this_minute}/min of ${b.per_minute}`);
+    return parts.join(", ");
+  }
+
+  function adviceLeftCell(s) {
+    const td = cell(adviceLeft(s), "left");
+    td.title = s.muted ? "The visitor asked for no more advice" :
+      "Advice this session may still be given (its budget: in all, and this minute)";
+    return td;
+  }
+
   function walkLink(d) {
     const td = document.createElement("td");
     td.className = "left";
@@ -154,6 +172,7 @@
     { key: "advice", label: "Advice", unit: "given", draw: (s) => cell(s.advice_count), value: (s) => s.advice_count },
     { key: "cost", label: "Cost", unit: "nats", draw: (s) => cell(fmt(s.total_cost, 2)), value: (s) => s.total_cost },
     { key: "per100", label: "Per 100", unit: "decisions", draw: (s) => cell(fmt(s.advice_per_100, 1)), value: (s) => s.advice_per_100 },
+    { key: "left", label: "Advice left", unit: "budget", left: true, draw: adviceLeftCell, value: adviceLeft },
     { key: "last", label: "Last advice", unit: "step, cell", left: true, draw: (s) => lastAdvice(s.last_advice), value: (s) => (s.last_advice ? s.last_advice.step : -1) },
     { key: "end", label: "", left: true, draw: endButton },
   ];

@@ -27,6 +27,7 @@ from app.service.data.ingest import parse_trajectories, to_trajectories
 from app.service.data.store import POOLED, Trajectory
 from app.service.live.registry import (
     Aggregate,
+    Budget,
     ClientQuotaReached,
     LiveSession,
     SessionMemoryFull,
@@ -96,7 +97,8 @@ def session_settings(
         )
     grid = domain.domain
     start = None if body.start is None else cell_state(grid, body.start, "start")
-    return SessionSettings(advisor, body.agent_type, start)
+    budget = None if body.budget is None else Budget(body.budget.total, body.budget.per_minute)
+    return SessionSettings(advisor, body.agent_type, start, budget)
 
 
 async def open_session(

@@ -76,6 +76,7 @@ def session_public(s: SessionSnapshot) -> SessionPublic:
         position=s.position, p_normal=s.p_normal,
         advice_count=s.advice_count, total_cost=s.total_cost, benefit=s.benefit,
         advice_per_100=s.advice_per_100, idle_seconds=s.idle_seconds, created_at=s.created_at,
+        muted=s.muted, budget=_budget(s),
     )  # fmt: skip
 
 
@@ -87,7 +88,7 @@ def _session_figures(s: SessionSnapshot) -> dict[str, Any]:
         "strategy": s.strategy, "goals": _goal_dicts(s), "steps": s.steps,
         "position": s.position, "p_normal": s.p_normal, "advice_count": s.advice_count,
         "total_cost": s.total_cost, "advice_per_100": s.advice_per_100, "path": s.path,
-        "p_normal_history": s.p_history,
+        "p_normal_history": s.p_history, "muted": s.muted, "budget": _budget(s),
     }  # fmt: skip
 
 
@@ -103,6 +104,16 @@ def overview_session(s: SessionSnapshot) -> dict[str, Any]:
 def viewer_session(s: SessionSnapshot) -> dict[str, Any]:
     """A live session as the viewer's feed gives it (``ViewerSession``)."""
     return _session_figures(s) | {"advice": s.advice}
+
+
+def _budget(s: SessionSnapshot) -> dict[str, int | None] | None:
+    if s.budget is None:
+        return None
+    left, minute = s.advice_left
+    return {
+        "total": s.budget.total, "per_minute": s.budget.per_minute, "left": left,
+        "left_this_minute": minute,
+    }  # fmt: skip
 
 
 def _goals(s: SessionSnapshot) -> list[GoalBelief] | None:

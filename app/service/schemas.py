@@ -275,6 +275,32 @@ else:
     )
 
 
+class BudgetIn(Strict):
+    """An advice budget: how much advice the session may give at most (omitted: no limit)."""
+
+    total: int | None = Field(
+        None, strict=True, ge=0, le=2**31 - 1, description="Pieces of advice in all."
+    )
+    per_minute: int | None = Field(
+        None, strict=True, ge=1, le=2**31 - 1,
+        description="Pieces of advice in any minute (a bucket of that many, refilled at that "
+        "rate).",
+    )  # fmt: skip
+
+
+class BudgetPublic(BaseModel):
+    total: int | None = Field(description="Pieces of advice in all (null: no limit).")
+    per_minute: int | None = Field(description="Pieces in any minute (null: no limit).")
+    left: int | None = Field(description="Pieces left in all (null: no limit).")
+    left_this_minute: int | None = Field(
+        description="Pieces the minute's bucket holds now (null: no limit)."
+    )
+
+
+class MuteIn(Strict):
+    muted: bool = Field(True, description="True: no more advice; false: advice again.")
+
+
 class SessionCreate(Strict):
     kappa: Kappa = DEFAULT_KAPPA
     window: Window = DEFAULT_WINDOW
@@ -284,6 +310,10 @@ class SessionCreate(Strict):
     params: StrategyParams | None = Field(
         None, description="The strategy's parameters: only those it reads (see StrategyParams)."
     )
+    budget: BudgetIn | None = Field(
+        None, description="At most this much advice (in all, per minute); a decision past it "
+        "does not advise.",
+    )  # fmt: skip
 
 
 ParamsInForce = Annotated[
@@ -386,6 +416,8 @@ class SessionBase(BaseModel):
     advice_count: int
     total_cost: float
     advice_per_100: float
+    muted: bool = Field(False, description="The visitor asked for no more advice.")
+    budget: BudgetPublic | None = Field(None, description="Its advice budget (null: none).")
 
 
 class SessionPublic(SessionBase):

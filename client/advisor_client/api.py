@@ -155,9 +155,11 @@ def create_session(
     start: Cell | None = None,
     strategy: str | None = None,
     params: Mapping[str, float | int] | None = None,
+    budget: Mapping[str, int] | None = None,
 ) -> Call:
     body: dict[str, Any] = {"kappa": kappa, "window": window, "agent_type": agent_type}
     body |= {"strategy": strategy, "params": dict(params) if params is not None else None}
+    body["budget"] = dict(budget) if budget is not None else None
     if start is not None:
         body["start"] = [int(start[0]), int(start[1])]
     clean = {k: v for k, v in body.items() if v is not None}
@@ -188,6 +190,13 @@ def positions(session: Session, points: Sequence[Sequence[float]]) -> Call:
 
 def read_session(session: Session) -> Call:
     return Call("GET", f"/sessions/{session.session_id}", headers=session.auth)
+
+
+def mute(session: Session, muted: bool = True) -> Call:
+    """No more advice for this session (``muted``), or advice again."""
+    return Call(
+        "POST", f"/sessions/{session.session_id}/mute", {"muted": muted}, headers=session.auth
+    )
 
 
 def end_session(session: Session) -> Call:

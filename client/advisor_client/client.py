@@ -341,10 +341,14 @@ class AdvisorClient(_Base):
         start: Cell | None = None,
         strategy: str | None = None,
         params: Mapping[str, float | int] | None = None,
+        budget: Mapping[str, int] | None = None,
     ) -> Session:
         """A new session (``strategy``: when to advise, default the paper's rule; ``params``:
-        its parameters, see the service's docs)."""
-        call = api.create_session(domain, kappa, window, agent_type, start, strategy, params)
+        its parameters, see the service's docs; ``budget``: at most this much advice,
+        ``{"total": n, "per_minute": m}``, either or both)."""
+        call = api.create_session(
+            domain, kappa, window, agent_type, start, strategy, params, budget
+        )
         return Session.of(self.call(call))
 
     def events(self, session: Session, events: EventLike | Sequence[EventLike]) -> Any:
@@ -364,6 +368,10 @@ class AdvisorClient(_Base):
 
     def session(self, session: Session) -> SessionInfo:
         return cast(SessionInfo, self.call(api.read_session(session)))
+
+    def mute(self, session: Session, muted: bool = True) -> SessionInfo:
+        """No more advice for this session (the visitor asked), or advice again."""
+        return cast(SessionInfo, self.call(api.mute(session, muted)))
 
     def end_session(self, session: Session) -> SessionInfo:
         return cast(SessionInfo, self.call(api.end_session(session)))
@@ -526,8 +534,11 @@ class AsyncAdvisorClient(_Base):
         start: Cell | None = None,
         strategy: str | None = None,
         params: Mapping[str, float | int] | None = None,
+        budget: Mapping[str, int] | None = None,
     ) -> Session:
-        call = api.create_session(domain, kappa, window, agent_type, start, strategy, params)
+        call = api.create_session(
+            domain, kappa, window, agent_type, start, strategy, params, budget
+        )
         return Session.of(await self.call(call))
 
     async def events(self, session: Session, events: EventLike | Sequence[EventLike]) -> Any:
@@ -542,6 +553,9 @@ class AsyncAdvisorClient(_Base):
 
     async def session(self, session: Session) -> SessionInfo:
         return cast(SessionInfo, await self.call(api.read_session(session)))
+
+    async def mute(self, session: Session, muted: bool = True) -> SessionInfo:
+        return cast(SessionInfo, await self.call(api.mute(session, muted)))
 
     async def end_session(self, session: Session) -> SessionInfo:
         return cast(SessionInfo, await self.call(api.end_session(session)))

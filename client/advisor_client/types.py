@@ -103,6 +103,13 @@ class GoalBelief(TypedDict):
     ruled_out: bool
 
 
+class BudgetInfo(TypedDict):
+    total: int | None
+    per_minute: int | None
+    left: int | None
+    left_this_minute: int | None
+
+
 class SessionInfo(TypedDict):
     session_id: str
     domain: str
@@ -122,6 +129,8 @@ class SessionInfo(TypedDict):
     advice_per_100: float
     idle_seconds: float
     created_at: str
+    muted: bool
+    budget: BudgetInfo | None
 
 
 class SessionList(TypedDict):

@@ -135,3 +135,18 @@ def test_dashboard_shows_why_the_operator_key_cannot_end_a_session(
     assert answer.status_code == 200, answer.text
     assert problems.seen_expected  # the refusal really was the service's 403
     screenshot(page, "dashboard-refused")
+
+
+def test_dashboard_shows_each_session_s_advice_left(service: Service, page: Page) -> None:
+    """A session's budget (pieces left in all, this minute) and a muted visitor's mute."""
+    made = service.http.post(
+        "/domains/default/sessions", json={"kappa": 0.0, "budget": {"total": 5, "per_minute": 4}}
+    ).json()
+    budgeted = made["session_id"]
+    muted, auth = service.new_session("E")
+    assert service.http.post(f"/sessions/{muted}/mute", headers=auth).status_code == 200
+    show_sessions(service, page, service.operator_key)
+    expect(page.locator('#sessions th[data-column="left"] .unit')).to_have_text("budget")
+    left = page.locator(f'tr[data-session-id="{budgeted}"] td').nth(12)
+    expect(left).to_have_text("4 of 5, 3/min of 4")  # the start decision took one
+    expect(page.locator(f'tr[data-session-id="{muted}"] td').nth(12)).to_have_text("muted")

@@ -62,6 +62,12 @@ def test_client_rest_calls(server: Server) -> None:
         assert client.session(aware)["strategy"] == "goal_aware"
         goals = client.session(aware)["goals"]
         assert goals is not None and len(goals) == 2
+        budgeted = client.create_session("tiny-rest", kappa=0.0, budget={"total": 1})
+        assert client.session(budgeted)["budget"] == {
+            "total": 1, "per_minute": None, "left": 0, "left_this_minute": None,
+        }  # fmt: skip
+        assert not client.step(budgeted, {"state": [5, 1], "action": "E"})["advise"]
+        assert client.mute(aware)["muted"] and not client.mute(aware, False)["muted"]
         client.delete_domain("tiny-rest")
 
 
@@ -161,6 +167,8 @@ def test_async_client_rest_and_stream(server: Server) -> None:
     async def scenario() -> tuple[int, list[int], int]:
         async with AsyncAdvisorClient(server.url, admin_key=server.admin_key) as client:
             session = await client.create_session("default", kappa=0.5)
+            assert (await client.mute(session))["muted"]
+            assert not (await client.mute(session, muted=False))["muted"]
             one = await client.events(session, E)
             async with await client.stream(session) as stream:
                 many = await stream.send([W, E] * 10)

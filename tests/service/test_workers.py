@@ -375,3 +375,26 @@ def test_a_session_another_version_kept_in_redis_is_410_with_a_log_line(
     assert got.status_code == 410, got.text
     assert "cannot read" in got.json()["detail"] and "start a new session" in got.json()["detail"]
     assert any("cannot be read" in m for m in caplog.messages)
+
+
+def test_a_budget_and_a_mute_hold_whichever_worker_answers(workers: Workers) -> None:
+    """The budget's bucket and the mute travel with the session's state in Redis."""
+    clients, service = workers
+    grid = service.catalog.get("default").domain
+    sid, auth, created = open_session(clients[0], kappa=0.0, budget={"total": 4})
+    assert created["decision"]["advise"] and created["decision"]["cost"]["advice_count"] == 1
+    rng = np.random.default_rng(8)
+    s, events = grid.start, []
+    for a in rng.integers(0, 4, 8).tolist():
+        events.append({"state": list(grid.cell(s)), "action": ACTIONS[a]})
+        s = int(grid.next_state[s, a])
+    first = clients[1].post(f"/sessions/{sid}/events", json=events[:2], headers=auth).json()
+    assert [d["advise"] for d in first] == [True, True]  # the start's and two: three of four
+    assert clients[0].post(f"/sessions/{sid}/mute", headers=auth).json()["muted"] is True
+    muted = clients[1].post(f"/sessions/{sid}/events", json=events[2:4], headers=auth).json()
+    assert [d["advise"] for d in muted] == [False, False]
+    clients[1].post(f"/sessions/{sid}/mute", json={"muted": False}, headers=auth)
+    rest = clients[0].post(f"/sessions/{sid}/events", json=events[4:], headers=auth).json()
+    assert [d["advise"] for d in rest] == [True, False, False, False]  # the fourth, then none
+    seen = clients[1].get(f"/sessions/{sid}", headers=auth).json()
+    assert seen["budget"]["left"] == 0 and seen["muted"] is False

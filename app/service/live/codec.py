@@ -37,7 +37,7 @@ from app.advice.models import AdviceTables
 from app.domain.grid import GridDomain
 from app.service.data.domains import DomainState
 from app.service.live.history import AdviceLog, Recent
-from app.service.live.registry import RECENT_ADVICE, LiveSession
+from app.service.live.registry import RECENT_ADVICE, Budget, LiveSession
 from app.service.live.replay import Replay
 from app.strategies.stream import KeyedWindow
 
@@ -336,6 +336,8 @@ def dump(session: LiveSession, replay: bool = True) -> bytes:
         "path": _ring(s.path), "p_history": _ring(s.p_history), "path_times": _ring(s.path_times),
         "advice_log": _advice_log(s.advice_log), "advisor": advisor_state(s.advisor),
         "replay": s.replay.state() if replay else None,
+        "budget": None if s.budget is None else [s.budget.total, s.budget.per_minute],
+        "tokens": s.tokens, "tokens_at": s.tokens_at, "muted": s.muted, "revision": s.revision,
     }  # fmt: skip
     return _encoder.encode(out)
 
@@ -366,5 +368,9 @@ def load(raw: bytes | dict[str, Any], domain: DomainState, replay_steps: int) ->
         reserved=v["reserved"], born=mono - (wall - v["born"]),
         path_times=_unring(v["path_times"]), token_digest=v["token_digest"],
         replay=Replay.of(replay_steps, v["replay"]),
+        # written since advice budgets came: a session written before has none
+        budget=None if v.get("budget") is None else Budget(*v["budget"]),
+        tokens=v.get("tokens", 0.0), tokens_at=v.get("tokens_at", 0.0),
+        muted=v.get("muted", False), revision=v.get("revision", 0),
     )  # fmt: skip
     return session

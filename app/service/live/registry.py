@@ -32,6 +32,7 @@ from app.advice.advisor import (
     DEFAULT_KAPPA,
     DEFAULT_STRATEGY,
     DEFAULT_WINDOW,
+    NO_CAP,
     Advisor,
     Decision,
     DecisionBatch,
@@ -88,6 +89,16 @@ class Limits:
 
 
 @dataclass(frozen=True, slots=True)
+class Budget:
+    """A session's advice budget: at most ``total`` pieces of advice in all, and at most
+    ``per_minute`` in any minute (a bucket of that many pieces, refilled at that rate); None:
+    no such limit."""
+
+    total: int | None = None
+    per_minute: int | None = None
+
+
+@dataclass(frozen=True, slots=True)
 class SessionSettings:
     """A session's settings, checked, as one object from the request to the advisor: the
     advisor's (strategy, kappa, window, the strategy's parameters), the agent type whose prior
@@ -96,17 +107,18 @@ class SessionSettings:
     advisor: AdvisorSettings = field(default_factory=AdvisorSettings)
     agent_type: str | None = None
     start: int | None = None
+    budget: Budget | None = None
 
     @classmethod
     def of(
         cls, strategy: str = DEFAULT_STRATEGY, kappa: float = DEFAULT_KAPPA,
         window: int = DEFAULT_WINDOW,
         params: StrategyParams | Mapping[str, int | float] | None = None,
-        agent_type: str | None = None, start: int | None = None,
+        agent_type: str | None = None, start: int | None = None, budget: Budget | None = None,
     ) -> SessionSettings:  # fmt: skip
         """Checked settings (ValueError: :meth:`Strategy.settings`)."""
         advisor = strategies.get(strategy).settings(kappa, window, params)
-        return cls(advisor, agent_type, start)
+        return cls(advisor, agent_type, start, budget)
 
 
 @dataclass(eq=False, slots=True)
@@ -139,6 +151,56 @@ class LiveSession:
     path_times: Recent | None = None  # seconds into the session of each cell of ``path``
     token_digest: bytes = b""  # SHA-256 of the token (``token`` is empty once it was loaded)
     replay: Replay = field(default_factory=lambda: Replay(0))  # its last decisions, for retries
+    budget: Budget | None = None  # the advice it may be given (None: no budget)
+    tokens: float = 0.0  # pieces left in its per-minute bucket, at ``tokens_at``
+    tokens_at: float = 0.0  # wall-clock seconds (a session moves between workers)
+    muted: bool = False  # the visitor asked for no more advice
+    revision: int = 0  # changes of its state between events (a mute), for Redis' commits
+
+    def state_step(self) -> str:
+        """What the session's state is called where it is kept (Redis): its step, and how
+        often it changed between events, so that a copy made before such a change is seen
+        to be behind it."""
+        steps = self.advisor.steps
+        return str(steps) if self.revision == 0 else f"{steps}r{self.revision}"
+
+    def limit_advice(self, now: float) -> int:
+        """Set the advisor's cap for the next events (:attr:`Advisor.cap`): no more advice when
+        muted, none past the budget's total, at most the pieces left in this minute's bucket
+        (refilled up to ``now``, wall-clock seconds); returns the advice count before them."""
+        adv = self.advisor
+        count = adv.advice_count
+        cap = count if self.muted else NO_CAP
+        budget = self.budget
+        if budget is not None and not self.muted:
+            if budget.total is not None:
+                cap = min(cap, budget.total)
+            if budget.per_minute is not None:
+                rate = budget.per_minute / 60.0
+                elapsed = max(0.0, now - self.tokens_at)
+                self.tokens = min(float(budget.per_minute), self.tokens + elapsed * rate)
+                self.tokens_at = now
+                cap = min(cap, count + int(self.tokens))
+        adv.cap = cap
+        return count
+
+    def spent(self, count_before: int) -> None:
+        """The advice given since :meth:`limit_advice` leaves this minute's bucket."""
+        if self.budget is not None and self.budget.per_minute is not None:
+            self.tokens -= self.advisor.advice_count - count_before
+
+    def advice_left(self, now: float) -> tuple[int | None, int | None]:
+        """(pieces left in all, pieces the bucket holds at ``now``); None where there is no
+        limit."""
+        b = self.budget
+        if b is None:
+            return None, None
+        total = None if b.total is None else max(0, b.total - self.advisor.advice_count)
+        minute = None
+        if b.per_minute is not None:
+            refilled = self.tokens + max(0.0, now - self.tokens_at) * b.per_minute / 60.0
+            minute = int(min(float(b.per_minute), refilled))
+        return total, minute
 
     def _rings(self) -> tuple[Recent, Recent]:
         """The recent path and P(M1 | H) rings, made at the first event (until then the
@@ -239,6 +301,9 @@ class SessionSnapshot:
     advice: list[tuple[int, tuple[int, int], Advice]]  # (step, cell, theta_s), oldest first
     # advisors with a goal posterior: (goal cell, P(goal | H), ruled out) per goal of the map
     goals: list[tuple[tuple[int, int], float, bool]] | None = None
+    budget: Budget | None = None  # its advice budget
+    advice_left: tuple[int | None, int | None] = (None, None)  # in all, this minute
+    muted: bool = False
 
 
 class SessionRegistry:
@@ -261,6 +326,9 @@ class SessionRegistry:
         #: a cache of sessions kept elsewhere (Redis): beyond the limits the least recently
         #: seen are dropped, rather than new ones refused
         self.evicts = False
+        #: wall-clock seconds, for the sessions' per-minute advice budgets (a session moves
+        #: between workers; tests give a clock of their own)
+        self.wall: Callable[[], float] = time.time
 
     @property
     def max_sessions(self) -> int:
@@ -302,7 +370,13 @@ class SessionRegistry:
         agent_type = settings.agent_type
         start = domain.domain.start if settings.start is None else settings.start
         need = self.reservation(advisor)
+        budget = settings.budget
+        tokens = float(budget.per_minute or 0) if budget is not None else 0.0
+        if budget is not None:  # the start decision within the budget too
+            advisor.cap = min(budget.total if budget.total is not None else NO_CAP,
+                              int(tokens) if budget.per_minute is not None else NO_CAP)  # fmt: skip
         decision = advisor.start(start)
+        wall = self.wall()
         now = time.monotonic()
         with self.lock:
             self._admit(need, client, now)
@@ -312,7 +386,9 @@ class SessionRegistry:
                 sid, token, domain, agent_type, key, advisor, start, decision.p_normal,
                 datetime.now(UTC), now, self.history_sizes, client=client, reserved=need,
                 born=now, token_digest=token_digest(token), replay=Replay(self.replay_steps),
+                budget=budget, tokens=tokens, tokens_at=wall,
             )  # fmt: skip
+            session.spent(0)  # the start decision's advice, if any, left this minute's bucket
             session.replay.restart(decision.advice_count, decision.benefit)
             if decision.advise:
                 own = decision.advice if advisor.own_advice else None
@@ -403,7 +479,9 @@ class SessionRegistry:
                 moves = tuple(np.array([v], dtype=np.int64) for v in (state, action, next_state))
                 return self._observe(session, moves, step).decisions()[0]  # type: ignore[arg-type]
             tables = adv.tables
+            before = session.limit_advice(self.wall())
             d = adv.observe(state, action, next_state)
+            session.spent(before)
             now = time.monotonic()
             session.record_one(d, tables, now)
             session.last_seen = now
@@ -427,7 +505,9 @@ class SessionRegistry:
             return done
         adv = session.advisor
         tables = adv.tables
+        before = session.limit_advice(self.wall())
         out = adv.observe_batch(*rest)
+        session.spent(before)
         now = time.monotonic()
         session.record_batch(out, tables, now)
         session.last_seen = now
@@ -483,6 +563,13 @@ class SessionRegistry:
             async with session.busy:
                 return self.observe_one(session, state, action, next_state, step)
         return self.observe_one(session, state, action, next_state, step)
+
+    def mute(self, session: LiveSession, muted: bool) -> None:
+        """The visitor asked for no more advice (``muted``), or for advice again."""
+        with self.lock:
+            if session.closed:
+                raise SessionNotFound(session.id)
+            session.muted = muted
 
     def touch(self, session: LiveSession) -> None:
         session.last_seen = time.monotonic()
@@ -595,6 +682,7 @@ class SessionRegistry:
             adv.advice_per_100, s.path.array() if s.path else None,
             s.p_history.array() if s.p_history else None,
             s.advice_log.items() if s.advice_log else [], adv.goal_beliefs(),
+            s.advice_left(self.wall()),
         )  # fmt: skip
 
     def forget_old(self) -> None:
@@ -653,6 +741,7 @@ class _Raw:
     p_history: npt.NDArray[np.float32] | None
     advice: list[tuple[int, int, AdviceTables | Advice]]
     beliefs: list[tuple[int, float, bool]] | None
+    advice_left: tuple[int | None, int | None]
 
 
 def joined(parts: list[DecisionBatch]) -> DecisionBatch:
@@ -687,6 +776,7 @@ def _snap(r: _Raw) -> SessionSnapshot:
         r.p_history.tolist() if r.p_history is not None else [r.p_normal],
         [(step, cell(st), _advice(tables, st)) for step, st, tables in r.advice],
         None if r.beliefs is None else [(cell(g), p, out) for g, p, out in r.beliefs],
+        s.budget, r.advice_left, s.muted,
     )  # fmt: skip
 
 

@@ -107,6 +107,10 @@ class Sessions(Protocol):
 
     async def describe(self, session: LiveSession) -> SessionSnapshot: ...
 
+    async def mute(self, session: LiveSession, muted: bool) -> None:
+        """The visitor asks for no more advice (``muted``), or for advice again."""
+        ...
+
     async def end(self, session: LiveSession) -> SessionSnapshot:
         """End the session; its final figures."""
         ...
@@ -201,6 +205,9 @@ class LocalSessions:
 
     async def describe(self, session: LiveSession) -> SessionSnapshot:
         return self.registry.describe(session)
+
+    async def mute(self, session: LiveSession, muted: bool) -> None:
+        self.registry.mute(session, muted)
 
     async def end(self, session: LiveSession) -> SessionSnapshot:
         """End the session; its final figures."""

@@ -464,7 +464,8 @@ class SharedSessions:
                     assert done is not None
                     return done
                 adv = session.advisor
-                expected, count, benefit = adv.steps, adv.advice_count, adv.benefit
+                expected, count, benefit = session.state_step(), adv.advice_count, adv.benefit
+                first = adv.steps
                 out: DecisionBatch | Decision
                 if one and done is None:  # the one-event path, as the local form runs it
                     out = self.registry.observe_one(session, *(int(m[0]) for m in rest))
@@ -478,8 +479,8 @@ class SharedSessions:
                         self.registry.write(session, lambda s: codec.dump(s, replay=False))
                     )
                     got = await self._run(
-                        "commit", session_id, str(expected), str(adv.steps),
-                        blob, record, adv.steps - expected,
+                        "commit", session_id, expected, session.state_step(),
+                        blob, record, adv.steps - first,
                         session.domain.version, int(time.time() * 1000), self.replay_steps,
                         _summary(session), self._ttl(), lane=session_id,
                     )  # fmt: skip
@@ -623,6 +624,31 @@ class SharedSessions:
         await self.redis.aclose()
         for lane in self._lanes:
             await lane.close()
+
+    async def mute(self, session: LiveSession, muted: bool) -> None:
+        """Mute (or unmute) the session and write its state to Redis: a commit of no step (the
+        step Redis holds must be the copy's; else the copy is read again and muted again)."""
+        session_id = session.id
+        async with self._lock(session_id):
+            for _ in range(ATTEMPTS):
+                copy = self.registry.cached(session_id) or await self._load(session_id)
+                expected = copy.state_step()
+                self.registry.mute(copy, muted)
+                copy.revision += 1
+                blob = codec.packed(self.registry.write(copy, lambda s: codec.dump(s, False)))
+                got = await self._run(
+                    "commit", session_id, expected, copy.state_step(), blob, b"", 0,
+                    copy.domain.version,
+                    int(time.time() * 1000), self.replay_steps, _summary(copy), self._ttl(),
+                    lane=session_id,
+                )  # fmt: skip
+                if got[0] == b"ok":
+                    session.muted = muted  # the caller's copy, if another
+                    return
+                self.registry.forget(session_id)
+                if got[0] == b"gone":
+                    raise SessionNotFound(session_id)
+        raise RuntimeError(f"session {session_id} kept changing while it was muted")
 
     def save(self, store: Store) -> int:
         """Nothing to keep at a shutdown: the sessions are in Redis."""

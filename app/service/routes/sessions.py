@@ -23,6 +23,7 @@ from app.service.public import session_created, session_public
 from app.service.schemas import (
     DecisionPublic,
     ErrorPublic,
+    MuteIn,
     PositionsIn,
     SessionCreate,
     SessionCreated,
@@ -96,6 +97,17 @@ async def post_positions(session: SessionDep, body: PositionsIn, state: StateDep
     farther jump, a wall or a point off the map refuses the batch whole (422)."""
     text = await ops.apply_positions(state, session, body)
     return Response(text, media_type="application/json")
+
+
+@router.post("/sessions/{session_id}/mute", openapi_extra=BEARER, responses=ERRORS)
+async def mute_session(
+    session: SessionDep, state: StateDep, body: Annotated[MuteIn | None, Body()] = None
+) -> SessionPublic:
+    """The visitor asks for no more advice (``{"muted": true}``, the default) or for advice
+    again (``{"muted": false}``): while muted, no decision advises (the advisor still watches,
+    and its figures go on). Its token only."""
+    await state.sessions.mute(session, (body or MuteIn()).muted)
+    return session_public(await state.sessions.describe(session))
 
 
 @router.get("/sessions/{session_id}", responses=ERRORS)
