@@ -102,6 +102,7 @@ from paho.mqtt.properties import Properties
 from pydantic import ValidationError
 
 from app.service import ops
+from app.service.clients import device_client
 from app.service.data.domains import DomainNotFound
 from app.service.errors import STORE_DOWN, STORE_DOWN_TEXT
 from app.service.live.registry import LiveSession, SessionNotFound
@@ -139,7 +140,7 @@ class Explorer:
     @property
     def client(self) -> str:
         """Whom its session's quota counts against."""
-        return f"mqtt {self.device}"
+        return device_client(self.device)
 
 
 @dataclass(frozen=True)
