@@ -371,7 +371,10 @@ class Bridge:
         over its maximum disconnects), so not even a buffer of that size is made. A broker that
         honours the maximum (Mosquitto does) never sends one."""
         paho = connection._client
-        recv = paho._sock_recv
+        recv = getattr(paho, "_sock_recv", None)
+        if recv is None:  # another paho: the broker's honouring of the maximum is left
+            self.log.warning("MQTT bridge: this paho-mqtt has no _sock_recv to guard")
+            return
 
         def guarded(size: int) -> bytes:
             if size > self.max_packet:
