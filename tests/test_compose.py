@@ -34,7 +34,7 @@ from paho.mqtt.enums import CallbackAPIVersion
 
 from app.cli import cli
 from app.service.config import Settings
-from app.service.mqtt import parse_url
+from app.service.mqtt import PACKET_HEADROOM, parse_url, subscriptions
 
 ROOT = Path(__file__).resolve().parents[1]
 COMPOSE = ROOT / "compose.yaml"
@@ -42,6 +42,7 @@ SCHEMA = ROOT / "tests" / "compose" / "compose-spec.json"
 DEPLOY = ROOT / "deploy"
 MOSQUITTO = "/usr/sbin/mosquitto"
 PASSWD = "/usr/bin/mosquitto_passwd"
+MOSQUITTO_PUB = "/usr/bin/mosquitto_pub"
 LOOPBACK = ("127.0.0.1", "localhost", "::1")
 #: what .env gives (deploy/make_env.py makes it); any values do for these checks
 DOTENV = {"POSTGRES_PASSWORD": "pg0123", "MQTT_PASSWORD": "mq0123", "ADVISOR_OPERATOR_KEY": "op0"}
@@ -373,41 +374,56 @@ def free_port() -> int:
         return port
 
 
-@pytest.fixture
-def broker(tmp_path: Path) -> Iterator[tuple[int, dict[str, str]]]:
+def deploy_broker(workdir: Path, users: dict[str, str]) -> tuple[subprocess.Popen[bytes], int]:
     """Mosquitto with deploy/mosquitto/mosquitto.conf and its ACL file as compose runs them,
-    on a free port of loopback, with a password file of the service's user and two devices."""
-    if shutil.which(MOSQUITTO) is None or shutil.which(PASSWD) is None:
-        pytest.skip(f"{MOSQUITTO} and {PASSWD} are not installed (apt-get install mosquitto)")
-    users = {"advisor": "service-pw", "robot-7": "seven-pw", "robot-8": "eight-pw"}
-    passwords = tmp_path / "passwd"
+    on a free port of loopback (returned with the process), with a password file of
+    ``users``."""
+    passwords = workdir / "passwd"
     passwords.touch(mode=0o600)
     for user, password in users.items():
         subprocess.run([PASSWD, "-b", str(passwords), user, password], check=True)
     port = free_port()
     here = {
         "listener": f"{port} 127.0.0.1", "password_file": str(passwords),
-        "acl_file": str(DEPLOY / "mosquitto" / "acl"), "persistence_location": f"{tmp_path}/",
+        "acl_file": str(DEPLOY / "mosquitto" / "acl"), "persistence_location": f"{workdir}/",
     }  # fmt: skip
     lines = []
     for line in (DEPLOY / "mosquitto" / "mosquitto.conf").read_text().splitlines():
         key = line.split(None, 1)[0] if line.strip() else ""
         lines.append(f"{key} {here[key]}" if key in here else line)
-    # started as root, Mosquitto would run as the user "mosquitto", who cannot read tmp_path
+    # started as root, Mosquitto would run as the user "mosquitto", who cannot read workdir
     lines.append(f"user {getpass.getuser()}")
-    conf = tmp_path / "mosquitto.conf"
+    conf = workdir / "mosquitto.conf"
     conf.write_text("\n".join(lines) + "\n")
     proc = subprocess.Popen([MOSQUITTO, "-c", str(conf)], stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL)  # fmt: skip
+    deadline = time.monotonic() + 10
+    while True:
+        try:
+            socket.create_connection(("127.0.0.1", port), timeout=1).close()
+            return proc, port
+        except OSError:
+            if proc.poll() is not None or time.monotonic() > deadline:
+                proc.terminate()
+                raise AssertionError("mosquitto failed to start") from None
+            time.sleep(0.05)
+
+
+def needs_mosquitto() -> None:
+    if shutil.which(MOSQUITTO) is None or shutil.which(PASSWD) is None:
+        pytest.skip(f"{MOSQUITTO} and {PASSWD} are not installed (apt-get install mosquitto)")
+
+
+@pytest.fixture
+def broker(tmp_path: Path) -> Iterator[tuple[int, dict[str, str]]]:
+    """:func:`deploy_broker` with the service's user, the set-up user and two devices."""
+    needs_mosquitto()
+    users = {
+        "advisor": "service-pw", "setup": "setup-pw", "robot-7": "seven-pw",
+        "robot-8": "eight-pw",
+    }  # fmt: skip
+    proc, port = deploy_broker(tmp_path, users)
     try:
-        deadline = time.monotonic() + 10
-        while True:
-            try:
-                socket.create_connection(("127.0.0.1", port), timeout=1).close()
-                break
-            except OSError:
-                assert proc.poll() is None and time.monotonic() < deadline, "mosquitto failed"
-                time.sleep(0.05)
         yield port, users
     finally:
         proc.terminate()
@@ -417,26 +433,50 @@ def broker(tmp_path: Path) -> Iterator[tuple[int, dict[str, str]]]:
 def test_mosquittos_acl_lets_a_device_publish_and_read_only_its_own_topics(
     broker: tuple[int, dict[str, str]],
 ) -> None:
+    """Both forms of the topics: ``advisor/<device>/<domain>/<explorer>/<kind>`` and the short
+    ``advisor/<domain>/<explorer>/<kind>`` (the explorer its own device). A device writes
+    events and reads decisions and errors under its own user name only, whatever it
+    subscribes to; only the service reads every topic; configs are the set-up user's."""
     port, users = broker
     service = Device(port, "advisor", users["advisor"])
+    setup = Device(port, "setup", users["setup"])
     seven = Device(port, "robot-7", users["robot-7"])
     eight = Device(port, "robot-8", users["robot-8"])
     try:
-        service.subscribe("advisor/+/+/events", "advisor/+/+/config")  # as the bridge does
+        service.subscribe(*subscriptions("advisor"))  # as the bridge does
         seven.subscribe("advisor/#")  # greedy: it gets its own topics only
-        eight.subscribe("advisor/+/+/decisions", "advisor/+/+/events")
-        seven.publish("advisor/default/robot-7/events", "own event")
-        seven.publish("advisor/default/robot-8/events", "forged event")
-        seven.publish("advisor/lobby/robot-8/decisions", "forged decision")
-        seven.publish("advisor/default/robot-7/config", "its own config")
+        eight.subscribe("advisor/+/+/decisions", "advisor/+/+/events",
+                        "advisor/+/+/+/decisions", "advisor/+/+/+/events")  # fmt: skip
+        # the device form
+        seven.publish("advisor/robot-7/default/e1/events", "own event")
+        seven.publish("advisor/robot-8/default/e1/events", "forged event")
+        seven.publish("advisor/robot-8/default/robot-7/decisions", "forged decision")
+        seven.publish("advisor/robot-7/default/e1/config", "its own config")
+        setup.publish("advisor/robot-7/default/e1/config", "a config")
+        service.publish("advisor/robot-7/default/e1/decisions", "for 7's e1")
+        service.publish("advisor/robot-7/default/e1/errors", "error for 7's e1")
+        # 8's explorer that has 7's name: 8's, not 7's
+        service.publish("advisor/robot-8/default/robot-7/decisions", "for 8's robot-7")
+        # the short form
+        seven.publish("advisor/default/robot-7/events", "own short event")
+        seven.publish("advisor/default/robot-8/events", "forged short event")
+        seven.publish("advisor/lobby/robot-8/decisions", "forged short decision")
+        seven.publish("advisor/default/robot-7/config", "its own short config")
+        setup.publish("advisor/default/robot-7/config", "a short config")
         service.publish("advisor/default/robot-7/decisions", "for 7")
         service.publish("advisor/lobby/robot-8/decisions", "for 8")
         service.publish("advisor/default/robot-7/errors", "error for 7")
         wanted = {
-            service: {("advisor/default/robot-7/events", "own event")},
-            seven: {("advisor/default/robot-7/decisions", "for 7"),
+            service: {("advisor/robot-7/default/e1/events", "own event"),
+                      ("advisor/robot-7/default/e1/config", "a config"),
+                      ("advisor/default/robot-7/events", "own short event"),
+                      ("advisor/default/robot-7/config", "a short config")},
+            seven: {("advisor/robot-7/default/e1/decisions", "for 7's e1"),
+                    ("advisor/robot-7/default/e1/errors", "error for 7's e1"),
+                    ("advisor/default/robot-7/decisions", "for 7"),
                     ("advisor/default/robot-7/errors", "error for 7")},
-            eight: {("advisor/lobby/robot-8/decisions", "for 8")},
+            eight: {("advisor/robot-8/default/robot-7/decisions", "for 8's robot-7"),
+                    ("advisor/lobby/robot-8/decisions", "for 8")},
         }  # fmt: skip
         deadline = time.monotonic() + 10
         while any(d.received() != w for d, w in wanted.items()) and time.monotonic() < deadline:
@@ -445,12 +485,80 @@ def test_mosquittos_acl_lets_a_device_publish_and_read_only_its_own_topics(
         for device, want in wanted.items():
             assert device.received() == want
     finally:
-        for device in (service, seven, eight):
+        for device in (service, setup, seven, eight):
             device.close()
     for user, password in ((None, None), ("robot-7", "wrong")):  # no password, a wrong one
         refused = Device(port, user, password)
         refused.close()
         assert refused.refused is not None and not refused.connected.is_set()
+
+
+def mosquitto_pub(port: int, user: str, password: str, topic: str, payload: Path) -> str:
+    """``mosquitto_pub`` (MQTT v5, QoS 1, debug output): what it says about the publish."""
+    run = subprocess.run(
+        [MOSQUITTO_PUB, "-h", "127.0.0.1", "-p", str(port), "-u", user, "-P", password,
+         "-V", "5", "-q", "1", "-d", "-t", topic, "-f", str(payload)],
+        capture_output=True, text=True, timeout=30,
+    )  # fmt: skip
+    return run.stdout + run.stderr
+
+
+def test_mosquittos_size_limits_are_the_services_and_a_publisher_is_told(
+    broker: tuple[int, dict[str, str]], tmp_path: Path
+) -> None:
+    """deploy/mosquitto/mosquitto.conf's ``message_size_limit`` is the service's
+    ADVISOR_MAX_BODY_BYTES and its ``max_packet_size`` the bridge's Maximum Packet Size (the
+    service's settings as compose runs it). A device's message over the first is refused,
+    its PUBACK saying so (reason 149, packet too large); one over the second is not sent by an
+    MQTT v5 client (Mosquitto told it the maximum when it connected), and an MQTT 3.1.1 client
+    that sends one is disconnected; none of them reaches the service; a message within both
+    does."""
+    if shutil.which(MOSQUITTO_PUB) is None:
+        pytest.skip(f"{MOSQUITTO_PUB} is not installed (apt-get install mosquitto-clients)")
+    conf = dict(
+        line.split(None, 1)
+        for line in (DEPLOY / "mosquitto" / "mosquitto.conf").read_text().splitlines()
+        if line.strip() and not line.startswith("#")
+    )
+    settings = Settings()  # compose sets no size: the defaults
+    assert int(conf["message_size_limit"]) == settings.max_body_bytes
+    assert int(conf["max_packet_size"]) == settings.max_body_bytes + PACKET_HEADROOM
+    port, users = broker
+    service = Device(port, "advisor", users["advisor"])
+    try:
+        service.subscribe("advisor/+/+/+/events")
+        sizes = {"fits": settings.max_body_bytes, "over-limit": settings.max_body_bytes + 1,
+                 "over-packet": settings.max_body_bytes + PACKET_HEADROOM}  # fmt: skip
+        said = {}
+        for name, size in sizes.items():
+            payload = tmp_path / name
+            payload.write_bytes(b"x" * size)
+            said[name] = mosquitto_pub(
+                port, "robot-7", users["robot-7"], f"advisor/robot-7/default/{name}/events",
+                payload,
+            )  # fmt: skip
+        assert "received PUBACK (Mid: 1, RC:0)" in said["fits"], said["fits"]
+        assert "received PUBACK (Mid: 1, RC:149)" in said["over-limit"], said["over-limit"]
+        assert "sending PUBLISH" not in said["over-packet"], said["over-packet"]
+        old = paho.Client(CallbackAPIVersion.VERSION2, protocol=paho.MQTTv311)
+        old.username_pw_set("robot-7", users["robot-7"])
+        gone = threading.Event()
+        old.on_disconnect = lambda *_: gone.set()
+        old.connect("127.0.0.1", port)
+        old.loop_start()
+        try:
+            big = b"x" * (settings.max_body_bytes + PACKET_HEADROOM)
+            old.publish("advisor/robot-7/default/old-client/events", big, qos=1)
+            assert gone.wait(10), "the broker kept the client that sent a packet too large"
+        finally:
+            old.loop_stop()
+        deadline = time.monotonic() + 10
+        while not service.received() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        time.sleep(0.3)  # and nothing more comes
+        assert [t for t, _ in service.received()] == ["advisor/robot-7/default/fits/events"]
+    finally:
+        service.close()
 
 
 @pytest.mark.skipif(

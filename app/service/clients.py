@@ -8,6 +8,10 @@ a request from a proxy the operator trusts (``ADVISOR_TRUSTED_PROXIES``), the la
 from, so the addresses left of the first untrusted one are whatever the client wrote).
 uvicorn's own reading of forwarded headers is off (``serve``): it would trust any
 ``X-Forwarded-For`` from 127.0.0.1.
+
+Over MQTT (:mod:`app.service.mqtt`) a client is the device its topic names (the broker's ACL
+makes it the publisher's user name): ``"mqtt <device>"`` (:func:`device_client`), a name no
+HTTP client has (``"address ..."``, ``"key ..."``, ``"operator key"``).
 """
 
 from __future__ import annotations
@@ -57,6 +61,11 @@ def client_address(conn: HTTPConnection, proxies: Sequence[Network]) -> str:
 
 
 OPERATOR = "operator key"
+
+
+def device_client(device: str) -> str:
+    """The client of an MQTT device, for the quotas."""
+    return f"mqtt {device}"
 
 
 def _digest(key: str) -> bytes:

@@ -153,7 +153,8 @@ class Settings(BaseSettings):
         1000, ge=1,
         description="Live sessions one client may hold (then 429). A client is the key it "
         "sends, if the service knows it (the operator key, ADVISOR_CLIENT_KEYS), else its "
-        "address; the admin key's sessions count against no client.",
+        "address; the admin key's sessions count against no client. Over MQTT, a client is "
+        "the device its topic names ('mqtt <device>').",
     )  # fmt: skip
     client_max_session_memory: int = Field(
         256 * MiB, ge=MiB, description="Session memory one client may reserve (then 429)."

@@ -227,7 +227,7 @@ def test_bridge_keeps_at_most_its_explorers(tmp_path: Path, prefix: str) -> None
         finally:
             peer.close()
         bridge = client.app.state.bridge  # type: ignore[attr-defined]
-        assert list(k for _, k in bridge.sessions) == ["e1", "e2"]
+        assert [k.explorer for k in bridge.sessions] == ["e1", "e2"]
         assert client.get("/overview").json()["total_sessions"] == 2
 
 
@@ -356,7 +356,7 @@ def test_an_explorer_id_off_the_rule_is_refused_on_its_errors_topic(
         assert error["status"] == 422 and "must match" in error["detail"]
         assert peer.got("default/-robot/decisions") == []
         bridge = client.app.state.bridge  # type: ignore[attr-defined]
-        assert [k for _, k in bridge.sessions] == ["robot"]
+        assert [k.explorer for k in bridge.sessions] == ["robot"]
         assert client.get("/overview").json()["total_sessions"] == 1
 
 
