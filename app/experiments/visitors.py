@@ -302,24 +302,20 @@ def measures(m: dict[str, FloatArray]) -> dict[str, Any]:
     }  # fmt: skip
 
 
-def floors(results: Results, args: Args) -> dict[str, dict[str, Any]]:
-    """Per map: the floor (mean arrival over destinations drawn uniformly), its order, and the
+def floor_of(args: Args, spec: MapSpec) -> dict[str, Any]:
+    """A map's floor (mean arrival over destinations drawn uniformly), its order, and the
     floor on the drawn destination tasks (the mean of their destinations' arrivals)."""
-    out: dict[str, dict[str, Any]] = {}
-    for spec in results.maps:
-        world = place(args, spec).world
-        d = world.domain
-        got = min_latency_order(d)
-        if got is None:
-            out[spec.name] = {"floor": None, "order": None, "floor_on_tasks": None}
-            continue
-        order, arrival = got
-        index = {g: i for i, g in enumerate(d.goals)}
-        out[spec.name] = {
-            "floor": float(np.mean(arrival)), "order": order, "arrival": arrival,
-            "floor_on_tasks": float(np.mean([arrival[index[g]] for g in world.goals])),
-        }  # fmt: skip
-    return out
+    world = place(args, spec).world
+    d = world.domain
+    got = min_latency_order(d)
+    if got is None:
+        return {"floor": None, "order": None, "floor_on_tasks": None}
+    order, arrival = got
+    index = {g: i for i, g in enumerate(d.goals)}
+    return {
+        "floor": float(np.mean(arrival)), "order": order, "arrival": arrival,
+        "floor_on_tasks": float(np.mean([arrival[index[g]] for g in world.goals])),
+    }  # fmt: skip
 
 
 def rows(results: Results, floor: dict[str, dict[str, Any]]) -> list[dict[str, Any]]:
@@ -487,9 +483,12 @@ def run(args: Args, out: RunDir) -> dict[str, Any]:
     started = time.perf_counter()
     results = run_all(args)
     elapsed = time.perf_counter() - started
-    floor = floors(results, args)
+    floor: dict[str, dict[str, Any]] = {}
+    maps = []
+    for s in results.maps:  # one map's world at a time, made once
+        floor[s.name] = floor_of(args, s)
+        maps.append(map_info(args, s, floor[s.name]))
     table = rows(results, floor)
-    maps = [map_info(args, s, floor[s.name]) for s in results.maps]
     result = {
         **header("visitors", args, elapsed), "maps": maps,
         "visitors": [{"spec": v.name, **asdict(v)} for v in results.visitors],
