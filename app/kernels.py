@@ -44,8 +44,10 @@ GuideArrays = tuple[IntArray, IntArray, IntArray, IntArray, IntArray, FloatArray
 #: (lam, p_lost, slack, spread, bump, the most destinations a tour is planned through)
 GuideParams = tuple[float, float, float, float, float, int]
 
-#: explorer kinds, in the order of app.agents.explorers.FIXED_EXPLORERS
-RANDOM, RANDOM_AVOID, LEFT, BUG, OPTIMAL = 0, 1, 2, 3, 4
+#: explorer kinds, in the order of app.agents.explorers.WALKERS (the paper's five first)
+RANDOM, RANDOM_AVOID, LEFT, BUG, OPTIMAL, CORRIDOR, STRAIGHT = 0, 1, 2, 3, 4, 5, 6
+#: (compliance p, position noise q, sight r) of a visitor: app.agents.explorers.Visitor
+VisitorParams = tuple[float, float, int]
 #: the strategies' compiled forms (each entry of app/strategies/table.py names its code)
 PAPER, GOAL_AWARE, EARLY, IMPORTANCE, MISTAKE, RANDOM_RULE, ALWAYS, GUIDE = 0, 1, 2, 3, 4, 5, 6, 7
 
@@ -943,6 +945,15 @@ def own_action(
             if open_moves[s, a]:
                 return a
         return heading
+    if kind in (CORRIDOR, STRAIGHT):
+        if kind == STRAIGHT and open_moves[s, heading]:
+            return heading
+        back = (heading + 2) % 4
+        ahead = open_moves[s].copy()
+        ahead[back] = False
+        if ahead.any():
+            return uniform_choice(ahead, rng.random())
+        return back if open_moves[s, back] else heading  # a dead end: back
     if kind == BUG:
         dr = cells[goal, 0] - cells[s, 0]
         dc = cells[goal, 1] - cells[s, 1]
@@ -971,6 +982,34 @@ def own_action(
     return uniform_choice(best, rng.random())
 
 
+@njit(cache=True)
+def in_sight(next_state: IntArray, s: int, goal: int, reach: int) -> int:  # pragma: no cover
+    """explorers.in_sight: the move along a straight line of free cells from ``s`` that
+    reaches ``goal`` within ``reach`` moves (N, E, S, W tried in turn), or -1."""
+    for a in range(4):
+        x = s
+        for _ in range(reach):
+            y = next_state[x, a]
+            if y == x:
+                break
+            if y == goal:
+                return a
+            x = y
+    return -1
+
+
+@njit(cache=True)
+def read_position(
+    next_state: IntArray, open_moves: BoolArray, s: int, noise: float, seen_rng: np.random.Generator
+) -> int:  # pragma: no cover - compiled
+    """explorers.read_position: the cell the advisor reads for an explorer at ``s``."""
+    if noise <= 0.0:
+        return s
+    if seen_rng.random() >= noise or not open_moves[s].any():
+        return s
+    return int(next_state[s, uniform_choice(open_moves[s], seen_rng.random())])
+
+
 # ---- whole episodes -----------------------------------------------------------------------------
 @njit(cache=True)
 def rule_says(
@@ -994,6 +1033,7 @@ def rule_says(
 @njit(cache=True)
 def episode(
     kind: int,
+    visitor: VisitorParams,
     world: tuple[IntArray, BoolArray, IntArray, BoolArray],
     start: int,
     goal: int,
@@ -1009,10 +1049,18 @@ def episode(
     guide: tuple[GuideArrays, GuideParams, IntArray],
     rng: np.random.Generator,
     rule_rng: np.random.Generator,
+    seen_rng: np.random.Generator,
     out: tuple[IntArray, FloatArray, BoolArray],
 ) -> tuple[int, bool, int, float, int]:  # pragma: no cover - compiled
     """One task of a fixed-policy explorer ``kind`` from ``start``, watched by the advisor of
     strategy ``rule``; returns (steps, success, advice count, benefit, goals ruled out).
+
+    ``visitor`` is (compliance p, position noise q, sight r): an advised explorer takes the
+    advice when one draw u < p (no draw at p = 1); the advisor reads each cell the explorer
+    stands on through :func:`read_position` (draws from ``seen_rng``, none at q = 0), appends
+    (read cell, action) and decides for the next read cell, while the explorer moves from its
+    true cell; with r > 0 an explorer whose goal is in sight (:func:`in_sight`) walks to it,
+    whatever the advice. ``s`` is the cell the advisor reads, ``x`` the explorer's own.
 
     ``world`` is (next_state (S, 4), open moves (S, 4), cells (S, 2), the optimal moves to
     ``goal`` (S, 4)); ``rule_params`` (n_steps, threshold, rate, beta). ``out`` receives, before
@@ -1020,8 +1068,9 @@ def episode(
     the explorer only if ``advised``). The explorer's draws come from ``rng``, the ``random``
     rule's from ``rule_rng``, in the reference's order. ``goals`` is read by ``goal_aware``
     only (G may be 0 for the others), ``guide`` (its map, parameters and destination states)
-    by ``guide`` only."""
+    by ``guide`` only. ``out[0]`` receives the explorer's own cell."""
     next_state, open_moves, cells, optimal = world
+    compliance, noise, sight = visitor
     beta = rule_params[3]
     log_probs, _, _, theta, _ = tables
     goal_of_state, _, _, _, goal_log_theta = goals
@@ -1047,12 +1096,14 @@ def episode(
     g_scratch, g_pi, _ = guide_buffers(n_dest)
     g_rows = guide_rows(g_scratch, n_dest)
     heading = 0
-    if kind == LEFT:
+    has_heading = kind in (LEFT, CORRIDOR, STRAIGHT)
+    if has_heading:
         heading = int(rng.random() * 4)
     all_moves = np.ones(4, dtype=np.bool_)
     advice_count = 0
     benefit = 0.0
-    s = start
+    x = start
+    s = read_position(next_state, open_moves, x, noise, seen_rng)
     last_s = -1
     last_a = -1
     for t in range(max_steps):
@@ -1078,24 +1129,29 @@ def episode(
         if advise:
             advice_count += 1
             benefit += kl
-        states_out[t] = s
+        states_out[t] = x
         if record_p:
             p_out[t] = p
         advise_out[t] = advise
-        # ---- the explorer acts --------------------------------------------------------------
-        if advised and advise:  # two calls: one merged row variable cost a quarter (measured)
+        # ---- the explorer acts from its own cell x ------------------------------------------
+        a = in_sight(next_state, x, goal, sight) if sight > 0 else -1
+        if a >= 0:
+            pass  # its goal in sight: it walks there, whatever the advice
+        elif advised and advise and (compliance >= 1.0 or rng.random() < compliance):
+            # two calls: one merged row variable cost a quarter (measured)
             if rule in (GOAL_AWARE, GUIDE):
                 a = sample_action(theta_w, rng.random(), all_moves)
             else:
                 a = sample_action(theta[s * 4 : s * 4 + 4], rng.random(), all_moves)
         else:
-            a = own_action(kind, s, heading, goal, open_moves, cells, optimal, rng)
-        s2 = next_state[s, a]
-        if kind == LEFT and s2 != s:
+            a = own_action(kind, x, heading, goal, open_moves, cells, optimal, rng)
+        x2 = next_state[x, a]
+        if has_heading and x2 != x:
             heading = a
-        if s2 == goal:
+        if x2 == goal:
             ruled = n_goals - int(alive.sum()) + n_dest - int(g_alive.sum())
             return t + 1, True, advice_count, benefit, ruled
+        s2 = read_position(next_state, open_moves, x2, noise, seen_rng)
         # ---- the advisor appends (s, a) to H ------------------------------------------------
         if rule == GOAL_AWARE:
             gi = goal_of_state[s]
@@ -1119,6 +1175,7 @@ def episode(
             pos = push(ring, loglik, pos, t + 1, period, log_probs, s, a)
         last_s, last_a = s, a
         s = s2
+        x = x2
     ruled = n_goals - int(alive.sum()) + n_dest - int(g_alive.sum())
     return max_steps, False, advice_count, benefit, ruled
 

@@ -8,7 +8,9 @@ acts (sampling the advice, ``decision.advice``, if advised and ``advised`` is on
 ``s'``; reaching its goal ends the episode; otherwise the advisor appends (s, a) to its
 window and decides for ``s'``. Any advisor of :mod:`app.strategies` can watch.
 With ``advised=False`` the advisor still watches (its P(M1 | H) is recorded) but its advice
-is not passed on.
+is not passed on. A visitor's compliance, position noise and sight (``compliance``, ``noise``,
+``sight``) change the loop as :mod:`app.agents.explorers` describes, step by step; their
+defaults are the paper's protocol.
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from app.advice.advisor import Advisor, Decision
-from app.agents.explorers import FixedPolicyExplorer
+from app.agents.explorers import FixedPolicyExplorer, in_sight, read_position
 from app.agents.qlearning import GOAL_REWARD, QLearningExplorer
 from app.domain.grid import GridDomain
 
@@ -27,7 +29,7 @@ from app.domain.grid import GridDomain
 class EpisodeRecord:
     """What happened in one episode."""
 
-    states: list[int] = field(default_factory=list)  # the state of each decision, in order
+    states: list[int] = field(default_factory=list)  # the explorer's cell at each decision
     actions: list[int] = field(default_factory=list)
     decisions: list[Decision] = field(default_factory=list)
     success: bool = False
@@ -56,36 +58,52 @@ def run_episode(
     max_steps: int = 5000,
     new_task: bool = True,
     new_history: bool = True,
+    compliance: float = 1.0,
+    noise: float = 0.0,
+    sight: int = 0,
+    seen_rng: np.random.Generator | None = None,
 ) -> EpisodeRecord:
     """One episode from the start cell; the Q-learner also learns from every move.
 
     ``new_task`` calls ``explorer.reset`` (a Q-learner forgets its table); ``new_history``
-    starts a new advisor session (empty window, cost zero).
+    starts a new advisor session (empty window, cost zero). ``seen_rng`` draws the readings
+    of the explorer's cell (needed when ``noise`` > 0).
     """
+    if noise > 0.0 and seen_rng is None:
+        raise ValueError("position noise needs seen_rng, the readings' generator")
+    readings = seen_rng if seen_rng is not None else rng  # not drawn from at noise 0
     if new_task:
         explorer.reset(goal, rng)
     if new_history:
         advisor.reset()
     rec = EpisodeRecord()
-    s = domain.start
+    x = domain.start  # where the explorer is
+    s = read_position(domain, x, noise, readings)  # where the advisor sees it
     decision = advisor.decide(s)
     for _ in range(max_steps):
-        rec.states.append(s)
+        rec.states.append(x)
         rec.decisions.append(decision)
         # the advisor's payload: theta_s for the paper's rule, theta^w_s for goal-aware advice
         advice = np.asarray(decision.advice) if advised and decision.advice is not None else None
-        a = explorer.act(s, rng, advice)
-        s_next = int(domain.next_state[s, a])
+        seen = in_sight(domain, x, goal, sight) if sight > 0 else None
+        if seen is not None:  # its goal in sight: it walks there, whatever the advice
+            a = seen
+        else:
+            if advice is not None and compliance < 1.0 and rng.random() >= compliance:
+                advice = None  # it keeps to its own way this time
+            a = explorer.act(x, rng, advice)
+        x_next = int(domain.next_state[x, a])
         rec.actions.append(a)
         if isinstance(explorer, QLearningExplorer):
-            explorer.learn(s, a, s_next)
+            explorer.learn(x, a, x_next)
         else:
-            explorer.observe(s, a, s_next)
-        if s_next == goal:
+            explorer.observe(x, a, x_next)
+        if x_next == goal:
             rec.success = True
             break
+        s_next = read_position(domain, x_next, noise, readings)
         decision = advisor.observe(s, a, s_next)
-        s = s_next
+        s, x = s_next, x_next
     return rec
 
 

@@ -30,12 +30,37 @@ bug            greedy on coordinates: of the (at most two) moves that reduce the
                differences: random order. If neither is open it moves uniformly among the
                open moves (it has no memory, so it can be caught in a pocket).
 optimal        a shortest path to its goal (uniform among tied shortest-path moves)
+corridor       never turns back but in a dead end: uniform over the open moves other than
+               back (back only where nothing else is open); the heading is its last move
+               that changed the cell, the first drawn uniformly
+straight       keeps its heading while the way ahead is open; else as ``corridor``
 =============  ===========================================================================
+
+The first five are the paper's explorers (:data:`FIXED_EXPLORERS`); ``corridor`` and
+``straight`` are walkers with a purpose, for the visitors' experiment (:data:`WALKERS`).
+
+**Visitors** (:class:`Visitor`): a walker and what makes it a visitor as it is. The loop
+(:func:`app.agents.episodes.run_episode`, and the kernel ``episode``) does, per move:
+
+1. the advisor has decided for the cell it read (:func:`read_position`);
+2. sight r > 0: if the goal lies on a straight line of free cells from the explorer's own
+   cell within r moves (:func:`in_sight`), it takes that move, whatever the advice, no draw;
+3. else, if advised: compliance p < 1 draws one u from the explorer's generator and takes
+   the advice (one more draw, sampled from it) iff u < p, else its own rule; p = 1 takes the
+   advice without that draw (the paper's protocol, the same draws as before visitors);
+4. else its own rule (its own draws), from its own cell;
+5. it moves; if it is not at its goal, the advisor reads the new cell: with noise q > 0 one
+   draw u from the readings' generator, and if u < q a second draw picks one of the cell's
+   open moves uniformly and the reading is the cell it leads to (a cell without open moves
+   reads true); q = 0 draws nothing. The advisor appends (the cell it read before the move,
+   the action) and decides for the new reading. Every cell is read once.
 """
 
 from __future__ import annotations
 
-from typing import ClassVar
+import math
+from dataclasses import dataclass
+from typing import Any, ClassVar
 
 import numpy as np
 import numpy.typing as npt
@@ -46,6 +71,8 @@ from app.domain.paths import optimal_actions
 
 #: Names of the fixed-policy explorers, in the order used by the experiments and kernels.
 FIXED_EXPLORERS: tuple[str, ...] = ("random", "random-avoid", "left", "bug", "optimal")
+#: Every walker a visitor can be: the paper's explorers, then the walkers with a purpose.
+WALKERS: tuple[str, ...] = (*FIXED_EXPLORERS, "corridor", "straight")
 
 
 def sample_action(weights: npt.ArrayLike, u: float, mask: npt.ArrayLike | None = None) -> int:
@@ -207,17 +234,159 @@ class OptimalExplorer(FixedPolicyExplorer):
         return uniform_choice(best, rng.random())
 
 
+class CorridorExplorer(LeftExplorer):
+    """A corridor walker: never turns back but in a dead end.
+
+    Uniform over the open moves other than back (relative to its heading, the direction of its
+    last move that changed the cell, the first drawn uniformly at ``reset``); back only where
+    nothing else is open.
+    """
+
+    name = "corridor"
+
+    def policy(self, state: int, rng: np.random.Generator) -> int:
+        open_moves = self.domain.open_moves[state]
+        back = (self.heading + 2) % N_ACTIONS
+        ahead = open_moves.copy()
+        ahead[back] = False
+        if ahead.any():
+            return uniform_choice(ahead, rng.random())
+        return back if open_moves[back] else self.heading  # a dead end: back
+
+
+class StraightExplorer(CorridorExplorer):
+    """Straight ahead while the way is open; else as the corridor walker."""
+
+    name = "straight"
+
+    def policy(self, state: int, rng: np.random.Generator) -> int:
+        if self.domain.open_moves[state, self.heading]:
+            return self.heading
+        return super().policy(state, rng)
+
+
 EXPLORER_CLASSES: dict[str, type[FixedPolicyExplorer]] = {
     cls.name: cls
-    for cls in (RandomExplorer, RandomAvoidExplorer, LeftExplorer, BugExplorer, OptimalExplorer)
-}
+    for cls in (
+        RandomExplorer, RandomAvoidExplorer, LeftExplorer, BugExplorer, OptimalExplorer,
+        CorridorExplorer, StraightExplorer,
+    )
+}  # fmt: skip
 
 
 def make_explorer(name: str, domain: GridDomain) -> FixedPolicyExplorer:
-    """A fixed-policy explorer by name (one of :data:`FIXED_EXPLORERS`)."""
+    """A fixed-policy explorer by name (one of :data:`WALKERS`)."""
     try:
         return EXPLORER_CLASSES[name](domain)
     except KeyError:
-        raise ValueError(
-            f"unknown explorer {name!r}: use one of {', '.join(FIXED_EXPLORERS)}"
-        ) from None
+        raise ValueError(f"unknown explorer {name!r}: use one of {', '.join(WALKERS)}") from None
+
+
+def in_sight(domain: GridDomain, state: int, goal: int, reach: int) -> int | None:
+    """The move along a straight line of free cells from ``state`` that reaches ``goal``
+    within ``reach`` moves (N, E, S, W tried in turn), or None."""
+    for a in range(N_ACTIONS):
+        x = state
+        for _ in range(reach):
+            y = int(domain.next_state[x, a])
+            if y == x:
+                break
+            if y == goal:
+                return a
+            x = y
+    return None
+
+
+def read_position(domain: GridDomain, state: int, noise: float, rng: np.random.Generator) -> int:
+    """The cell an advisor reads for an explorer at ``state``: with probability ``noise``
+    (one draw) a uniformly drawn open neighbour (a second draw), else ``state``; no draw
+    at all when ``noise`` is 0."""
+    if noise <= 0.0:
+        return state
+    open_moves = domain.open_moves[state]
+    if rng.random() >= noise or not open_moves.any():
+        return state
+    return int(domain.next_state[state, uniform_choice(open_moves, rng.random())])
+
+
+#: where a visitor's goal is drawn from: the map's destinations, or any free cell
+GOAL_SETS: tuple[str, ...] = ("destinations", "anywhere")
+
+
+@dataclass(frozen=True)
+class Visitor:
+    """A walker and what makes it a visitor as it is (see the module's docstring).
+
+    Written as a spec: the walker, then any of ``p=P`` (compliance, 0 to 1: takes a piece of
+    advice with probability P), ``q=Q`` (position noise, 0 to 1: each cell is read one cell
+    off with probability Q), ``r=R`` (sight, an integer >= 0: walks to its goal once it is in
+    a straight line of free cells within R moves; 0 off) and ``anywhere`` (bound for any free
+    cell, not only the map's destinations). ``"random p=0.5"``, ``"optimal anywhere"``,
+    ``"corridor q=0.1"``, ``"random r=8"``. Defaults: p=1, q=0, r=0, destinations, which is
+    the paper's explorer.
+    """
+
+    walker: str
+    compliance: float = 1.0
+    noise: float = 0.0
+    sight: int = 0
+    goals: str = "destinations"
+
+    def __post_init__(self) -> None:
+        if self.walker not in WALKERS:
+            raise ValueError(f"unknown walker {self.walker!r}: use one of {', '.join(WALKERS)}")
+        for name, v in (("p (compliance)", self.compliance), ("q (position noise)", self.noise)):
+            if not (isinstance(v, int | float) and math.isfinite(v) and 0.0 <= v <= 1.0):
+                raise ValueError(f"{name} must be a number from 0 to 1, got {v}")
+        if not (isinstance(self.sight, int) and self.sight >= 0):
+            raise ValueError(f"r (sight) must be an integer >= 0, got {self.sight}")
+        if self.goals not in GOAL_SETS:
+            raise ValueError(f"goals must be one of {', '.join(GOAL_SETS)}, got {self.goals!r}")
+
+    @classmethod
+    def parse(cls, spec: str) -> Visitor:
+        """A visitor from its spec (ValueError naming what is wrong and what is allowed)."""
+        words = spec.split()
+        if not words:
+            raise ValueError("an empty visitor spec: give a walker, e.g. 'random p=0.5'")
+        given: dict[str, Any] = {}
+        for word in words[1:]:
+            key, eq, value = word.partition("=")
+            if not eq and word in GOAL_SETS:
+                key, value = "goals", word
+            elif key not in _SPEC_KEYS or not eq:
+                raise ValueError(
+                    f"visitor {spec!r}: {word!r} is not one of p=P, q=Q, r=R, "
+                    f"{', '.join(GOAL_SETS)}"
+                )
+            field_name = _SPEC_KEYS.get(key, "goals")
+            if field_name in given:
+                raise ValueError(f"visitor {spec!r}: {key} given twice")
+            try:
+                given[field_name] = (
+                    value if field_name == "goals" else int(value) if key == "r" else float(value)
+                )
+            except ValueError:
+                raise ValueError(f"visitor {spec!r}: {word!r} is not a number") from None
+        return cls(words[0], **given)
+
+    @property
+    def name(self) -> str:
+        """The spec in its usual form: the walker, then what differs from the defaults."""
+        parts = [self.walker]
+        if self.compliance != 1.0:
+            parts.append(f"p={self.compliance:g}")
+        if self.noise != 0.0:
+            parts.append(f"q={self.noise:g}")
+        if self.sight:
+            parts.append(f"r={self.sight}")
+        if self.goals != "destinations":
+            parts.append(self.goals)
+        return " ".join(parts)
+
+    @property
+    def anywhere(self) -> bool:
+        return self.goals == "anywhere"
+
+
+_SPEC_KEYS = {"p": "compliance", "q": "noise", "r": "sight", "goals": "goals"}

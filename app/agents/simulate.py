@@ -6,13 +6,15 @@
 
 Every advising strategy of :mod:`app.strategies` with a compiled form runs in the same kernel
 (``strategy=``; one without runs the reference loop); ``goal_aware`` and ``guide`` need the
-per-goal counts (``goal_priors``). From equal generators a run makes the draws, moves and
-decisions of the reference loop (:func:`app.agents.episodes.run_episode`), which
-``tests/agents/test_simulate.py`` checks.
+per-goal counts (``goal_priors``). A visitor's compliance, position noise and sight are
+keywords of :meth:`Simulator.fixed` (defaults: the paper's explorer). From equal generators a
+run makes the draws, moves and decisions of the reference loop
+(:func:`app.agents.episodes.run_episode`), which ``tests/agents/test_simulate.py`` checks.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -24,7 +26,7 @@ from app.advice.models import AdviceTables
 from app.advice.params import StrategyParams
 from app.advice.priors import GoalPriors
 from app.agents.episodes import run_episode
-from app.agents.explorers import FIXED_EXPLORERS, make_explorer
+from app.agents.explorers import WALKERS, make_explorer
 from app.agents.qlearning import TIE_RULES
 from app.arrays import BoolArray, FloatArray, IntArray
 from app.domain.grid import GridDomain
@@ -34,7 +36,8 @@ from app.strategies import AdvisorSettings, DomainData, Need, Strategy
 #: the kernels' codes for the explorers and the strategies, by name
 EXPLORER_CODES = {
     "random": kernels.RANDOM, "random-avoid": kernels.RANDOM_AVOID, "left": kernels.LEFT,
-    "bug": kernels.BUG, "optimal": kernels.OPTIMAL,
+    "bug": kernels.BUG, "optimal": kernels.OPTIMAL, "corridor": kernels.CORRIDOR,
+    "straight": kernels.STRAIGHT,
 }  # fmt: skip
 _NOTHING = np.zeros(0)
 _DEFAULTS = StrategyParams()
@@ -45,6 +48,8 @@ _NO_GUIDE: kernels.GuideArrays = (
     np.zeros((0, 0), dtype=np.int64),
 )  # fmt: skip
 _NO_GOALS = np.zeros(0, dtype=np.int64)
+_NO_OPTIMAL = np.zeros((0, 4), dtype=np.bool_)  # read by the optimal explorer only
+_UNREAD_RNG = np.random.default_rng(0)  # the readings' generator where nothing is misread
 
 
 def guide_arrays(window: int, params: StrategyParams) -> kernels.GuideParams:
@@ -61,7 +66,7 @@ class FixedRun:
     advice_count: int
     benefit: float  # sum of the deciding KL at advised states (the paper's KL for peer rules)
     goals_ruled_out: int  # goal_aware only (0 otherwise)
-    states: IntArray  # state before each move
+    states: IntArray  # the explorer's cell before each move (the advisor may read another)
     p_normal: FloatArray  # P(M1 | H) at each decision the explorer acted on (if recorded)
     advise: BoolArray  # the advisor's decision there (given to the explorer only if advised)
 
@@ -177,6 +182,11 @@ class Simulator:
     def optimal(self, goal: int) -> BoolArray:
         return self._world(goal)[3]
 
+    def _walls(self) -> tuple[IntArray, BoolArray, IntArray, BoolArray]:
+        """The world of every explorer but the optimal one (which alone reads the optimal
+        moves to its goal): no search per goal, so any free cell can be a goal."""
+        return (self.next_state, self.open_moves, self.cells, _NO_OPTIMAL)
+
     def _world(self, goal: int) -> tuple[IntArray, BoolArray, IntArray, BoolArray]:
         """What the episode kernel reads of the maze for ``goal`` (made once per goal)."""
         if goal not in self._worlds:
@@ -198,26 +208,49 @@ class Simulator:
         rule_rng: np.random.Generator | None = None,
         max_steps: int = 5000,
         record_p: bool = True,
+        compliance: float = 1.0,
+        noise: float = 0.0,
+        sight: int = 0,
+        seen_rng: np.random.Generator | None = None,
     ) -> FixedRun:
-        """One task of ``explorer`` (a name in FIXED_EXPLORERS) from the start cell, watched
-        by the advisor of ``strategy``. ``rule_rng`` is the ``random`` rule's own generator
-        (default: seeded with ``params.seed``, as the reference advisor seeds its own)."""
-        if explorer not in FIXED_EXPLORERS:
-            raise ValueError(f"unknown explorer {explorer!r}: use {', '.join(FIXED_EXPLORERS)}")
+        """One task of ``explorer`` (a name in WALKERS) from the start cell to ``goal`` (any
+        free cell but the start), watched by the advisor of ``strategy``. ``rule_rng`` is the
+        ``random`` rule's own generator (default: seeded with ``params.seed``, as the reference
+        advisor seeds its own). A visitor (:class:`app.agents.explorers.Visitor`): takes a
+        piece of advice with probability ``compliance``; is read one cell off with probability
+        ``noise`` (drawn from ``seen_rng``, needed then); walks to its goal once it is in sight
+        within ``sight`` cells (0: never)."""
+        if explorer not in WALKERS:
+            raise ValueError(f"unknown explorer {explorer!r}: use {', '.join(WALKERS)}")
         entry, settings = self.settings(strategy, kappa, window, params)
         if max_steps < 1:
             raise ValueError(f"max_steps must be at least 1, got {max_steps}")
+        if not (0 <= goal < self.domain.n_states) or goal == self.domain.start:
+            raise ValueError(f"goal must be a free cell other than the start, got {goal}")
+        for name, v in (("compliance", compliance), ("noise", noise)):
+            if not (math.isfinite(v) and 0.0 <= v <= 1.0):
+                raise ValueError(f"{name} must be a number from 0 to 1, got {v}")
+        if sight < 0:
+            raise ValueError(f"sight must be >= 0, got {sight}")
+        if noise > 0.0 and seen_rng is None:
+            raise ValueError("position noise needs seen_rng, the readings' generator")
+        visitor = (float(compliance), float(noise), int(sight))
+        readings = _UNREAD_RNG if seen_rng is None else seen_rng
         if entry.kernel is None:
-            return self._fixed_readable(entry, settings, explorer, goal, rng, advised, max_steps)
+            return self._fixed_readable(
+                entry, settings, explorer, goal, rng, advised, max_steps, visitor, readings
+            )
         p = settings.params
         if rule_rng is None:  # a fresh generator only where the random rule draws from it
             rule_rng = np.random.default_rng(p.seed) if "seed" in entry.reads else _UNUSED_RNG
         states = np.empty(max_steps, dtype=np.int64)
         p_out = np.empty(max_steps) if record_p else _NOTHING
         advise = np.empty(max_steps, dtype=np.bool_)
+        world = self._world(goal) if explorer == "optimal" else self._walls()
         steps, success, count, benefit, ruled_out = kernels.episode(
             EXPLORER_CODES[explorer],
-            self._world(goal),
+            visitor,
+            world,
             self.domain.start,
             goal,
             max_steps,
@@ -232,6 +265,7 @@ class Simulator:
             self._guide(entry, settings),
             rng,
             rule_rng,
+            readings,
             (states, p_out, advise),
         )
         return FixedRun(
@@ -242,12 +276,15 @@ class Simulator:
     def _fixed_readable(
         self, entry: Strategy, settings: AdvisorSettings, explorer: str, goal: int,
         rng: np.random.Generator, advised: bool, max_steps: int,
+        visitor: kernels.VisitorParams, readings: np.random.Generator,
     ) -> FixedRun:  # fmt: skip
         """:meth:`fixed` for a strategy without a compiled form: the reference loop."""
         advisor = entry.advisor(self.data, settings)
+        compliance, noise, sight = visitor
         rec = run_episode(
             self.domain, make_explorer(explorer, self.domain), advisor, goal, rng,
-            advised=advised, max_steps=max_steps,
+            advised=advised, max_steps=max_steps, compliance=compliance, noise=noise,
+            sight=sight, seen_rng=readings,
         )  # fmt: skip
         beliefs = advisor.goal_beliefs() or []
         return FixedRun(

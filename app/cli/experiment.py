@@ -39,6 +39,7 @@ EXPERIMENTS = {
     "ablations": ("ablations", "One setting changed at a time: alpha0, experts, kappa, ..."),
     "strategies": ("strategies", "Every advising strategy on a suite of maps."),
     "buildings": ("buildings", "Lost explorers in buildings: paper, goal_aware and guide."),
+    "visitors": ("visitors", "Visitors as they are (compliance, noise, sight) in buildings."),
     "all": ("paper", "The paper's protocol end to end: Table I, Figures 5-7, difficulty."),
 }
 

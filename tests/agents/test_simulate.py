@@ -19,7 +19,7 @@ from app.advice.params import StrategyParams
 from app.advice.priors import GoalPriors
 from app.agents.episodes import run_episode, run_learning
 from app.agents.experts import train_goal_priors, train_prior
-from app.agents.explorers import FIXED_EXPLORERS, make_explorer
+from app.agents.explorers import FIXED_EXPLORERS, WALKERS, Visitor, make_explorer
 from app.agents.qlearning import QLearningExplorer
 from app.agents.simulate import EXPLORER_CODES, QParams, Simulator
 from app.domain.generate import generate_domain
@@ -43,7 +43,7 @@ def test_fsum_rounds_half_even_across_partials() -> None:
 
 
 def test_kernel_codes_name_every_explorer_and_strategy() -> None:
-    assert set(EXPLORER_CODES) == set(FIXED_EXPLORERS)
+    assert set(EXPLORER_CODES) == set(WALKERS)
     assert len(set(EXPLORER_CODES.values())) == len(EXPLORER_CODES)
     codes = [strategies.get(name).kernel for name in STRATEGIES]
     assert None not in codes and len(set(codes)) == len(codes)  # each compiled, its own code
@@ -108,6 +108,101 @@ def test_compiled_episode_follows_the_reference_loop(
         assert fast.p_normal.tolist() == [dec.p_normal for dec in ref.decisions]
     beliefs = advisor.goal_beliefs()
     assert fast.goals_ruled_out == (sum(out for *_, out in beliefs) if beliefs else 0)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    st.integers(0, 10_000),
+    st.sampled_from(STRATEGIES),
+    st.sampled_from(WALKERS),
+    st.sampled_from([0.0, 0.3, 1.0]),
+    st.sampled_from([0.0, 0.1, 0.5, 1.0]),
+    st.sampled_from([0, 1, 4]),
+    st.booleans(),
+    st.booleans(),
+)
+def test_compiled_visitor_follows_the_reference_loop(
+    seed: int, strategy: str, walker: str, compliance: float, noise: float, sight: int,
+    anywhere: bool, advised: bool,
+) -> None:  # fmt: skip
+    """Visitors (compliance, readings one cell off, sight, any free cell as the goal, the
+    corridor and straight walkers) make the reference loop's draws, moves and decisions."""
+    d, tables, goal_priors = world(seed, 2 + seed % 2)
+    rng = np.random.default_rng(seed)
+    params = StrategyParams(
+        n_steps=int(rng.integers(0, 60)), threshold=0.3, rate=0.3, beta=float(seed % 2),
+        seed=seed, p_lost=float(rng.choice([0.05, 0.5])), slack=0.5, spread=0.05,
+    )  # fmt: skip
+    cells = [c for c in range(d.n_states) if c != d.start]
+    goal = cells[seed % len(cells)] if anywhere else d.goals[seed % len(d.goals)]
+    kappa, window = float(rng.choice([0.0, 0.3, 0.7])), int(rng.integers(3, 40))
+    fast = Simulator(d, tables, goal_priors).fixed(
+        walker, goal, np.random.default_rng(seed), advised=advised, strategy=strategy,
+        kappa=kappa, window=window, params=params, max_steps=600, compliance=compliance,
+        noise=noise, sight=sight, seen_rng=np.random.default_rng(seed + 7),
+    )  # fmt: skip
+    advisor = make_advisor(
+        strategy, tables, kappa, window, params, goal_priors, GuideMap.of(d, goal_priors)
+    )
+    ref = run_episode(
+        d, make_explorer(walker, d), advisor, goal, np.random.default_rng(seed),
+        advised=advised, max_steps=600, compliance=compliance, noise=noise, sight=sight,
+        seen_rng=np.random.default_rng(seed + 7),
+    )  # fmt: skip
+    assert (fast.success, fast.steps) == (ref.success, ref.steps)
+    assert fast.states.tolist() == ref.states
+    assert fast.advise.tolist() == [dec.advise for dec in ref.decisions]
+    assert fast.benefit == ref.decisions[-1].benefit
+    if strategy in ("paper", "goal_aware", "guide"):
+        assert fast.p_normal.tolist() == [dec.p_normal for dec in ref.decisions]
+
+
+def test_a_full_compliance_visitor_is_the_paper_s_explorer() -> None:
+    """p = 1, q = 0, r = 0 make the draws of today's explorer (no compliance draw, no
+    reading drawn): the same run whatever the readings' generator."""
+    d, tables, goal_priors = world(5, 2)
+    sim = Simulator(d, tables, goal_priors)
+    for walker in FIXED_EXPLORERS:
+        a = sim.fixed(walker, d.goals[1], np.random.default_rng(3), advised=True,
+                      strategy="guide", max_steps=500)  # fmt: skip
+        b = sim.fixed(walker, d.goals[1], np.random.default_rng(3), advised=True,
+                      strategy="guide", max_steps=500, compliance=1.0, noise=0.0, sight=0,
+                      seen_rng=np.random.default_rng(99))  # fmt: skip
+        assert a.states.tolist() == b.states.tolist()
+        assert a.advise.tolist() == b.advise.tolist()
+
+
+def test_visitor_walkers_and_sight() -> None:
+    """The corridor walker never turns back in a corridor, the straight one keeps its
+    heading, and a visitor with its goal in sight walks straight to it."""
+    d = GridDomain.from_strings(["S.........G"])
+    sim = Simulator(d, AdviceTables.paper(np.full((d.n_states, 4), 0.25)))
+    for walker in ("corridor", "straight"):
+        for i in range(20):
+            run = sim.fixed(walker, d.goals[0], np.random.default_rng(i), advised=False)
+            assert run.success and run.steps == 10  # east at once, or back from the wall
+    near = sim.fixed("random", d.goals[0], np.random.default_rng(0), advised=False, sight=10)
+    assert near.success and near.steps == 10
+    far = sim.fixed("random", d.goals[0], np.random.default_rng(0), advised=False, sight=3)
+    assert far.steps > 10
+
+
+def test_visitor_specs() -> None:
+    v = Visitor.parse("corridor  q=0.1 p=0.5 r=8 anywhere")
+    assert (v.walker, v.compliance, v.noise, v.sight, v.anywhere) == ("corridor", 0.5, 0.1, 8, True)
+    assert v.name == "corridor p=0.5 q=0.1 r=8 anywhere"
+    assert Visitor.parse("random destinations").name == "random"
+    for bad, says in (
+        ("", "empty"),
+        ("teleport", "unknown walker"),
+        ("random p=2", "from 0 to 1"),
+        ("random x=1", "is not one of"),
+        ("random p=a", "not a number"),
+        ("random p=0.5 p=0.4", "twice"),
+        ("random r=-1", "r \\(sight\\)"),
+    ):
+        with pytest.raises(ValueError, match=says):
+            Visitor.parse(bad)
 
 
 @settings(max_examples=25, deadline=None)

@@ -1,0 +1,120 @@
+"""The visitors experiment runs in seconds with a tiny budget, writes its files, repeats the
+buildings experiment's tasks for a plain walker, and its floor is the best order of the
+destinations (checked against every order)."""
+
+from __future__ import annotations
+
+import itertools
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from app.cli import cli
+from app.domain.generate import generate_building_domain, generate_domain
+from app.domain.grid import GridDomain
+from app.experiments import buildings, visitors
+from app.experiments.output import RunDir
+
+VISITORS = ("random", "corridor p=0.5", "optimal q=0.2", "random anywhere", "straight r=5")
+TINY: dict[str, Any] = {
+    "tasks": 3, "buildings": (24,), "steps": 300, "workers": 1, "progress": False,
+    "visitors": VISITORS,
+}  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def floor(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("maps") / "floor.txt"
+    path.write_text(generate_building_domain(20, 26, 9, n_goals=3).to_text())
+    return path
+
+
+@pytest.fixture(scope="module")
+def tiny(floor: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, Any]]:
+    out = tmp_path_factory.mktemp("visitors")
+    return out, visitors.run(visitors.Args(mazes=(floor,), **TINY), RunDir(out))
+
+
+def test_writes_every_file_and_a_row_per_map_visitor_and_config(
+    tiny: tuple[Path, dict[str, Any]],
+) -> None:
+    out, result = tiny
+    for name in ("visitors.json", "visitors.csv", "visitors.md", "visitors.png"):
+        assert (out / name).stat().st_size > 0, name
+    assert [m["name"] for m in result["maps"]][1] == "floor"
+    assert {c["key"] for c in result["configs"]} == {"none", "guide@0.5"}
+    assert [v["spec"] for v in result["visitors"]] == list(VISITORS)
+    assert len(result["rows"]) == 3 * len(VISITORS) * 2  # two maps and the suite
+    for r in result["rows"]:
+        assert r["tasks"] == (6 if r["map"] == "suite" else 3)
+        assert r["arrived"] == round(r["success"] * r["tasks"])
+        assert 0.0 <= r["trapped_share"] <= 1.0
+        if r["curve"] == "none":
+            assert r["advice_per_task"] == 0 and r["change_success"] == 0
+        if r["goals"] == "anywhere" or r["map"] == "suite":
+            assert r["arrival_over_floor"] is None
+    text = (out / "visitors.md").read_text()
+    assert "## guide@0.5 against no advice" in text and "corridor p=0.5" in text
+    stored = json.loads((out / "visitors.json").read_text())["rows"]  # NaN stored as null
+    assert [(r["visitor"], r["key"], r["success"]) for r in stored] == [
+        (r["visitor"], r["key"], r["success"]) for r in result["rows"]
+    ]
+    for m in result["maps"]:
+        assert m["floor"] is not None and m["floor_on_tasks"] is not None
+        assert sorted(m["order"]) == list(range(m["goals"]))
+
+
+def test_a_plain_walker_repeats_the_buildings_tasks(floor: Path) -> None:
+    """The same maps, experts, goals and walker streams as ``experiment buildings``."""
+    args = visitors.Args(mazes=(floor,), **{**TINY, "buildings": ()})
+    spec = buildings.map_suite(args.suite())[0]
+    mine = visitors.run_job(args, spec, "random")
+    theirs = buildings.run_fixed(
+        buildings.Args(mazes=(floor,), buildings=(), tasks=3, steps=300, strategies=("guide",),
+                       guide_levels=(), q_tasks=0, progress=False),
+        spec, "random",
+    )  # fmt: skip
+    for key in ("none", "guide@0.5"):
+        for measure in ("success", "steps", "advice"):
+            np.testing.assert_array_equal(mine[key][measure], theirs[key][measure])
+
+
+def latency(d: GridDomain, order: tuple[int, ...]) -> int:
+    """The sum of the arrivals at the destinations visited in ``order`` from the start."""
+    dist = d.goal_distances
+    t, at, out = 0, -1, 0
+    for j in order:
+        t += int(dist[j, d.start] if at < 0 else dist[j, d.goals[at]])
+        out, at = out + t, j
+    return out
+
+
+def test_floor_is_the_best_order_of_the_destinations() -> None:
+    for seed in range(3):
+        d = generate_domain(13, 15, seed, braid=0.3, n_goals=5)
+        got = visitors.min_latency_order(d)
+        assert got is not None
+        order, arrival = got
+        every = itertools.permutations(range(len(d.goals)))
+        assert sum(arrival) == min(latency(d, p) for p in every)
+        assert latency(d, tuple(order)) == sum(arrival)
+
+
+def test_trapped_moves_count_windows_of_few_cells() -> None:
+    pacing = np.array([1, 2, 3, 4] * 30)  # 120 positions on 4 cells: every window trapped
+    assert visitors.trapped_moves(pacing) == 120 - 49
+    assert visitors.trapped_moves(np.arange(200)) == 0
+    assert visitors.trapped_moves(np.array([1, 2, 3, 4, 5] * 20)) == 0  # 5 cells: not trapped
+    assert visitors.trapped_moves(np.array([7] * 49)) == 0  # shorter than a window
+
+
+def test_a_bad_visitor_spec_is_refused_in_one_line(floor: Path) -> None:
+    result = CliRunner().invoke(
+        cli, ["experiment", "visitors", "--mazes", str(floor), "--visitors", "random p=2"]
+    )
+    assert result.exit_code == 2
+    assert "p (compliance) must be a number from 0 to 1" in result.output
