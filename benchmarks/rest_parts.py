@@ -32,7 +32,10 @@ costs the median over the rounds of (whole - without it). What "off" means for e
   advisor update, no rings, no replay row);
 * answer building: ``decision_json`` answered with bytes of the same length made beforehand;
 * route work, all of the above that the endpoint does (token check, read, decide, count,
-  write): the endpoint answering stored bytes after reading the body.
+  write): the endpoint answering stored bytes after reading the body;
+* route handler: what the route's ASGI app does around the endpoint function (FastAPI's:
+  parameters resolved and validated, exit stacks, exception handling; or the service's own
+  handler) against a function calling the endpoint function at once.
 
 The bare FastAPI endpoint of ``baseline_app.py`` (parses the body, answers the same number of
 bytes) runs under the same guarded protocol: the yardstick ``bench_service.py`` uses.
@@ -61,6 +64,7 @@ from typing import Any
 HERE = Path(__file__).resolve().parents[1]
 SESSIONS = 64
 CONNECTIONS = 32
+EVENTS = "/sessions/{session_id}/events"
 
 Undo = Callable[[], None]
 
@@ -240,6 +244,7 @@ def patch(owner: Any, name: str, value: Any) -> Undo:
 
 
 async def measure(args: argparse.Namespace) -> dict[str, Any]:
+    from starlette.requests import Request
     from uvicorn.protocols.http.httptools_impl import HttpToolsProtocol
 
     from app.cli.serve import uvicorn_options
@@ -312,7 +317,17 @@ async def measure(args: argparse.Namespace) -> dict[str, Any]:
             async def stored_answer(st: Any, session: Any, raw: Any, binary: bool = False) -> Any:
                 return answer
 
+            route = next(r for r in app.router.routes if getattr(r, "path", "") == EVENTS)
+
+            async def no_handler(scope: Any, receive: Any, send: Any) -> None:
+                request = Request(scope, receive, send)
+                response = await routes.post_events(request, scope["path_params"]["session_id"])
+                await response(scope, receive, send)
+
             toggles: dict[str, Callable[[], Undo]] = {
+                "route handler (what the route does around the endpoint function)": lambda: patch(
+                    route, "app", no_handler
+                ),
                 "body and websocket checks": stack_off(user & {"BodyLimit", "NoWebSocketRoute"}),
                 "metrics (requests)": stack_off(user & {"MetricsMiddleware"}),
                 "metrics (decisions)": lambda: patch(ops, "_count", lambda *a: None),
