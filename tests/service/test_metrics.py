@@ -168,6 +168,67 @@ def test_a_live_server_counts_event_routes_instead_of_logging_them(tmp_path: Pat
     assert 'method="WS",route="/sessions/{session_id}/stream",status="101"} 1.0' in counted
 
 
+def _access_lines(quiet: bool) -> tuple[list[bool], list[str]]:
+    """Two requests (an event, another route) through the service's HTTP protocol over an
+    in-memory transport, uvicorn's access logger at INFO, the event lines dropped (``quiet``)
+    or not: whether the protocol meant to log each, and the lines that reached a handler."""
+    import asyncio
+    from unittest import mock
+
+    from uvicorn.config import Config
+    from uvicorn.server import ServerState
+
+    from app.service.guard import guarded_http
+    from app.service.logs import quiet_event_routes
+
+    async def app(scope: Any, receive: Any, send: Any) -> None:
+        await send({"type": "http.response.start", "status": 200, "headers": []})
+        await send({"type": "http.response.body", "body": b"{}"})
+
+    lines: list[str] = []
+    handler = logging.Handler()
+    handler.emit = lambda record: lines.append(record.getMessage())  # type: ignore[method-assign]
+    logger = logging.getLogger("uvicorn.access")
+    kept = logger.filters[:]
+    transport = mock.Mock(is_closing=lambda: False, get_extra_info=lambda *a: None)
+    logged: list[bool] = []
+
+    async def run() -> None:
+        config = Config(app, log_config=None, proxy_headers=False)
+        config.load()
+        protocol = guarded_http(16384, 5.0, 5.0, 10, 10, [])(config, ServerState(), {})
+        protocol.connection_made(transport)
+        for path in (b"/sessions/ab12/events", b"/sessions/ab12"):
+            protocol.data_received(b"POST " + path + b" HTTP/1.1\r\nHost: x\r\n\r\n")
+            logged.append(protocol.cycle.access_log)
+            await asyncio.sleep(0)  # the application task answers
+        protocol.connection_lost(None)
+
+    logger.addHandler(handler)
+    level = logger.level
+    logger.setLevel(logging.INFO)
+    try:
+        for f in [f for f in logger.filters if isinstance(f, SkipEventRoutes)]:
+            logger.removeFilter(f)
+        if quiet:
+            quiet_event_routes()
+        asyncio.run(run())
+    finally:
+        logger.removeHandler(handler)
+        logger.setLevel(level)
+        logger.filters[:] = kept
+    return logged, lines
+
+
+def test_the_protocol_makes_no_access_line_the_log_would_drop() -> None:
+    logged, lines = _access_lines(quiet=True)  # the default: event routes counted, not logged
+    assert logged == [False, True]
+    assert len(lines) == 1 and "/sessions/ab12 " in lines[0]
+    logged, lines = _access_lines(quiet=False)  # ADVISOR_ACCESS_LOG_EVENTS=true
+    assert logged == [True, True]
+    assert len(lines) == 2 and "/sessions/ab12/events" in lines[0]
+
+
 def test_metrics_add_up_the_workers_in_prometheus_multiprocess_mode(tmp_path: Path) -> None:
     """Three worker processes count; a fourth answers /metrics with their sums (the live
     sessions, which every worker counts whole when they share them: the value set last by a
