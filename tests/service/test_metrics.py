@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 import httpx
+from fastapi import FastAPI
 from fastapi.testclient import TestClient
 from prometheus_client import REGISTRY
 from prometheus_client.parser import text_string_to_metric_families
@@ -64,6 +65,69 @@ def test_metrics_count_requests_by_route_template_not_path(client: TestClient) -
 
 
 E = {"state": [28, 0], "action": "E"}
+
+
+def series(name: str) -> dict[tuple[tuple[str, str], ...], float]:
+    """The samples of ``name`` in the registry: label sets and values."""
+    return {
+        tuple(sorted(s.labels.items())): s.value
+        for family in REGISTRY.collect()
+        for s in family.samples
+        if s.name == name
+    }
+
+
+#: methods llhttp (uvicorn's parser) knows, and some it does not
+METHODS = [
+    *("GET", "HEAD", "POST", "PUT", "DELETE", "CONNECT", "OPTIONS", "TRACE", "PATCH", "COPY"),
+    *("LOCK", "MKCOL", "MOVE", "PROPFIND", "PROPPATCH", "SEARCH", "UNLOCK", "BIND", "REBIND"),
+    *("UNBIND", "ACL", "REPORT", "MKACTIVITY", "CHECKOUT", "MERGE", "M-SEARCH", "NOTIFY"),
+    *("SUBSCRIBE", "UNSUBSCRIBE", "PURGE", "MKCALENDAR", "LINK", "UNLINK", "SOURCE", "QUERY"),
+    *("DESCRIBE", "ANNOUNCE", "SETUP", "PLAY", "PAUSE", "TEARDOWN", "GET_PARAMETER"),
+    *("SET_PARAMETER", "REDIRECT", "RECORD", "FLUSH", "FOO", "BAR", "X-EVIL", "ZZZZ"),
+]
+
+
+def test_no_metrics_label_takes_a_value_the_client_chose(client: TestClient) -> None:
+    """50 methods x 20 paths: the series they add name only the routes' own methods (any
+    other is OTHER) and route templates (any other path is <unmatched>)."""
+    from app.service import apidocs, metrics, viewer_feed
+    from app.service.routes import ROUTERS
+
+    assert len(METHODS) == 50
+    sid, auth, _ = open_session(client)
+    paths = [
+        f"/sessions/{sid}/events", f"/sessions/{sid}", f"/sessions/{sid}/positions",
+        "/sessions", "/domains", "/domains/default", "/domains/default/sessions",
+        "/domains/default/prior", "/health", "/metrics", "/overview", "/docs", "/openapi.json",
+        "/static/app.js", f"/no/such/{sid}", "/%00", "/" + "x" * 300, "/sessions/a/b/c",
+        "/domains/no-such", "/viewer",
+    ]  # fmt: skip
+    assert len(paths) == 20
+    names = ("advisor_http_requests_total", "advisor_http_request_duration_seconds_count")
+    before = {n: series(n) for n in names}
+    for method in METHODS:
+        for path in paths:
+            client.request(method, path, headers=auth)
+    app: FastAPI = client.app  # type: ignore[assignment]
+    routers = (app.router, *ROUTERS, viewer_feed.router, apidocs.router, metrics.router)
+    routes = [r for router in routers for r in router.routes]
+    own: dict[str, set[str]] = {}  # each route template's methods
+    for r in routes:
+        if hasattr(r, "path"):
+            own.setdefault(r.path, set()).update(getattr(r, "methods", None) or ())
+    anywhere = set().union(*own.values())
+    assert anywhere == {"GET", "HEAD", "POST", "PUT", "DELETE"}
+    own |= {p: anywhere for p in ("<unmatched>", "/static/{path}", "/static-offline-docs/{path}")}
+    for name in names:
+        after = series(name)
+        assert sum(after.values()) - sum(before[name].values()) == 50 * 20  # each counted
+        added = [dict(x) for x in after.keys() - before[name].keys()]
+        assert {x["method"] for x in added} <= anywhere | {"OTHER"}
+        for x in added:  # a route's own methods, or OTHER
+            assert x["method"] in own[x["route"]] | {"OTHER"}, x
+        assert len({x["route"] for x in added}) <= len(paths)
+        assert {dict(x)["method"] for x in after} <= anywhere | {"OTHER", "WS"}
 
 
 def test_metrics_count_decisions_and_advice_per_domain_and_strategy(
