@@ -55,7 +55,8 @@ if TYPE_CHECKING:
 
 disable_created_metrics()  # type: ignore[no-untyped-call]  # no ``_created`` series beside each counter (half the text)
 UNMATCHED = "<unmatched>"
-#: the method label of a request whose method none of the service's routes has
+#: the method label of a request whose method is not its route's (on a path no route matches:
+#: no route's)
 OTHER_METHOD = "OTHER"
 #: seconds; an event answer takes ~0.2 ms, an ingest or a domain PUT up to seconds
 LATENCY_BUCKETS = (0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1, 2.5, 10)

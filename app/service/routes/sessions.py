@@ -110,12 +110,12 @@ class DirectEvents:
     """The event route's ASGI app: :func:`post_events` called at once for a valid session id.
     FastAPI's own handler (``framework``) resolves the route's parameters on every request (a
     Request, the query string, the path parameter through pydantic, two exit stacks, exception
-    handling of its own): about 50 us of CPU of a one-event request's 200 in process
-    (docs/PERFORMANCE.md, "REST, part by part"). The same checks stay: the route's method was
-    checked before (405); an id that is not ``SESSION_ID_PATTERN`` goes to ``framework``,
-    which answers its 422, and so does every request while FastAPI's telemetry is on (it
-    records the endpoint there); errors reach the same exception handlers (the app's own
-    layer catches them). tests/service/test_routes_sessions.py compares both answers."""
+    handling of its own): 60-67 us of CPU of a one-event request's 222-253 in process
+    (docs/PERFORMANCE.md, "REST at 0.85 of bare FastAPI"). The same checks stay: the route's
+    method was checked before (405); an id that is not ``SESSION_ID_PATTERN`` goes to
+    ``framework``, which answers its 422, and so does every request while FastAPI's telemetry
+    is on (it records the endpoint there); errors reach the same exception handlers (the
+    app's own layer catches them). tests/service/test_routes_sessions.py compares both."""
 
     def __init__(self, framework: ASGIApp) -> None:
         self.framework = framework
