@@ -19,6 +19,10 @@ accepts every connection. :func:`guarded_http` makes its protocol class with:
 * malformed HTTP answered as every other client error is: a JSON body ``{"detail": ...}``;
   so are websocket handshakes that are not valid (:class:`JsonWebSocket`, uvicorn's ``ws``).
 
+It also leaves out the access-log line of an event request when the service drops those lines
+anyway (:func:`app.service.logs.event_lines_dropped`): uvicorn would make it, arguments and
+record, only for the service's filter to drop it.
+
 httptools stays the parser (uvicorn's h11 bounds headers too, but parses several times slower
 in pure Python; docs/PERFORMANCE.md). ``make run`` still needs only Python.
 """
@@ -47,6 +51,7 @@ from websockets.typing import StatusLike
 
 from app.service.clients import Network, networks, trusted
 from app.service.config import Settings
+from app.service.logs import EVENT_RAW_PATH, event_lines_dropped
 
 log = logging.getLogger("uvicorn.error")
 
@@ -76,6 +81,7 @@ class GuardedHttpTools(HttpToolsProtocol):
         self._timer: asyncio.TimerHandle | None = None
         self._refused = False
         self._counted: str | None = None  # the address this connection counts against
+        self._no_event_lines = event_lines_dropped()
         if len(self.connections) > self.max_connections:
             self.refuse(503, f"the service holds its maximum of {self.max_connections} connections")
             return
@@ -145,7 +151,10 @@ class GuardedHttpTools(HttpToolsProtocol):
             self._too_large()
             raise _Refused  # stops the parser: no application task for this request
         super().on_headers_complete()
-        if self.cycle is not None and self.cycle.scope is self.scope:  # not an upgrade
+        cycle = self.cycle
+        if cycle is not None and cycle.scope is self.scope:  # not an upgrade
+            if self._no_event_lines and EVENT_RAW_PATH.match(self.scope["raw_path"]):
+                cycle.access_log = False  # its line would be dropped: not made
             self._arm(self.body_timeout, "body")
 
     def on_message_complete(self) -> None:

@@ -102,16 +102,16 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     )
     app.state.settings = settings
     install_error_handlers(app)
+    add_event_route(app)  # the busiest route first, on the app's own router
+    routers = [*ROUTERS, metrics_route.router] if settings.metrics_enabled else [*ROUTERS]
+    for router in routers:
+        app.include_router(router)
     app.add_middleware(BodyLimit, max_bytes=settings.max_body_bytes)
     app.add_middleware(NoWebSocketRoute)
     if settings.metrics_enabled:
         request_ids = settings.log_format == "json"
-        app.add_middleware(metrics.MetricsMiddleware, request_ids=request_ids)
-    add_event_route(app)  # the busiest route first, on the app's own router
-    for router in ROUTERS:
-        app.include_router(router)
-    if settings.metrics_enabled:
-        app.include_router(metrics_route.router)
+        methods = metrics.route_methods(app.router, *routers)  # the method label's values
+        app.add_middleware(metrics.MetricsMiddleware, request_ids=request_ids, methods=methods)
     if settings.static_dir.is_dir():
         app.mount("/static", StaticFiles(directory=settings.static_dir), "static")
     install_openapi(app)

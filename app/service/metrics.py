@@ -3,7 +3,9 @@
 Requests are counted by a pure ASGI middleware under their *route template*
 (``/sessions/{session_id}/events``, never the raw path), method and status, so the number of
 series is bounded by the routes the service has; a path no route matches is counted as
-``<unmatched>``. Decisions and advice are counted per domain and strategy (domains are created
+``<unmatched>``, and a method that is not the route's (``DELETE /health``, ``PROPFIND``) as
+``OTHER`` (on a path no route matches: one that no route has): no label takes a value the
+client chose. Decisions and advice are counted per domain and strategy (domains are created
 by the admin only, strategies are a fixed list), expert trajectories per domain.
 
 Cost on the hot path: one labelled child per (route, method, status) is looked up in a dict and
@@ -27,8 +29,9 @@ import asyncio
 import contextlib
 import os
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from pathlib import Path
+from typing import Any
 
 from prometheus_client import (
     REGISTRY,
@@ -47,6 +50,9 @@ from app.service.logs import REQUEST_ID, new_request_id
 
 disable_created_metrics()  # type: ignore[no-untyped-call]  # no ``_created`` series beside each counter (half the text)
 UNMATCHED = "<unmatched>"
+#: the method label of a request whose method is not its route's (on a path no route matches:
+#: no route's)
+OTHER_METHOD = "OTHER"
 #: seconds; an event answer takes ~0.2 ms, an ingest or a domain PUT up to seconds
 LATENCY_BUCKETS = (0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1, 2.5, 10)
 TICK_BUCKETS = (0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 1.0)
@@ -215,14 +221,30 @@ def exposition() -> bytes:
     return generate_latest(REGISTRY)
 
 
-class MetricsMiddleware:
-    """Counts every request by route template and status and times it; with ``request_ids``,
-    gives each request an id (its ``X-Request-ID`` if it sent one of sane length, else a new
-    one) that the JSON logs carry and the answer's ``X-Request-ID`` header echoes."""
+def route_methods(*routers: Any) -> frozenset[str]:
+    """The HTTP methods of the routes of ``routers`` (anything with ``routes``: an app's
+    router, an ``APIRouter``), as the metrics' method label keeps them."""
+    return frozenset(
+        method
+        for router in routers
+        for route in router.routes
+        for method in (getattr(route, "methods", None) or ())
+    )
 
-    def __init__(self, app: ASGIApp, request_ids: bool = False) -> None:
+
+class MetricsMiddleware:
+    """Counts every request by route template, method and status and times it; a method that
+    is not the matched route's, or on a path no route matches none of ``methods`` (the
+    routes', :func:`route_methods`), is counted as ``OTHER``. With ``request_ids``, gives
+    each request an id (its ``X-Request-ID`` if it sent one of sane length, else a new one)
+    that the JSON logs carry and the answer's ``X-Request-ID`` header echoes."""
+
+    def __init__(
+        self, app: ASGIApp, request_ids: bool = False, methods: Collection[str] = ()
+    ) -> None:
         self.app = app
         self.request_ids = request_ids
+        self.methods = frozenset(methods)
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         kind = scope["type"]
@@ -253,7 +275,10 @@ class MetricsMiddleware:
         try:
             await self.app(scope, receive, send_counted)
         finally:
-            METRICS.request(scope["method"], _route(scope), status, time.perf_counter() - started)
+            method = scope["method"]
+            if method not in (getattr(scope.get("route"), "methods", None) or self.methods):
+                method = OTHER_METHOD  # not the route's (405), or no route's
+            METRICS.request(method, _route(scope), status, time.perf_counter() - started)
 
     async def _websocket(self, scope: Scope, receive: Receive, send: Send) -> None:
         status = 1006  # the connection went before an answer

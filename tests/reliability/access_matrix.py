@@ -57,6 +57,7 @@ ROUTES = [
     Route("POST", "/domains/{name}/sessions", "anyone", {}),
     Route("POST", "/sessions/{session_id}/events", "token", E),
     Route("POST", "/sessions/{session_id}/positions", "token", {"positions": [[2.5, 1.5]]}),
+    Route("POST", "/sessions/{session_id}/mute", "token", {"muted": True}),
     Route("GET", "/sessions/{session_id}", "token or operator"),
     Route("DELETE", "/sessions/{session_id}", "token or admin"),
     Route("GET", "/sessions", "operator"),

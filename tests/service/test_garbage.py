@@ -25,6 +25,7 @@ CONTRACT = {
     ("DELETE", "/domains/{name}"), ("POST", "/domains/{name}/trajectories"),
     ("GET", "/domains/{name}/prior"), ("POST", "/domains/{name}/sessions"),
     ("POST", "/sessions/{session_id}/events"), ("POST", "/sessions/{session_id}/positions"),
+    ("POST", "/sessions/{session_id}/mute"),
     ("GET", "/sessions/{session_id}"),
     ("DELETE", "/sessions/{session_id}"), ("GET", "/sessions"), ("GET", "/overview"),
     ("GET", "/viewer"),  # where the viser viewer runs (app/service/routes/viewer.py)

@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 import httpx
+from fastapi import FastAPI
 from fastapi.testclient import TestClient
 from prometheus_client import REGISTRY
 from prometheus_client.parser import text_string_to_metric_families
@@ -64,6 +65,69 @@ def test_metrics_count_requests_by_route_template_not_path(client: TestClient) -
 
 
 E = {"state": [28, 0], "action": "E"}
+
+
+def series(name: str) -> dict[tuple[tuple[str, str], ...], float]:
+    """The samples of ``name`` in the registry: label sets and values."""
+    return {
+        tuple(sorted(s.labels.items())): s.value
+        for family in REGISTRY.collect()
+        for s in family.samples
+        if s.name == name
+    }
+
+
+#: methods llhttp (uvicorn's parser) knows, and some it does not
+METHODS = [
+    *("GET", "HEAD", "POST", "PUT", "DELETE", "CONNECT", "OPTIONS", "TRACE", "PATCH", "COPY"),
+    *("LOCK", "MKCOL", "MOVE", "PROPFIND", "PROPPATCH", "SEARCH", "UNLOCK", "BIND", "REBIND"),
+    *("UNBIND", "ACL", "REPORT", "MKACTIVITY", "CHECKOUT", "MERGE", "M-SEARCH", "NOTIFY"),
+    *("SUBSCRIBE", "UNSUBSCRIBE", "PURGE", "MKCALENDAR", "LINK", "UNLINK", "SOURCE", "QUERY"),
+    *("DESCRIBE", "ANNOUNCE", "SETUP", "PLAY", "PAUSE", "TEARDOWN", "GET_PARAMETER"),
+    *("SET_PARAMETER", "REDIRECT", "RECORD", "FLUSH", "FOO", "BAR", "X-EVIL", "ZZZZ"),
+]
+
+
+def test_no_metrics_label_takes_a_value_the_client_chose(client: TestClient) -> None:
+    """50 methods x 20 paths: the series they add name only the routes' own methods (any
+    other is OTHER) and route templates (any other path is <unmatched>)."""
+    from app.service.routes import ROUTERS
+    from app.service.routes import metrics as metrics_route
+
+    assert len(METHODS) == 50
+    sid, auth, _ = open_session(client)
+    paths = [
+        f"/sessions/{sid}/events", f"/sessions/{sid}", f"/sessions/{sid}/positions",
+        "/sessions", "/domains", "/domains/default", "/domains/default/sessions",
+        "/domains/default/prior", "/health", "/metrics", "/overview", "/docs", "/openapi.json",
+        "/static/app.js", f"/no/such/{sid}", "/%00", "/" + "x" * 300, "/sessions/a/b/c",
+        "/domains/no-such", "/viewer",
+    ]  # fmt: skip
+    assert len(paths) == 20
+    names = ("advisor_http_requests_total", "advisor_http_request_duration_seconds_count")
+    before = {n: series(n) for n in names}
+    for method in METHODS:
+        for path in paths:
+            client.request(method, path, headers=auth)
+    app: FastAPI = client.app  # type: ignore[assignment]
+    routers = (app.router, *ROUTERS, metrics_route.router)
+    routes = [r for router in routers for r in router.routes]
+    own: dict[str, set[str]] = {}  # each route template's methods
+    for r in routes:
+        if hasattr(r, "path"):
+            own.setdefault(r.path, set()).update(getattr(r, "methods", None) or ())
+    anywhere = set().union(*own.values())
+    assert anywhere == {"GET", "HEAD", "POST", "PUT", "DELETE"}
+    own |= {p: anywhere for p in ("<unmatched>", "/static/{path}", "/static-offline-docs/{path}")}
+    for name in names:
+        after = series(name)
+        assert sum(after.values()) - sum(before[name].values()) == 50 * 20  # each counted
+        added = [dict(x) for x in after.keys() - before[name].keys()]
+        assert {x["method"] for x in added} <= anywhere | {"OTHER"}
+        for x in added:  # a route's own methods, or OTHER
+            assert x["method"] in own[x["route"]] | {"OTHER"}, x
+        assert len({x["route"] for x in added}) <= len(paths)
+        assert {dict(x)["method"] for x in after} <= anywhere | {"OTHER", "WS"}
 
 
 def test_metrics_count_decisions_and_advice_per_domain_and_strategy(
@@ -166,6 +230,67 @@ def test_a_live_server_counts_event_routes_instead_of_logging_them(tmp_path: Pat
     assert f"/sessions/{sid}/events" not in log and f"/sessions/{sid}/stream" not in log
     assert 'route="/sessions/{session_id}/events",status="200"} 1.0' in counted
     assert 'method="WS",route="/sessions/{session_id}/stream",status="101"} 1.0' in counted
+
+
+def _access_lines(quiet: bool) -> tuple[list[bool], list[str]]:
+    """Two requests (an event, another route) through the service's HTTP protocol over an
+    in-memory transport, uvicorn's access logger at INFO, the event lines dropped (``quiet``)
+    or not: whether the protocol meant to log each, and the lines that reached a handler."""
+    import asyncio
+    from unittest import mock
+
+    from uvicorn.config import Config
+    from uvicorn.server import ServerState
+
+    from app.service.guard import guarded_http
+    from app.service.logs import quiet_event_routes
+
+    async def app(scope: Any, receive: Any, send: Any) -> None:
+        await send({"type": "http.response.start", "status": 200, "headers": []})
+        await send({"type": "http.response.body", "body": b"{}"})
+
+    lines: list[str] = []
+    handler = logging.Handler()
+    handler.emit = lambda record: lines.append(record.getMessage())  # type: ignore[method-assign]
+    logger = logging.getLogger("uvicorn.access")
+    kept = logger.filters[:]
+    transport = mock.Mock(is_closing=lambda: False, get_extra_info=lambda *a: None)
+    logged: list[bool] = []
+
+    async def run() -> None:
+        config = Config(app, log_config=None, proxy_headers=False)
+        config.load()
+        protocol = guarded_http(16384, 5.0, 5.0, 10, 10, [])(config, ServerState(), {})
+        protocol.connection_made(transport)
+        for path in (b"/sessions/ab12/events", b"/sessions/ab12"):
+            protocol.data_received(b"POST " + path + b" HTTP/1.1\r\nHost: x\r\n\r\n")
+            logged.append(protocol.cycle.access_log)
+            await asyncio.sleep(0)  # the application task answers
+        protocol.connection_lost(None)
+
+    logger.addHandler(handler)
+    level = logger.level
+    logger.setLevel(logging.INFO)
+    try:
+        for f in [f for f in logger.filters if isinstance(f, SkipEventRoutes)]:
+            logger.removeFilter(f)
+        if quiet:
+            quiet_event_routes()
+        asyncio.run(run())
+    finally:
+        logger.removeHandler(handler)
+        logger.setLevel(level)
+        logger.filters[:] = kept
+    return logged, lines
+
+
+def test_the_protocol_makes_no_access_line_the_log_would_drop() -> None:
+    logged, lines = _access_lines(quiet=True)  # the default: event routes counted, not logged
+    assert logged == [False, True]
+    assert len(lines) == 1 and "/sessions/ab12 " in lines[0]
+    logged, lines = _access_lines(quiet=False)  # ADVISOR_ACCESS_LOG_EVENTS=true
+    assert logged == [True, True]
+    assert len(lines) == 2 and "/sessions/ab12/events" in lines[0]
 
 
 def test_metrics_add_up_the_workers_in_prometheus_multiprocess_mode(tmp_path: Path) -> None:

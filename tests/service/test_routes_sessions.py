@@ -3,13 +3,17 @@
 from __future__ import annotations
 
 import json
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from typing import Any
 
 import numpy as np
 import pytest
+from fastapi import FastAPI
+from fastapi.routing import APIRoute
 from fastapi.testclient import TestClient
 
 from app.service.data.store import POOLED
+from app.service.routes.sessions import EVENTS_PATH, DirectEvents
 from app.service.state import ServiceState
 from tests.service.conftest import open_session
 
@@ -139,6 +143,59 @@ def test_session_routes_need_the_sessions_own_token(
     assert r.status_code == 404
     r = client.get("/sessions/bad%20id!", headers=auth)
     assert r.status_code == 422
+
+
+def test_the_event_route_answers_as_fastapis_own_handler(client: TestClient) -> None:
+    """The event route's direct handler against FastAPI's for the same requests: decisions,
+    every error, every header that matters."""
+    app: FastAPI = client.app  # type: ignore[assignment]
+    route = next(r for r in app.routes if getattr(r, "path", "") == EVENTS_PATH)
+    assert isinstance(route, APIRoute)
+    direct = route.app
+    assert isinstance(direct, DirectEvents)
+    a, auth_a, _ = open_session(client)  # the same start: the same decisions
+    b, auth_b, _ = open_session(client)
+    _, other, _ = open_session(client)
+
+    def both(request: Callable[[str, dict[str, str]], Any]) -> list[tuple[Any, ...]]:
+        got = []
+        for sid, auth, handler in ((a, auth_a, direct), (b, auth_b, direct.framework)):
+            route.app = handler
+            try:
+                r = request(sid, auth)
+            finally:
+                route.app = direct
+            kind, challenge = r.headers.get("content-type"), r.headers.get("www-authenticate")
+            got.append((r.status_code, r.content.replace(sid.encode(), b"<id>"), kind, challenge))
+        return got
+
+    def post(body: Any, sid: str | None = None) -> Callable[[str, dict[str, str]], Any]:
+        return lambda s, h: client.post(f"/sessions/{sid or s}/events", json=body, headers=h)
+
+    walk = [E, [E, {"state": [28, 1], "action": "N"}], {"state": [28, 1], "action": "S"}]
+    cases: list[Callable[[str, dict[str, str]], Any]] = [
+        *(post(e) for e in walk),
+        post(E | {"step": 2}),  # a retry
+        post(E | {"step": 9}),  # out of turn: 409
+        post({"state": [99, 0]}),  # off the map: 422
+        post(E, "0123456789abcdef"),  # no such session: 404
+        *(post(E, bad) for bad in ("bad.id", "a" * 65, "abc%0A", "%C3%A9t%C3%A9")),  # 422
+        lambda s, h: client.post(f"/sessions/{s}/events", json=E),
+        lambda s, h: client.post(f"/sessions/{s}/events", json=E, headers=other),
+        lambda s, h: client.post(f"/sessions/{s}/events", json=E, headers={"Authorization": "x"}),
+        lambda s, h: client.post(f"/sessions/{s}/events", content=b"{nope", headers=h | JSON),
+        lambda s, h: client.post(f"/sessions/{s}/events", content=b"", headers=h),
+        lambda s, h: client.post(
+            f"/sessions/{s}/events", content=b"x=1", headers=h | {"Content-Type": "text/plain"}
+        ),
+        lambda s, h: client.get(f"/sessions/{s}/events", headers=h),
+    ]
+    answers = [both(case) for case in cases]
+    for first, second in answers:
+        assert first == second
+    statuses = [first[0] for first, _ in answers]
+    assert statuses[:12] == [200, 200, 200, 200, 409, 422, 404, 422, 422, 422, 422, 401]
+    assert statuses[12:] == [403, 401, 422, 422, 415, 405]
 
 
 def test_read_and_end_session(client: TestClient, admin: dict[str, str]) -> None:

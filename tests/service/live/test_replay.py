@@ -82,6 +82,51 @@ def test_the_ring_answers_what_a_list_of_every_decision_says(
                 assert got.benefit_before == want.benefit_before
 
 
+def _add_one_by_fields(ring: Replay, d: Decision) -> None:
+    """``Replay.add_one`` as it was written with numpy's row fields (the reference for its
+    packed bytes)."""
+    rows = ring._room(1)
+    row = rows[ring._count % len(rows)]
+    row["state"], row["advise"], row["kl"], row["p"] = d.state, d.advise, d.kl, d.p_normal
+    row["advice"] = d.advice if d.advise and d.advice is not None else np.nan
+    ring._count += 1
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    limit=st.integers(1, 40),
+    sizes=st.lists(st.integers(1, 3), min_size=1, max_size=120),
+)
+def test_one_decision_is_kept_as_the_bytes_numpy_writes(
+    seed: int, limit: int, sizes: list[int]
+) -> None:
+    rng = np.random.default_rng(seed)
+    start = (int(rng.integers(0, 2)), float(rng.random()))
+    packed, fields = Replay(limit), Replay(limit)
+    for r in (packed, fields):
+        r.restart(*start)
+    every: list[Decision] = []
+    count, benefit = start
+    for n in sizes:  # mostly single decisions (growing, then wrapping round), some batches
+        made: list[Decision] = []
+        for _ in range(n):
+            d = _decision(len(every) + len(made) + 1, rng, count, benefit)
+            count, benefit = d.advice_count, d.benefit
+            made.append(d)
+        if n == 3:
+            b = _batch(every + made, len(every), len(every) + n, start)
+            packed.add(b)
+            fields.add(b)
+        else:
+            for d in made:
+                packed.add_one(d)
+                _add_one_by_fields(fields, d)
+        every += made
+        assert packed.state() == fields.state()
+        assert packed.kept == fields.kept
+
+
 def test_part_of_a_batch_is_a_batch_of_its_own() -> None:
     rng = np.random.default_rng(3)
     made: list[Decision] = []
