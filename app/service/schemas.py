@@ -298,7 +298,7 @@ class BudgetPublic(BaseModel):
 
 
 class MuteIn(Strict):
-    muted: bool = Field(True, description="True: no more advice; false: advice again.")
+    muted: bool = Field(True, strict=True, description="True: no more advice; false: advice again.")
 
 
 class SessionCreate(Strict):

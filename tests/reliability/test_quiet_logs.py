@@ -17,7 +17,10 @@ from tests.reliability.conftest import start, stop
 
 
 def _reset(sock: socket.socket) -> None:
-    """Close with a TCP reset (SO_LINGER 0): the client is gone at once."""
+    """Close with a TCP reset (SO_LINGER 0): the client is gone at once (a socket the client
+    library closed already, as it does when the server refuses a handshake, is gone too)."""
+    if sock.fileno() < 0:
+        return
     sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
     sock.close()
 

@@ -17,6 +17,7 @@ import httpx
 import numpy as np
 
 from app.domain.grid import ACTIONS, GridDomain
+from app.strategies import STRATEGIES
 from app.viewer.controls import NONE, SLIDER_KAPPA_HIGH
 from app.viewer.remote import RemoteFeed
 from app.viewer.scene import DETAIL_CELLS
@@ -71,12 +72,15 @@ def test_forged_values_and_a_500_by_500_domain_against_the_viewer_of_a_live_serv
         assert controls.picked_session is None and controls.session.value == NONE
         assert controls.lost.value == controls.lost.options[0]
 
-        # kappa out of the slider's range, or not a number: put back in [0, SLIDER_KAPPA_HIGH]
+        # kappa out of the slider's range, or not a number: put back in [0, the slider's top],
+        # every strategy's range as the service says it (above the paper's, log 4)
+        high = controls.kappa_high
+        assert high == max(e.kappa_max or 0.0 for e in STRATEGIES.values()) > SLIDER_KAPPA_HIGH
         for sent, kept in (
             (math.nan, 0.5),
             (math.inf, 0.5),
             (-5.0, 0.0),
-            (1e308, SLIDER_KAPPA_HIGH),
+            (1e308, high),
         ):
             update(attacker, controls.kappa, sent)
 
@@ -89,7 +93,7 @@ def test_forged_values_and_a_500_by_500_domain_against_the_viewer_of_a_live_serv
             assert f"kappa = {kept:.2f}" in controls.shading_text.content
         update(attacker, controls.kappa, "x")  # viser cannot make a float of it: unchanged
         viewer.tick()
-        assert controls.picked_kappa == SLIDER_KAPPA_HIGH
+        assert controls.picked_kappa == high
 
         # the 500 x 500 domain, picked by the attacker: the map as an image, no prior arrows
         before = settled(attacker)

@@ -15,6 +15,7 @@ from prometheus_client.parser import text_string_to_metric_families
 
 from app.service.logs import JsonFormatter, SkipEventRoutes
 from app.service.main import create_app
+from tests.client.test_client import run_async
 from tests.service.conftest import make_settings, open_session, put_tiny
 
 EVENTS = "/sessions/{session_id}/events"
@@ -276,7 +277,7 @@ def _access_lines(quiet: bool) -> tuple[list[bool], list[str]]:
             logger.removeFilter(f)
         if quiet:
             quiet_event_routes()
-        asyncio.run(run())
+        run_async(run())  # off the browser tests' loop
     finally:
         logger.removeHandler(handler)
         logger.setLevel(level)

@@ -23,6 +23,7 @@ from app.service import ops
 from app.service.live.sessions import StoreUnavailable
 from app.service.main import create_app
 from app.service.mqtt import MQTT_END, PACKET_HEADROOM, Bridge
+from tests.client.test_client import run_async
 from tests.service.conftest import (
     REDIS_URL,
     drop_redis_keys,
@@ -323,7 +324,7 @@ def test_repeated_warnings_are_one_line_a_minute_for_each_kind(
     async def make() -> aiomqtt.Client:  # aiomqtt takes the running loop
         return bridge._client()
 
-    connection = asyncio.run(make())
+    connection = run_async(make())  # off the browser tests' loop
     aiomqtt_log = connection._logger
     assert aiomqtt_log is bridge.client_log
     assert connection._client._logger is bridge.client_log  # paho's too

@@ -135,7 +135,12 @@ async def post_positions(session: SessionDep, body: PositionsIn, state: StateDep
     return Response(text, media_type="application/json")
 
 
-@router.post("/sessions/{session_id}/mute", openapi_extra=BEARER, responses=ERRORS)
+@router.post(
+    "/sessions/{session_id}/mute",
+    openapi_extra=BEARER,
+    # 400: a body that is not readable JSON, as FastAPI reads it
+    responses=ERRORS | {code: {"model": ErrorPublic} for code in (400, 413, 415)},
+)
 async def mute_session(
     session: SessionDep, state: StateDep, body: Annotated[MuteIn | None, Body()] = None
 ) -> SessionPublic:
