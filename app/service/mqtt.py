@@ -12,7 +12,9 @@ for TLS). With ``P`` the prefix (``ADVISOR_MQTT_PREFIX``, ``advisor``):
   answers. Events go through the routes' own functions (:mod:`app.service.ops`), so the
   decisions are the REST ones.
 * ``P/<domain>/<explorer>/errors``: ``{"detail", "status"}`` for a message refused (bad JSON,
-  unknown domain, a wall...), as the websocket's error frames; nothing changed.
+  unknown domain, a wall...), as the websocket's error frames; nothing changed. When Redis or
+  the database does not answer: status 503, a detail naming which, and ``retry_after``
+  (seconds): send the message again then (events carrying ``step`` are applied once).
 
 Explorer ids follow the rule of domain names (a message of another id is answered on its
 ``errors`` topic and opens no session). QoS 1 both ways: the bridge handles one message at a
@@ -73,6 +75,14 @@ from pydantic import ValidationError
 
 from app.service import ops
 from app.service.data.domains import DomainNotFound
+from app.service.errors import (
+    DATABASE_DOWN,
+    DATABASE_DOWN_TEXT,
+    DATABASE_RETRY_AFTER,
+    STORE_DOWN,
+    store_down_detail,
+)
+from app.service.live.faults import RETRY_AFTER
 from app.service.live.registry import LiveSession, SessionNotFound
 from app.service.metrics import MQTT_MESSAGES
 from app.service.problems import BadInput, describe_errors
@@ -111,9 +121,20 @@ def parse_url(url: str) -> Broker:
 
 
 class Refused(Exception):
-    def __init__(self, status: int, detail: str):
+    def __init__(self, status: int, detail: str, retry_after: int | None = None):
         super().__init__(detail)
-        self.status, self.detail = status, detail
+        self.status, self.detail, self.retry_after = status, detail, retry_after
+
+
+#: what a message may be refused for: its own fault, or Redis or the database not answering
+REFUSED: tuple[type[Exception], ...] = (Refused, *STORE_DOWN, *DATABASE_DOWN)
+
+
+def unavailable(exc: Exception) -> Refused:
+    """Redis or the database not answering, as a message's refusal: 503, naming which."""
+    if isinstance(exc, DATABASE_DOWN):
+        return Refused(503, DATABASE_DOWN_TEXT, DATABASE_RETRY_AFTER)
+    return Refused(503, store_down_detail(exc), RETRY_AFTER)
 
 
 class Bridge:
@@ -288,8 +309,10 @@ class Bridge:
                 await self.configure((domain, explorer), payload)
                 return
             decisions = await self.events((domain, explorer), payload)
-        except Refused as exc:
-            error = orjson.dumps({"detail": exc.detail, "status": exc.status})
+        except REFUSED as failed:
+            exc = failed if isinstance(failed, Refused) else unavailable(failed)
+            later = {} if exc.retry_after is None else {"retry_after": exc.retry_after}
+            error = orjson.dumps({"detail": exc.detail, "status": exc.status, **later})
             self.pending.append((self.topic(domain, explorer, "errors"), error))
             MQTT_MESSAGES.labels("out", "errors").inc()
         else:
