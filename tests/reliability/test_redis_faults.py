@@ -322,6 +322,40 @@ def test_redis_restarted_empty_answers_410_saying_the_session_was_lost(
         assert a.get("/health/ready").status_code == 200
 
 
+def test_trajectories_stored_while_redis_fails_are_acknowledged_and_other_workers_learn_of_them(
+    tmp_path: Path, redis_server: RedisServer, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Redis fails after an ingestion's transaction committed (telling it the domain's new
+    data version): the trajectories are stored, so the answer is 201, not a 503 a client
+    would send again (storing them twice); the other worker learns of them once Redis is told,
+    at the next sweep."""
+    from app.service.live.faults import RedisDown
+    from app.service.live.shared import SharedSessions
+
+    a = TestClient(create_app(settings_for(tmp_path, redis_server)))
+    b = TestClient(create_app(settings_for(tmp_path, redis_server)))
+    with a, b:
+        admin = {"X-API-Key": service_of(a).admin_key}
+        before = b.get("/domains/default").json()["trajectories"]
+        run = SharedSessions._run
+
+        async def failing(self: SharedSessions, cmd: str, *args: Any, lane: str = "") -> Any:
+            if cmd == "version":
+                raise RedisDown("Redis did not answer within 0.3 s")
+            return await run(self, cmd, *args, lane=lane)
+
+        steps = {"trajectories": [{"steps": [{"state": [28, c], "action": "E"} for c in range(4)]}]}
+        with monkeypatch.context() as m:
+            m.setattr(SharedSessions, "_run", failing)
+            r = a.post("/domains/default/trajectories", json=steps, headers=admin)
+        assert r.status_code == 201, r.text
+        assert a.get("/domains/default").json()["trajectories"] == before + 1
+        assert b.get("/domains/default").json()["trajectories"] == before  # not told yet
+        assert a.portal is not None
+        a.portal.call(service_of(a).sessions.sweep)
+        assert b.get("/domains/default").json()["trajectories"] == before + 1
+
+
 def test_a_full_redis_answers_503_for_writes_and_recovers_losing_nothing(
     tmp_path: Path,
 ) -> None:

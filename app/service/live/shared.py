@@ -526,10 +526,18 @@ class SharedSessions:
     async def domain_changed(self, name: str, version: int, made_or_gone: bool) -> None:
         """This worker changed domain ``name`` (to data ``version``; a deleted domain's last
         version plus one): other workers read it again from their next request that uses it
-        (the catalog's epoch goes up too when a domain was made or deleted)."""
-        await self._run("version", name, version)
-        if made_or_gone:
-            await self.redis.incr(f"{self.prefix}:catalog")
+        (the catalog's epoch goes up too when a domain was made or deleted). With Redis down,
+        they are told once it answers again: the change is in the database, and the request
+        that made it is acknowledged."""
+        try:
+            await self._run("version", name, version)
+            if made_or_gone:
+                await self.redis.incr(f"{self.prefix}:catalog")
+        except RedisDown as exc:
+            self._owed = True
+            log.warning(
+                "domain %r changed while Redis is down (%s): told when it is back", name, exc.why
+            )
 
     async def _prepare(self, domain: DomainState, strategy: str) -> None:
         """What ``strategy`` reads of ``domain`` built (in a worker thread, the first time)."""
@@ -787,6 +795,10 @@ class SharedSessions:
         return int(await self._run("end_domain", name))
 
     async def sweep(self) -> None:
+        """Idle sessions go (every worker's), and Redis hears of a domain's change it was not
+        told of when it failed."""
+        if self._owed:
+            await self._tell_versions()
         now = int(time.time() * 1000)
         gone = await self._run("expire", now, int(self.registry.idle_seconds * 1000), SWEEP_BATCH)
         for sid in gone:
