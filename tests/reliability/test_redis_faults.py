@@ -12,6 +12,7 @@ runs the real server (``python -m app serve``) and reads its log for tracebacks.
 from __future__ import annotations
 
 import json
+import logging
 import subprocess
 import threading
 import time
@@ -42,6 +43,15 @@ def settings_for(tmp: Path, server: RedisServer, url: str | None = None, **more:
     values: dict[str, Any] = {"redis_url": url or server.url, "redis_timeout": TIMEOUT}
     return make_settings(tmp / "data", database_url=f"sqlite:///{tmp / 'advisor.db'}",
                          **(values | more))  # fmt: skip
+
+
+@pytest.fixture(autouse=True)
+def no_traceback(caplog: pytest.LogCaptureFixture) -> Iterator[None]:
+    """No test here logs an error or a traceback (the server's log is read in the kill test)."""
+    with caplog.at_level(logging.WARNING):
+        yield
+    logged = [r for r in caplog.records if r.levelno >= logging.ERROR or r.exc_info]
+    assert logged == [], [r.getMessage() for r in logged]
 
 
 @pytest.fixture
