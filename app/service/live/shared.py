@@ -559,6 +559,7 @@ class SharedSessions:
     async def create(
         self, domain: DomainState, settings: SessionSettings, client: str | None
     ) -> tuple[LiveSession, Decision]:
+        self.breaker.check()  # Redis known to be down: nothing built
         for _ in range(ATTEMPTS):
             session, decision = self.registry.create(domain, settings, client)
             now = int(time.time() * 1000)
@@ -638,7 +639,10 @@ class SharedSessions:
         self, session_id: str, moves: Moves, first_step: int | None, one: bool = False
     ) -> DecisionBatch | Decision:
         """Apply ``moves`` to the session and write its new state to Redis before answering;
-        again from what Redis holds when another worker or a prior update came between."""
+        again from what Redis holds when another worker or a prior update came between.
+        While Redis is known to be down, refused before anything is computed (this worker's
+        copy stays as Redis holds it)."""
+        self.breaker.check()
         async with self._lock(session_id):
             session = self.registry.cached(session_id) or await self._load(session_id)
             for _ in range(ATTEMPTS):
