@@ -41,6 +41,8 @@ RUN python -c "from app.service.ops import warm_up; warm_up()"
 
 VOLUME ["/data"]
 EXPOSE 8000
+# liveness: the process answers (a database or Redis that is down makes /health/ready 503,
+# which is for load balancers; restarting the container would not bring them back)
 HEALTHCHECK --interval=30s --timeout=5s --start-period=60s --retries=3 \
-    CMD ["python", "-c", "import sys, urllib.request; sys.exit(urllib.request.urlopen('http://127.0.0.1:8000/health', timeout=4).status != 200)"]
+    CMD ["python", "-c", "import sys, urllib.request; sys.exit(urllib.request.urlopen('http://127.0.0.1:8000/health/live', timeout=4).status != 200)"]
 CMD ["python", "-m", "app", "serve", "--host", "0.0.0.0", "--port", "8000"]

@@ -67,7 +67,8 @@ run: run-venv
 
 ## Every benchmark under benchmarks/ (never part of `make test`): about 25 minutes on 2 quiet
 ## cores, more on busy ones; each rewrites its own section of docs/PERFORMANCE.md (bench_hostile
-## its combined load's in docs/RELIABILITY.md; bench_minigrid docs/RESULTS.md; bench_scaling
+## its combined load's and its Redis pause's in docs/RELIABILITY.md, the pause with a
+## redis-server of its own; bench_minigrid docs/RESULTS.md; bench_scaling
 ## and bench_service the curves in docs/figures/). bench_mqtt runs Debian's mosquitto;
 ## bench_workers the machine's Redis; bench_redis_costs prints what docs/SCALING.md quotes of it.
 bench: venv wrk
@@ -81,6 +82,7 @@ bench: venv wrk
 	$(BIN)/python benchmarks/bench_minigrid.py --write docs/RESULTS.md
 	$(BIN)/python benchmarks/bench_buildings.py --write docs/PERFORMANCE.md
 	$(BIN)/python benchmarks/bench_hostile.py --only combined --write docs/RELIABILITY.md
+	$(BIN)/python benchmarks/bench_hostile.py --only redis_pause --write docs/RELIABILITY.md
 	$(BIN)/python benchmarks/bench_workers.py --write docs/PERFORMANCE.md
 	$(BIN)/python benchmarks/bench_redis_costs.py
 	$(BIN)/python benchmarks/rest_inprocess.py

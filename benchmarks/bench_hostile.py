@@ -20,7 +20,11 @@ opening as many slow sockets as the service takes connections, while another ask
 goal_aware sessions at window 10,000; the service and a domain at the goals x cells cap),
 ``combined`` (90 s of warm-up, then 60 s: 200 explorers at 10 events a second each, 5
 ingesting writers, a watched viewer, two readers of the largest prior, a 500 x 500 domain's,
-the largest map the service takes).
+the largest map the service takes), ``redis_pause`` (the combined load with the live sessions
+in a Redis of its own, ``redis-server`` on a free port, stopped with SIGSTOP for 10 s in the
+middle: the explorers send each event with its step and send it again after a refusal; what
+was acknowledged against what Redis holds at the end, how every refusal was answered, and
+how soon latency is back).
 """
 
 from __future__ import annotations
@@ -28,7 +32,10 @@ from __future__ import annotations
 import json
 import multiprocessing as mp
 import os
+import shutil
+import signal
 import socket
+import subprocess
 import sys
 import tempfile
 import threading
@@ -594,6 +601,267 @@ def bench_combined(root: Path, workdir: Path, seconds: float) -> Rows:
     ]
 
 
+# ---- Redis paused in the middle of the combined load ---------------------------------------------
+#: seconds from the start of the load: measured from, Redis stopped at, and for how long
+FAULT_FROM, FAULT_AT, FAULT_FOR = 20.0, 30.0, 10.0
+#: after Redis returns, latency must be back under this (ms) within this many seconds
+FAULT_P99, FAULT_BACK = 100.0, 5.0
+#: what an answer of the fault run was: a decision, a 503, anything else
+DECIDED, REFUSED, WRONG = 1.0, 2.0, 3.0
+
+
+@contextmanager
+def private_redis(workdir: Path) -> Iterator[tuple[str, subprocess.Popen[bytes]]]:
+    """``redis-server`` of the benchmark's own on a free port, nothing kept on disk."""
+    import redis
+
+    server = shutil.which("redis-server")
+    if server is None:
+        raise SystemExit("redis-server is not installed (apt-get install redis-server)")
+    port = free_port()
+    home = workdir / f"redis-{port}"
+    home.mkdir()
+    with (home / "redis.log").open("ab") as log:
+        proc = subprocess.Popen(
+            [server, "--port", str(port), "--bind", "127.0.0.1", "--save", "", "--appendonly",
+             "no", "--dir", str(home)], stdout=log, stderr=log,
+        )  # fmt: skip
+    try:
+        client = redis.Redis(port=port, socket_timeout=1)
+        for _ in range(300):
+            with suppress(redis.exceptions.RedisError):
+                if client.ping():
+                    break
+            time.sleep(0.02)
+        yield f"redis://127.0.0.1:{port}/0", proc
+    finally:
+        proc.kill()
+        proc.wait(30)
+
+
+def stepped_explorers(ws_url: str, created: list[tuple[int, str, str]], seconds: float,
+                      out: Any, acked: Any, errors: Any) -> None:  # fmt: skip
+    """A process of explorers, each sending one event every 100 ms on its websocket with its
+    step; a 503 frame: the same event at the next tick. Each answer into ``out`` (a shared
+    array: a count, then (when sent, round trip in ms, DECIDED/REFUSED/WRONG) triplets); the
+    last step each session had acknowledged into ``acked``."""
+    import asyncio
+
+    from websockets.asyncio.client import connect as aconnect
+
+    async def one(k: int, sid: str, token: str) -> None:
+        url = f"{ws_url}/sessions/{sid}/stream"
+        async with aconnect(url, additional_headers={"Authorization": f"Bearer {token}"}) as ws:
+            deadline = time.monotonic() + seconds
+            step = 1
+            while time.monotonic() < deadline:
+                e = {"state": [28, (step - 1) % 2], "action": "E" if step % 2 else "W",
+                     "step": step}  # fmt: skip
+                t, sent = time.perf_counter(), time.monotonic()
+                await ws.send(json.dumps(e))
+                answer = json.loads(await ws.recv())
+                rtt = 1000 * (time.perf_counter() - t)
+                if answer.get("step") == step:
+                    kind = DECIDED
+                    acked[k] = step
+                    step += 1
+                elif answer.get("status") == 503 and "Redis" in answer.get("detail", ""):
+                    kind = REFUSED
+                else:
+                    kind = WRONG
+                    errors.value += 1
+                with out.get_lock():
+                    n = int(out[0])
+                    if 3 * n + 3 < len(out):
+                        out[3 * n + 1], out[3 * n + 2], out[3 * n + 3] = sent, rtt, kind
+                        out[0] = n + 1
+                await asyncio.sleep(max(0.0, 0.1 - (time.perf_counter() - t)))
+
+    async def counted(k: int, sid: str, token: str) -> None:
+        try:
+            await one(k, sid, token)
+        except Exception:  # a closed socket, a refused handshake: an error, not a crash
+            errors.value += 1
+
+    async def run() -> None:
+        await asyncio.gather(*(counted(*c) for c in created))
+
+    asyncio.run(run())
+
+
+def steady_writer(url: str, seconds: float, acked: Any, refused: Any, errors: Any) -> None:
+    """A process ingesting one expert trajectory per request; 503s counted apart."""
+    steps = [{"state": [28, c], "action": "E"} for c in range(6)]
+    body = {"trajectories": [{"steps": steps}]}
+    with httpx.Client(base_url=url, timeout=60, headers=ADMIN) as http:
+        deadline = time.monotonic() + seconds
+        while time.monotonic() < deadline:
+            try:
+                status = http.post("/domains/default/trajectories", json=body).status_code
+            except httpx.HTTPError:
+                status = 0
+            if status == 201:
+                acked.value += 1
+            elif status == 503:
+                refused.value += 1
+            else:
+                errors.value += 1
+            time.sleep(0.05)
+
+
+def steady_reader(url: str, seconds: float, counts: Any, refused: Any, errors: Any) -> None:
+    with httpx.Client(timeout=120) as http:
+        deadline = time.monotonic() + seconds
+        while time.monotonic() < deadline:
+            try:
+                status = http.get(url).status_code
+            except httpx.HTTPError:
+                status = 0
+            if status == 200:
+                counts.value += 1
+            elif status == 503:
+                refused.value += 1
+                time.sleep(0.1)
+            else:
+                errors.value += 1
+
+
+def bench_redis_pause(root: Path, workdir: Path, seconds: float) -> Rows:
+    """The combined load (200 explorers at 10 events a second, 5 writers, two readers of the
+    largest prior, a watched viewer) with the sessions in a Redis of its own, which is stopped
+    (SIGSTOP) at ``FAULT_AT`` s for ``FAULT_FOR`` s; ``seconds`` in all."""
+    with (
+        private_redis(workdir) as (redis_url, redis_proc),
+        service(root, workdir, viewer=True, ADVISOR_REDIS_URL=redis_url) as srv,
+        httpx.Client(base_url=srv.url, timeout=120) as http,
+    ):
+        r = http.put("/domains/big", json={"map": open_map(500, 500)}, headers=ADMIN)
+        assert r.status_code in (200, 201), r.text
+        viewer_port = http.get("/viewer").json()["port"]
+        before = http.get("/domains/default").json()["trajectories"]
+        created = []
+        for k in range(200):
+            c = http.post("/domains/default/sessions", json={}).json()
+            created.append((k, c["session_id"], c["token"]))
+        errors, writes, reads = mp.Value("i", 0), mp.Value("i", 0), mp.Value("i", 0)
+        refused_writes, refused_reads = mp.Value("i", 0), mp.Value("i", 0)
+        acked = mp.Array("i", 200)
+        answers = mp.Array("d", 1 + 3 * 200 * int(seconds) * 12)
+        procs = [mp.Process(target=stepped_explorers,
+                            args=(srv.ws_url, created[i::4], seconds, answers, acked, errors))
+                 for i in range(4)]  # fmt: skip
+        procs += [mp.Process(target=steady_writer,
+                             args=(srv.url, seconds, writes, refused_writes, errors))
+                  for _ in range(5)]  # fmt: skip
+        prior = srv.url + "/domains/big/prior"
+        procs += [mp.Process(target=steady_reader,
+                             args=(prior, seconds, reads, refused_reads, errors))
+                  for _ in range(2)]  # fmt: skip
+        procs.append(mp.Process(target=watcher, args=(viewer_port, seconds, errors)))
+        began = time.monotonic()
+        for p in procs:
+            p.start()
+        health: list[tuple[float, str, int, float]] = []  # (when, path, status, ms)
+        paused = resumed = None
+        while any(p.is_alive() for p in procs) and time.monotonic() - began < seconds + 120:
+            now = time.monotonic() - began
+            if paused is None and now >= FAULT_AT:
+                os.kill(redis_proc.pid, signal.SIGSTOP)
+                paused = time.monotonic()
+            if paused is not None and resumed is None and now >= FAULT_AT + FAULT_FOR:
+                os.kill(redis_proc.pid, signal.SIGCONT)
+                resumed = time.monotonic()
+            for path in ("/health/live", "/health/ready"):
+                t = time.perf_counter()
+                try:
+                    status = http.get(path, timeout=10).status_code
+                except httpx.HTTPError:
+                    status = 0
+                health.append((time.monotonic(), path, status, 1000 * (time.perf_counter() - t)))
+            time.sleep(0.25)
+        for p in procs:
+            p.join(timeout=60)
+        crashed = sum(p.exitcode != 0 for p in procs)
+        assert paused is not None and resumed is not None, "the load ended before the pause"
+        lost = twice = 0
+        for k, sid, token in created:
+            held = http.get(f"/sessions/{sid}", headers={"Authorization": f"Bearer {token}"})
+            steps = held.json()["steps"] if held.status_code == 200 else 0
+            lost += max(0, acked[k] - steps)
+            twice += max(0, steps - acked[k])
+        stored = http.get("/domains/default").json()["trajectories"] - before
+        sessions_end = http.get("/health").json()["sessions"]
+    n = int(answers[0])
+    rows_of = np.asarray(answers[1 : 1 + 3 * n]).reshape(-1, 3)
+    sent, rtt, kind = rows_of[:, 0], rows_of[:, 1], rows_of[:, 2]
+    decided, refusal = kind == DECIDED, kind == REFUSED
+    start = began + FAULT_FROM
+
+    def p99(mask: Any) -> float:
+        return float(np.percentile(rtt[mask], 99)) if mask.any() else float("nan")
+
+    before_pause = decided & (sent >= start) & (sent < paused)
+    first_after = decided & (sent >= resumed) & (sent < resumed + FAULT_BACK)
+    later = decided & (sent >= resumed + FAULT_BACK)
+    # the first second after Redis returned from which every 1-s window's p99 is under target
+    # (nan: not within the run), and the first whose p99 is back under the one before the pause
+    windows = np.arange(resumed, sent.max() - 1.0 + 1e-9, 1.0)
+    by_second = [p99(decided & (sent >= w) & (sent < w + 1)) for w in windows]
+    over = [k for k, v in enumerate(by_second) if not v < FAULT_P99]
+    back = float("nan") if over and over[-1] == len(by_second) - 1 else (
+        float(over[-1] + 1) if over else 0.0
+    )  # fmt: skip
+    baseline = p99(before_pause)
+    again = next((float(k) for k, v in enumerate(by_second) if v <= baseline), float("nan"))
+    refusals = rtt[refusal]
+    late = refusal & (sent >= paused + 2.0)  # the breaker's: Redis known to be down
+    series = []
+    for w in np.arange(began + FAULT_FROM, sent.max(), 1.0):
+        within = (sent >= w) & (sent < w + 1)
+        series.append(f"{w - began:.0f}: {p99(decided & within):.0f} ms, "
+                      f"{int((within & refusal).sum())} refused")  # fmt: skip
+    print("single-event p99 by second of the load:", "; ".join(series), file=sys.stderr)
+    live_bad = sum(1 for _, path, st, _ in health if path == "/health/live" and st != 200)
+    live_max = max(ms for _, path, _, ms in health if path == "/health/live")
+    ready_503 = sum(1 for t, path, st, _ in health
+                    if path == "/health/ready" and st == 503 and paused <= t < resumed)  # fmt: skip
+    return [
+        ("redis pause: events answered with a decision", int(decided.sum()), "events"),
+        ("redis pause: events refused 503 (Redis named, sent again)", int(refusal.sum()),
+         "events"),
+        ("redis pause: ingests and prior reads refused 503",
+         refused_writes.value + refused_reads.value, ""),
+        ("redis pause: other errors (answers neither a decision nor a 503, failed requests "
+         "or connections, load processes that died)", errors.value + crashed, ""),
+        ("redis pause: acknowledged events Redis does not hold at the end (lost)", lost, ""),
+        ("redis pause: events Redis holds that were not acknowledged", twice, ""),
+        ("redis pause: trajectories acknowledged", writes.value, ""),
+        ("redis pause: trajectories acknowledged and not stored",
+         max(0, writes.value - stored), ""),
+        ("redis pause: trajectories stored and not acknowledged", max(0, stored - writes.value),
+         ""),
+        ("redis pause: prior reads answered", reads.value, ""),
+        ("redis pause: single-event p99 before the pause", p99(before_pause), "ms"),
+        ("redis pause: 503 answers p50", float(np.percentile(refusals, 50)), "ms"),
+        ("redis pause: 503 answers p99", float(np.percentile(refusals, 99)), "ms"),
+        ("redis pause: 503 answers max", float(refusals.max()), "ms"),
+        ("redis pause: 503 answers p99, from 2 s after Redis stopped (refused by the breaker)",
+         float(np.percentile(rtt[late], 99)) if late.any() else float("nan"), "ms"),
+        (f"redis pause: single-event p99, first {FAULT_BACK:.0f} s after Redis returned",
+         p99(first_after), "ms"),
+        (f"redis pause: single-event p99 from {FAULT_BACK:.0f} s after Redis returned to the end",
+         p99(later), "ms"),
+        (f"redis pause: seconds after Redis returned until every 1-s window's p99 < "
+         f"{FAULT_P99:.0f} ms (nan: not within the run)", back, "s"),
+        ("redis pause: seconds after Redis returned until a 1-s window's p99 is back under the "
+         "p99 before the pause", again, "s"),
+        ("redis pause: /health/live answers other than 200", live_bad, ""),
+        ("redis pause: /health/live slowest answer", live_max, "ms"),
+        ("redis pause: /health/ready answered 503 while Redis was stopped", ready_503, "times"),
+        ("redis pause: live sessions at the end", sessions_end, ""),
+    ]  # fmt: skip
+
+
 SECTIONS: dict[str, tuple[Callable[[Path, Path, float], Rows], float]] = {
     "reads": (bench_reads, 15.0),
     "batches": (bench_batches, 15.0),
@@ -602,6 +870,7 @@ SECTIONS: dict[str, tuple[Callable[[Path, Path, float], Rows], float]] = {
     "throughput": (bench_throughput, 10.0),
     "memory": (bench_memory, 0.0),
     "combined": (bench_combined, 150.0),
+    "redis_pause": (bench_redis_pause, 70.0),
 }
 #: The combined load's first seconds, while caches fill and the allocator grows its arenas
 #: (measured: RSS rises for 60 to 80 s, then stays within a few MiB)

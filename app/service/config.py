@@ -122,6 +122,18 @@ class Settings(BaseSettings):
     redis_prefix: str = Field(
         "advisor", pattern=r"^[A-Za-z0-9_.-]{1,64}$", description="First part of its keys."
     )
+    redis_timeout: float = Field(
+        1.0, gt=0, le=60,
+        description="Seconds a command to Redis (or a connection to it) may take; then, and at "
+        "once while Redis is known to be down, requests that need it are answered 503 with "
+        "Retry-After (Redis is tried again every second).",
+    )  # fmt: skip
+    database_timeout: float = Field(
+        10.0, gt=0, le=600,
+        description="PostgreSQL: seconds a connection, or one exchange with the database, may "
+        "take before the request is answered 503 with Retry-After (SQLite waits up to 30 s "
+        "for a lock).",
+    )  # fmt: skip
     # ---- operations: metrics, logs, the MQTT bridge ----
     metrics_enabled: bool = Field(True, description="Count requests; serve GET /metrics.")
     log_format: Literal["text", "json"] = Field(

@@ -5,13 +5,16 @@
 * bodies over the limit: 413 from :class:`BodyLimit` before the app reads them, bodies that say
   they are not JSON (a ``Content-Type`` other than ``application/json``): 415;
 * JSON nested too deeply for the parser: 400 (instead of the RecursionError's 500);
-* a websocket to a path without a websocket route: 404 (:class:`NoWebSocketRoute`).
+* a websocket to a path without a websocket route: 404 (:class:`NoWebSocketRoute`);
+* Redis failing (:class:`~app.service.live.faults.RedisDown`) or the database not answering:
+  503 with ``Retry-After``, the body naming which; a session lost with Redis' data: 410.
 """
 
 from __future__ import annotations
 
 import logging
 import re
+import time
 from typing import Any
 
 from fastapi import FastAPI, Request, Response
@@ -20,6 +23,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from redis.exceptions import ConnectionError as RedisConnectionError
 from redis.exceptions import TimeoutError as RedisTimeoutError
+from sqlalchemy import exc as sa_exc
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.requests import ClientDisconnect
 from starlette.routing import WebSocketRoute
@@ -27,6 +31,7 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from app.service.data.domains import DomainChanged, DomainNotFound
 from app.service.data.store import COUNT_MAX, CountsFull
+from app.service.live.faults import RETRY_AFTER, RedisDown, SessionLost
 from app.service.live.lanes import LaneError
 from app.service.live.registry import SessionNotFound, SessionUnreadable
 from app.service.live.sessions import StoreUnavailable
@@ -119,6 +124,17 @@ async def _unreadable(_: Request, exc: Exception) -> JSONResponse:
     )
 
 
+async def _lost(_: Request, exc: Exception) -> JSONResponse:
+    return _json(410, lost_detail(exc.args[0]))
+
+
+def lost_detail(session_id: str) -> str:
+    return (
+        f"live session {session_id!r} was lost: Redis, where live sessions are kept, came "
+        "back without its data; start a new session"
+    )
+
+
 async def _domain_changed(_: Request, exc: Exception) -> JSONResponse:
     return _json(
         409,
@@ -127,19 +143,57 @@ async def _domain_changed(_: Request, exc: Exception) -> JSONResponse:
     )
 
 
-#: what Redis failing looks like (the live sessions' store, with workers)
+#: what Redis failing looks like (the live sessions' store, with workers): RedisDown, and
+#: the errors it stands for should one reach a route as it is
 STORE_DOWN: tuple[type[Exception], ...] = (
     StoreUnavailable, RedisConnectionError, RedisTimeoutError, LaneError,
 )  # fmt: skip
-STORE_DOWN_TEXT = (
-    "the live sessions are kept in Redis, which does not answer now; nothing was applied: "
-    "send the same request again (events with their step are applied once)"
-)
+
+
+def store_down_detail(exc: BaseException) -> str:
+    """The words of a 503 for Redis failing: what failed, what was applied, what to do."""
+    why = exc.why if isinstance(exc, RedisDown) else (str(exc) or type(exc).__name__)
+    return (
+        f"the live sessions are kept in Redis, which does not answer now ({why}): the request "
+        "was not applied (or, if Redis stopped in the middle of it, is not known to be): send "
+        f"it again in {RETRY_AFTER} s (events carrying their step are applied once)"
+    )
 
 
 async def _store_down(_: Request, exc: Exception) -> JSONResponse:
-    log.warning("Redis does not answer: %s", exc)
-    return _json(503, STORE_DOWN_TEXT)
+    _now_and_then("Redis does not answer: %s", exc)
+    return _json(503, store_down_detail(exc), headers={"Retry-After": str(RETRY_AFTER)})
+
+
+#: the database not answering (PostgreSQL down or past ADVISOR_DATABASE_TIMEOUT, a pool with
+#: no connection free in time, SQLite locked past its wait)
+DATABASE_DOWN: tuple[type[Exception], ...] = (
+    sa_exc.OperationalError, sa_exc.InterfaceError, sa_exc.TimeoutError,
+)  # fmt: skip
+DATABASE_RETRY_AFTER = 2
+DATABASE_DOWN_TEXT = (
+    "the database does not answer now: send the request again in a few seconds (nothing is "
+    "acknowledged before the database has stored it)"
+)
+
+
+async def _database_down(_: Request, exc: Exception) -> JSONResponse:
+    cause = getattr(exc, "orig", None) or exc
+    _now_and_then("the database does not answer: %s", f"{type(cause).__name__}: {cause}")
+    return _json(503, DATABASE_DOWN_TEXT, headers={"Retry-After": str(DATABASE_RETRY_AFTER)})
+
+
+_logged: dict[str, float] = {}
+
+
+def _now_and_then(message: str, arg: object, every: float = 10.0) -> None:
+    """A warning at most every ``every`` seconds per message (a store that is down refuses
+    every request: one line says it)."""
+    now = time.monotonic()
+    if now - _logged.get(message, -every) >= every:
+        _logged[message] = now
+        text = str(arg).strip().splitlines()
+        log.warning(message, text[0][:300] if text else type(arg).__name__)
 
 
 async def _counts_full(_: Request, exc: Exception) -> JSONResponse:
@@ -176,11 +230,14 @@ def install_error_handlers(app: FastAPI) -> None:
     app.add_exception_handler(DomainChanged, _domain_changed)
     app.add_exception_handler(SessionNotFound, _no_session)
     app.add_exception_handler(SessionUnreadable, _unreadable)
+    app.add_exception_handler(SessionLost, _lost)
     app.add_exception_handler(RecursionError, _too_deep)
     app.add_exception_handler(ClientDisconnect, _gone)
     app.add_exception_handler(CountsFull, _counts_full)
     for unavailable in STORE_DOWN:
         app.add_exception_handler(unavailable, _store_down)
+    for unavailable in DATABASE_DOWN:
+        app.add_exception_handler(unavailable, _database_down)
 
 
 class _TooLarge(Exception):

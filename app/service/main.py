@@ -14,7 +14,13 @@ from starlette.concurrency import run_in_threadpool
 
 from app.service import metrics
 from app.service.config import VERSION, Settings
-from app.service.errors import BodyLimit, NoWebSocketRoute, install_error_handlers
+from app.service.errors import (
+    DATABASE_DOWN,
+    STORE_DOWN,
+    BodyLimit,
+    NoWebSocketRoute,
+    install_error_handlers,
+)
 from app.service.logs import announce, quiet_event_routes
 from app.service.openapi import install_openapi
 from app.service.ops import warm_up
@@ -45,6 +51,16 @@ async def _expire_idle(state: ServiceState) -> None:
         await state.sessions.sweep()  # idle sessions, and the retention of where explorers were
 
 
+async def _surviving(run: Callable[[], Awaitable[None]], pause: float = 1.0) -> None:
+    """The loop ``run`` makes, started again after Redis or the database failed it (they
+    come back; the loop must not end with them)."""
+    while True:
+        try:
+            await run()
+        except (*STORE_DOWN, *DATABASE_DOWN):
+            await asyncio.sleep(pause)
+
+
 @asynccontextmanager
 async def lifespan(app: FastAPI) -> AsyncIterator[None]:
     settings: Settings = app.state.settings
@@ -61,11 +77,11 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
     # of the collector, whose full passes over it would otherwise pause requests for ~100 ms.
     gc.collect()
     gc.freeze()
-    sweeper = asyncio.create_task(_expire_idle(state))
+    sweeper = asyncio.create_task(_surviving(lambda: _expire_idle(state)))
     gauges = None
     if settings.metrics_enabled:
         metrics.forget_dead_workers()  # a worker that takes a killed one's place
-        gauges = asyncio.create_task(metrics.keep_gauges(state.sessions))
+        gauges = asyncio.create_task(_surviving(lambda: metrics.keep_gauges(state.sessions)))
     stops = await start_background(app, settings)
     try:
         yield

@@ -26,8 +26,10 @@ any device there.
   through the routes' own functions (:mod:`app.service.ops`), so the decisions are the REST
   ones.
 * ``B/errors``: ``{"detail", "status"}`` for a message refused (bad JSON, unknown domain, a
-  wall, the device's quota...), as the websocket's error frames; nothing changed. A failure of
-  the service's own (Redis not answering, a bug) is answered there too (503, 500) and logged.
+  wall, the device's quota...), as the websocket's error frames; nothing changed. When Redis or
+  the database does not answer: status 503, a detail naming which, and ``retry_after``
+  (seconds): send the message again then (events carrying ``step`` are applied once). A bug is
+  answered there too (500) and logged.
 
 Device, domain and explorer ids follow the rule of domain names (a message of another id is
 answered on its ``errors`` topic and opens no session). QoS 1 both ways: the bridge handles
@@ -104,7 +106,14 @@ from pydantic import ValidationError
 from app.service import ops
 from app.service.clients import device_client
 from app.service.data.domains import DomainNotFound
-from app.service.errors import STORE_DOWN, STORE_DOWN_TEXT
+from app.service.errors import (
+    DATABASE_DOWN,
+    DATABASE_DOWN_TEXT,
+    DATABASE_RETRY_AFTER,
+    STORE_DOWN,
+    store_down_detail,
+)
+from app.service.live.faults import RETRY_AFTER
 from app.service.live.registry import LiveSession, SessionNotFound
 from app.service.metrics import MQTT_MESSAGES
 from app.service.problems import BadInput, describe_errors
@@ -172,9 +181,20 @@ def subscriptions(prefix: str) -> list[str]:
 
 
 class Refused(Exception):
-    def __init__(self, status: int, detail: str):
+    def __init__(self, status: int, detail: str, retry_after: int | None = None):
         super().__init__(detail)
-        self.status, self.detail = status, detail
+        self.status, self.detail, self.retry_after = status, detail, retry_after
+
+
+#: what a message may be refused for: its own fault, or Redis or the database not answering
+REFUSED: tuple[type[Exception], ...] = (Refused, *STORE_DOWN, *DATABASE_DOWN)
+
+
+def unavailable(exc: Exception) -> Refused:
+    """Redis or the database not answering, as a message's refusal: 503, naming which."""
+    if isinstance(exc, DATABASE_DOWN):
+        return Refused(503, DATABASE_DOWN_TEXT, DATABASE_RETRY_AFTER)
+    return Refused(503, store_down_detail(exc), RETRY_AFTER)
 
 
 class Throttle(logging.Filter):
@@ -469,11 +489,12 @@ class Bridge:
                     await self.configure(who, payload)
                     return
                 decisions = await self.events(who, payload)
-            except STORE_DOWN as exc:
-                self.log.warning("MQTT bridge: Redis does not answer: %s", exc)
-                raise Refused(503, STORE_DOWN_TEXT) from None
             except Refused:
                 raise
+            except REFUSED as failed:  # Redis or the database does not answer
+                refused = unavailable(failed)
+                self.log.warning("MQTT bridge: %s", refused.detail)
+                raise refused from None
             except Exception:  # a bug: the device is told, the log gets the traceback
                 self.log.exception("MQTT bridge: a message on %s failed", topic)
                 raise Refused(
@@ -481,7 +502,8 @@ class Bridge:
                     "known to have been applied: send it again, with steps to be safe",
                 ) from None  # fmt: skip
         except Refused as exc:
-            error = orjson.dumps({"detail": exc.detail, "status": exc.status})
+            later = {} if exc.retry_after is None else {"retry_after": exc.retry_after}
+            error = orjson.dumps({"detail": exc.detail, "status": exc.status, **later})
             self.pending.append((self.topic(who, "errors"), error))
             MQTT_MESSAGES.labels("out", "errors").inc()
         else:

@@ -87,6 +87,16 @@ class ErrorPublic(BaseModel):
     errors: list[dict[str, object]] | None = Field(None, description="Each validation problem.")
 
 
+class DependencyPublic(BaseModel):
+    state: str = Field(
+        description="up, down or not used (the database, Redis); connected, not connected, "
+        "standby (another worker runs it) or off (the MQTT bridge); listening, not listening "
+        "or off (the viewer)."
+    )
+    required: bool = Field(description="Whether readiness fails (503) while it is not up.")
+    detail: str | None = Field(None, description="Why it is not up, in words.")
+
+
 class HealthPublic(BaseModel):
     status: Literal["ok"]
     version: str
@@ -94,6 +104,23 @@ class HealthPublic(BaseModel):
     domains: int
     sessions: int
     uptime_seconds: float
+    dependencies: dict[str, DependencyPublic] | None = Field(
+        None,
+        description="database, redis, mqtt, viewer: the state of each (only the database "
+        "and Redis, when used, can fail readiness).",
+    )
+
+
+class LivePublic(BaseModel):
+    status: Literal["ok"]
+    version: str
+    uptime_seconds: float
+
+
+class NotReadyPublic(BaseModel):
+    detail: str = Field(description="What the service cannot work without that is down.")
+    status: Literal["unavailable"]
+    dependencies: dict[str, DependencyPublic]
 
 
 # ---- domains ---------------------------------------------------------------------------------

@@ -47,7 +47,7 @@ def open_state(settings: Settings) -> tuple[ServiceState, list[str]]:
     admin_key, key_message = load_admin_key(settings)
     operator_key, operator_message = load_operator_key(settings)
     client_keys = quota_keys(settings, admin_key, operator_key)  # before anything is opened
-    store = Store(settings.db_url)
+    store = Store(settings.db_url, timeout=settings.database_timeout)
     store.create_schema()
     catalog = DomainCatalog(store, settings.max_map_cells)
     catalog.load()
@@ -82,6 +82,7 @@ def open_state(settings: Settings) -> tuple[ServiceState, list[str]]:
             settings.replay_steps,
             (settings.max_sessions, settings.max_session_memory,
              settings.client_max_sessions, settings.client_max_session_memory),
+            settings.redis_timeout,
         )  # fmt: skip
     state = ServiceState(
         settings, store, catalog, registry, admin_key, operator_key, trusted=trusted,

@@ -48,6 +48,10 @@ class Route:
 ROUTES = [
     Route("GET", "/health", "anyone"),
     Route("HEAD", "/health", "anyone"),
+    Route("GET", "/health/live", "anyone"),
+    Route("HEAD", "/health/live", "anyone"),
+    Route("GET", "/health/ready", "anyone"),
+    Route("HEAD", "/health/ready", "anyone"),
     Route("GET", "/domains", "anyone"),
     Route("GET", "/domains/{name}", "anyone"),
     Route("PUT", "/domains/{new}", "admin", {"map": TINY}),

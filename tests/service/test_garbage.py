@@ -21,7 +21,8 @@ BODIES = [
     b"\x00" * 64, "\u202e\ufeff\U0001f600".encode(),
 ]  # fmt: skip
 CONTRACT = {
-    ("GET", "/health"), ("GET", "/domains"), ("GET", "/domains/{name}"), ("PUT", "/domains/{name}"),
+    ("GET", "/health"), ("GET", "/health/live"), ("GET", "/health/ready"),
+    ("GET", "/domains"), ("GET", "/domains/{name}"), ("PUT", "/domains/{name}"),
     ("DELETE", "/domains/{name}"), ("POST", "/domains/{name}/trajectories"),
     ("GET", "/domains/{name}/prior"), ("POST", "/domains/{name}/sessions"),
     ("POST", "/sessions/{session_id}/events"), ("POST", "/sessions/{session_id}/positions"),

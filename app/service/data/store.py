@@ -15,10 +15,18 @@ Tables (the same on every database; only the engine's connect options differ):
 A trajectory and the counts it adds are written in one transaction, so the counts always equal
 a recount of the stored trajectories (:meth:`Store.recount`), whatever happens to the process.
 Every method is synchronous and short; the service calls them from a worker thread.
+
+On PostgreSQL every connection is made, and every exchange with the server (a statement, a
+commit) answered, within ``timeout`` seconds (``ADVISOR_DATABASE_TIMEOUT``), else the
+connection is closed and ``OperationalError`` raised (the service answers 503): a database that
+stops answering holds a worker thread that long, not for ever. A commit whose answer did not
+come is not known to have happened or not; nothing is acknowledged before it answered.
 """
 
 from __future__ import annotations
 
+import inspect as pyinspect
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
@@ -200,11 +208,15 @@ def table_increments(items: Sequence[Trajectory], n_states: int) -> dict[str, Ta
 class Store:
     """The repository: every read and write of durable state goes through here."""
 
-    def __init__(self, url: str):
+    def __init__(self, url: str, timeout: float = 10.0):
         connect_args = {"timeout": 30} if url.startswith("sqlite") else {}
-        self.engine: Engine = create_engine(url, connect_args=connect_args, pool_pre_ping=True)
+        self.engine: Engine = create_engine(
+            url, connect_args=connect_args, pool_pre_ping=True, pool_timeout=timeout
+        )
         if self.engine.dialect.name == "sqlite":
             event.listen(self.engine, "connect", _sqlite_pragmas)
+        elif self.engine.dialect.driver == "psycopg":
+            _with_deadlines(self.engine, timeout)
 
     @property
     def dialect(self) -> str:
@@ -447,6 +459,37 @@ class Store:
         """The counts recomputed from the stored trajectories (to check :meth:`counts`)."""
         items = self.trajectories(name)
         return table_increments(items, n_states) if items else {}
+
+
+def _with_deadlines(engine: Engine, deadline: float) -> None:
+    """psycopg's connections of ``engine`` made within ``deadline`` seconds and each exchange
+    answered within it (see the module); a psycopg without ``wait(..., timeout=)`` (older than
+    the one this was written for) keeps only the connection's time limit."""
+    import psycopg
+
+    found = getattr(psycopg.errors, "_WaitTimeout", None)
+    params = pyinspect.signature(psycopg.Connection.wait).parameters
+    timed: type[psycopg.Connection[Any]] = psycopg.Connection
+    if isinstance(found, type) and {"interval", "timeout"} <= set(params):
+        expired: type[BaseException] = found
+
+        class Timed(psycopg.Connection[Any]):
+            def wait(self, gen: Any, interval: float = 0.1, timeout: float | None = None) -> Any:
+                limit = deadline if timeout is None else min(timeout, deadline)
+                try:
+                    return super().wait(gen, interval, limit)
+                except expired:
+                    self.pgconn.finish()  # in the middle of an exchange: not usable again
+                    raise psycopg.OperationalError(
+                        f"the database did not answer within {deadline:g} s"
+                    ) from None
+
+        timed = Timed
+
+    @event.listens_for(engine, "do_connect")
+    def connect(_dialect: Any, _record: Any, cargs: Any, cparams: dict[str, Any]) -> Any:
+        cparams.setdefault("connect_timeout", max(2, math.ceil(deadline)))
+        return timed.connect(*cargs, **cparams)
 
 
 def _sqlite_pragmas(dbapi_conn: Any, _record: Any) -> None:

@@ -11,14 +11,17 @@ one write at its end: Redis reads them together and answers them together (2.2 e
 instead of one, one worker under 16 REST connections: ``benchmarks/bench_redis_costs.py``).
 Everything else (reads, admin, the sweep) goes through redis-py.
 
-A lane that loses its connection fails the calls in flight (the caller answers 503, a retry
-with the same step is safe) and connects again at the next call; a call that gets no answer
-within ``timeout`` seconds (checked every quarter of it: at most 1.25 ``timeout``) fails the
-same way, since a late answer could no longer be told apart. One watchdog a lane does that
-check, not a timer a call (each timer is an entry in the event loop's heap, made and
-cancelled at every event). Answers are parsed where the bytes arrive (an asyncio protocol's
-``data_received``), not by a reading task woken through a stream: one step of the event loop
-less an answer.
+A lane that loses its connection fails the calls in flight (:class:`LaneError`: the caller
+answers 503, a retry with the same step is safe) and connects again at the next call; a
+call that gets no answer within ``timeout`` seconds (checked every quarter of it: at most
+1.25 ``timeout``) fails the same way (:class:`LaneTimeout`), since a late answer could no
+longer be told apart, and so does a connection that cannot be made within ``timeout``
+(:class:`LaneUnreachable`: refused, no route, TLS or AUTH refused). One watchdog a lane does
+that check, not a timer a call (each timer is an entry in the event loop's heap, made and
+cancelled at every event). A connection given up is aborted, not closed: what it had not
+written yet (to a Redis that stopped reading) is dropped at once. Answers are parsed where the
+bytes arrive (an asyncio protocol's ``data_received``), not by a reading task woken through a
+stream: one step of the event loop less an answer.
 """
 
 from __future__ import annotations
@@ -35,6 +38,36 @@ from redis.connection import parse_url
 
 class LaneError(ConnectionError):
     """The lane's connection failed, or Redis did not answer in time."""
+
+
+class LaneTimeout(LaneError):
+    """Redis did not answer a call within the lane's timeout."""
+
+
+class LaneUnreachable(LaneError):
+    """The lane could not connect to Redis (refused, timed out, TLS or AUTH refused)."""
+
+
+def tls_context(options: dict[str, Any]) -> ssl.SSLContext:
+    """The TLS context of a ``rediss://`` URL, from the options redis-py reads in its query
+    string: ``ssl_ca_certs`` (a CA file; default: the system's), ``ssl_cert_reqs`` (``none``,
+    ``optional``, ``required``), ``ssl_certfile`` and ``ssl_keyfile`` (a client certificate),
+    ``ssl_check_hostname``."""
+    context = ssl.create_default_context(cafile=options.get("ssl_ca_certs"))
+    check = options.get("ssl_check_hostname")
+    if check is not None:
+        context.check_hostname = check if isinstance(check, bool) else check.lower() in (
+            "1", "true", "yes", "on",
+        )  # fmt: skip
+    reqs = str(options.get("ssl_cert_reqs") or "required").lower()
+    if reqs == "none":
+        context.check_hostname = False
+        context.verify_mode = ssl.CERT_NONE
+    elif reqs == "optional":
+        context.verify_mode = ssl.CERT_OPTIONAL
+    if options.get("ssl_certfile"):
+        context.load_cert_chain(options["ssl_certfile"], options.get("ssl_keyfile"))
+    return context
 
 
 class _Wire(asyncio.Protocol):
@@ -83,6 +116,7 @@ class Lane:
     def __init__(self, url: str, timeout: float = 10.0):
         self.options = parse_url(url)  # type: ignore[no-untyped-call]
         self.tls = url.startswith("rediss://")
+        self._tls_context = tls_context(self.options) if self.tls else None
         self.timeout = timeout
         self._wire: _Wire | None = None
         self._waiting: collections.deque[asyncio.Future[Any]] = collections.deque()
@@ -102,13 +136,17 @@ class Lane:
             o = self.options
             loop = asyncio.get_running_loop()
             wire = _Wire(self)
-            if "path" in o:
-                await loop.create_unix_connection(lambda: wire, o["path"])
-            else:
-                context = ssl.create_default_context() if self.tls else None
-                await loop.create_connection(
-                    lambda: wire, o.get("host", "127.0.0.1"), o.get("port", 6379), ssl=context
-                )
+            try:
+                async with asyncio.timeout(self.timeout):
+                    if "path" in o:
+                        await loop.create_unix_connection(lambda: wire, o["path"])
+                    else:
+                        await loop.create_connection(
+                            lambda: wire, o.get("host", "127.0.0.1"), o.get("port", 6379),
+                            ssl=self._tls_context,
+                        )  # fmt: skip
+            except (OSError, TimeoutError) as exc:  # ssl.SSLError is an OSError
+                raise LaneUnreachable(f"cannot connect to Redis: {_reason(exc)}") from None
             hello: list[tuple[Any, ...]] = []
             if o.get("password"):
                 user = o.get("username")
@@ -117,8 +155,17 @@ class Lane:
                 hello.append(("SELECT", o["db"]))
             self._wire = wire  # (a connection lost from here on fails what waits)
             answers = [self._write(wire, command) for command in hello]  # first on the wire
-            for done in answers:
-                await done
+            try:
+                for done in answers:
+                    await done
+            except (hiredis.ReplyError, LaneError) as exc:  # a wrong password, no answer
+                refused = LaneUnreachable(f"Redis refused the connection: {exc}")
+                if isinstance(exc, hiredis.ReplyError):
+                    self._lost(refused, wire)
+                for other in answers:  # their failure is this one
+                    if other.done() and not other.cancelled():
+                        other.exception()
+                raise refused from None
             return wire
 
     async def call(self, *args: Any) -> Any:
@@ -173,7 +220,7 @@ class Lane:
         if not self._sent:
             return
         if time.monotonic() - self._sent[0] > self.timeout:
-            self._lost(LaneError(f"Redis did not answer within {self.timeout} s"))
+            self._lost(LaneTimeout(f"Redis did not answer within {self.timeout:g} s"))
             return
         self._watchdog = asyncio.get_running_loop().call_later(self.timeout / 4, self._watch)
 
@@ -183,8 +230,10 @@ class Lane:
         if wire is not None and wire is not self._wire:
             return  # an older connection, already dropped
         wire, self._wire = self._wire, None
-        if wire is not None and wire.transport is not None:
-            wire.transport.close()
+        if wire is not None:
+            wire._resume()  # a caller waiting for the buffer to drain goes on (and fails)
+            if wire.transport is not None:
+                wire.transport.abort()  # what Redis did not read goes now, not at its return
         self._sent.clear()
         self._out.clear()
         if self._watchdog is not None:
@@ -197,3 +246,10 @@ class Lane:
 
     async def close(self) -> None:
         self._lost(LaneError("closed"))
+
+
+def _reason(exc: BaseException) -> str:
+    """An exception in a few words (a TimeoutError says nothing of itself)."""
+    if isinstance(exc, TimeoutError) and not str(exc):
+        return "no answer in time"
+    return str(exc) or type(exc).__name__

@@ -25,11 +25,22 @@ Where an explorer was is written without the cells older than the retention
 (``ADVISOR_PATH_RETENTION_SECONDS``); a session that stays still keeps them in Redis until its
 next event or its expiry, and every read (a worker's copy made from Redis) drops them.
 
+Redis failing (:mod:`app.service.live.faults`): every call has a time limit
+(``ADVISOR_REDIS_TIMEOUT``: the lanes' watchdog, redis-py's socket timeouts), every failure is
+one exception (:class:`~app.service.live.faults.RedisDown`: 503), and while Redis is known to
+be down calls are refused at once and a probe asks it again every second. An event is
+acknowledged only once the commit script has answered ``ok``: what a worker answered 2xx is in
+Redis. When Redis comes back without its data (restarted empty: its generation key ``P:gen``
+is not the one the worker knew), the sessions the worker held that Redis no longer has are
+marked lost (``P:lost``, for as long as their keys would have lived): their requests answer
+410 saying so, from any worker; and the worker tells Redis its data versions again.
+
 Keys (``P`` the prefix, ``ADVISOR_REDIS_PREFIX``): ``P:s:<id>`` the session, ``P:r:<id>`` and
 ``P:r:<id>:old`` its kept decisions, ``P:live`` (sorted set), ``P:mem``, ``P:c:<client>``,
 ``P:dom:<domain>`` (set), ``P:sum`` (hash: figures per session for the aggregates),
 ``P:v:<domain>`` (the data version of its prior, from the database), ``P:catalog`` (goes up
-when a domain is made or deleted).
+when a domain is made or deleted), ``P:gen`` (set once, by the first worker to start on this
+Redis's data), ``P:lost`` (set: sessions lost with Redis' data).
 The script reaches keys it derives from its arguments: this is for one Redis server (or
 Sentinel), not Redis Cluster as it stands (docs/SCALING.md).
 """
@@ -39,12 +50,17 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import secrets
 import time
-from typing import Any
+from typing import Any, cast
 
 import hiredis
 import numpy as np
 import redis.asyncio as aioredis
+import redis.exceptions as rx
+from redis.asyncio.client import Pipeline
+from redis.asyncio.retry import Retry
+from redis.backoff import NoBackoff
 from starlette.concurrency import run_in_threadpool
 
 from app import strategies
@@ -53,6 +69,7 @@ from app.arrays import Moves
 from app.service.data.domains import DomainCatalog, DomainNotFound, DomainState
 from app.service.data.store import POOLED, Store
 from app.service.live import codec
+from app.service.live.faults import Breaker, RedisDown, SessionLost
 from app.service.live.lanes import Lane
 from app.service.live.registry import (
     Aggregate,
@@ -86,6 +103,12 @@ local function skey(id) return p .. ':s:' .. id end
 local function rkey(id) return p .. ':r:' .. id end
 -- versions are integers below 2**53: compared as numbers, returned as the text Redis holds
 local function version(domain) return redis.call('GET', p .. ':v:' .. domain) or '0' end
+-- a session Redis does not hold: lost with Redis' data (marked by a worker that held it),
+-- else gone (with the generation of Redis' data, for the worker to compare)
+local function absent(id)
+  if redis.call('SISMEMBER', p .. ':lost', id) == 1 then return {'lost'} end
+  return {'gone', redis.call('GET', p .. ':gen') or ''}
+end
 local function drop(id)
   local k = skey(id)
   local h = redis.call('HMGET', k, 'domain', 'client', 'reserved')
@@ -146,7 +169,7 @@ if cmd == 'create' then
   return {'ok'}
 elseif cmd == 'load' then
   local h = redis.call('HMGET', skey(ARGV[3]), 'blob', 'step', 'domain')
-  if not h[1] then return {'gone'} end
+  if not h[1] then return absent(ARGV[3]) end
   return {'ok', h[1], h[2], version(h[3])}
 elseif cmd == 'commit' then
   local id, expected, step, blob = ARGV[3], ARGV[4], ARGV[5], ARGV[6]
@@ -155,7 +178,7 @@ elseif cmd == 'commit' then
   local summary, ttl = ARGV[12], tonumber(ARGV[13])
   local k = skey(id)
   local h = redis.call('HMGET', k, 'step', 'domain', 'kept', 'touched')
-  if not h[1] then return {'gone'} end
+  if not h[1] then return absent(id) end
   local v = version(h[2])
   if h[1] ~= expected then return {'moved', redis.call('HGET', k, 'blob'), h[1], v} end
   if tonumber(v) > used then return {'stale', redis.call('HGET', k, 'blob'), h[1], v} end
@@ -205,6 +228,18 @@ elseif cmd == 'end_domain' then
   return #ids
 elseif cmd == 'expire' then
   return expire(tonumber(ARGV[3]), tonumber(ARGV[4]), tonumber(ARGV[5]))
+elseif cmd == 'lost' then
+  -- Redis lost its data: of the sessions a worker held, those it no longer has are lost
+  local ttl, gen, lost = tonumber(ARGV[3]), ARGV[4], {}
+  for i = 5, #ARGV do
+    if redis.call('EXISTS', skey(ARGV[i])) == 0 then
+      redis.call('SADD', p .. ':lost', ARGV[i])
+      lost[#lost + 1] = ARGV[i]
+    end
+  end
+  if #lost > 0 then redis.call('PEXPIRE', p .. ':lost', ttl) end
+  if gen ~= '' then redis.call('SET', p .. ':gen', gen, 'NX') end
+  return {redis.call('GET', p .. ':gen') or '', lost}
 elseif cmd == 'version' then
   local key = p .. ':v:' .. ARGV[3]
   if tonumber(ARGV[4]) > tonumber(redis.call('GET', key) or '0') then
@@ -222,22 +257,71 @@ def _summary(s: LiveSession) -> str:
     return f"{s.domain.name}|{a.steps}|{a.decisions}|{a.advice_count}|{s.p_normal!r}"
 
 
+class _Redis(aioredis.Redis):
+    """redis-py's client whose every command asks the breaker first (refused at once while
+    Redis is known to be down) and whose failures are :class:`RedisDown`."""
+
+    breaker: Breaker
+
+    async def execute_command(self, *args: Any, **options: Any) -> Any:
+        self.breaker.check()
+        try:
+            return await super().execute_command(*args, **options)  # type: ignore[no-untyped-call]
+        except Exception as exc:
+            down = self.breaker.failed(exc)
+            if down is None:
+                raise
+            raise down from None
+
+    async def unguarded(self, *args: Any) -> Any:
+        """A command past the breaker (its probe, the start)."""
+        return await super().execute_command(*args)  # type: ignore[no-untyped-call]
+
+    def pipeline(self, transaction: bool = True, shard_hint: str | None = None) -> Pipeline:
+        pipe = _Pipeline(self.connection_pool, self.response_callbacks, transaction, shard_hint)
+        pipe.breaker = self.breaker
+        return pipe
+
+
+class _Pipeline(Pipeline):
+    breaker: Breaker
+
+    async def execute(self, raise_on_error: bool = True) -> list[Any]:
+        self.breaker.check()
+        try:
+            return await super().execute(raise_on_error)
+        except Exception as exc:
+            down = self.breaker.failed(exc)
+            if down is None:
+                raise
+            raise down from None
+
+
 class SharedSessions:
     """Live sessions in Redis, this worker's registry a cache of the ones it used lately (see
-    the module; a :class:`~app.service.live.sessions.Sessions`)."""
+    the module; a :class:`~app.service.live.sessions.Sessions`). ``timeout``: seconds a call
+    to Redis may take (``ADVISOR_REDIS_TIMEOUT``)."""
 
     shared = True
 
     def __init__(
         self, registry: SessionRegistry, catalog: DomainCatalog, url: str, prefix: str,
-        replay_steps: int, limits: tuple[int, int, int, int],
+        replay_steps: int, limits: tuple[int, int, int, int], timeout: float = 1.0,
     ):  # fmt: skip
         self.registry = registry
         self.catalog = catalog
-        self.redis = aioredis.Redis.from_url(url)  # reads and rare writes: a pool
+        self.timeout = timeout
+        # reads and rare writes: a pool, each command within the timeout; a connection lost
+        # between commands (Redis closed it) is tried again once, at once, a timeout never
+        self.redis = cast(_Redis, _Redis.from_url(
+            url, socket_timeout=timeout, socket_connect_timeout=timeout,
+            retry=Retry(NoBackoff(), 1, (rx.ConnectionError,)),
+        ))  # fmt: skip
+        self.breaker = Breaker(self._probe, self._back)
+        self.redis.breaker = self.breaker
         # the scripts of events: a few single connections, which cost about half of a
         # pool's CPU a call (measured: docs/PERFORMANCE.md, "Workers")
-        self._lanes = [Lane(url) for _ in range(LANES)]
+        self._lanes = [Lane(url, timeout) for _ in range(LANES)]
         self._sha = ""
         self.prefix = prefix
         self.replay_steps = replay_steps
@@ -245,6 +329,9 @@ class SharedSessions:
         self._locks: dict[str, asyncio.Lock] = {}
         self._refreshing: dict[str, asyncio.Future[DomainState | None]] = {}
         self._catalog_epoch: int | None = None
+        self._gen = ""  # the generation of Redis' data this worker knows (P:gen)
+        self._losing: asyncio.Future[set[str]] | None = None
+        self._owed = False  # a domain's change Redis was not told of (it was down)
 
     @property
     def max_sessions(self) -> int:
@@ -252,17 +339,29 @@ class SharedSessions:
 
     async def _run(self, cmd: str, *args: Any, lane: str = "") -> Any:
         """The script's command ``cmd``: through the lane of session ``lane`` (the events'
-        path: :mod:`app.service.live.lanes`), else redis-py's pool."""
+        path: :mod:`app.service.live.lanes`), else redis-py's pool. RedisDown at once while
+        Redis is known to be down, or when it fails now."""
+        self.breaker.check()
         call = ("EVALSHA", self._sha, 0, self.prefix, cmd, *args)
         try:
             if lane:
                 return await self._lanes[hash(lane) % LANES].call(*call)
-            return await self.redis.execute_command(*call)  # type: ignore[no-untyped-call]
+            return await self.redis.execute_command(*call)
         except (aioredis.ResponseError, hiredis.ReplyError) as exc:
-            if "NOSCRIPT" not in str(exc):
-                raise
+            if not (isinstance(exc, rx.NoScriptError) or str(exc).startswith("NOSCRIPT")):
+                down = self.breaker.failed(exc)
+                if down is None:
+                    raise
+                raise down from None
             self._sha = await self.redis.script_load(SCRIPT)  # Redis restarted, or flushed
             return await self._run(cmd, *args, lane=lane)
+        except RedisDown:
+            raise
+        except Exception as exc:
+            down = self.breaker.failed(exc)
+            if down is None:
+                raise
+            raise down from None
 
     def _ttl(self) -> int:
         """Milliseconds a session's keys live without activity: past the idle timeout (the
@@ -274,13 +373,90 @@ class SharedSessions:
         versions this worker read from the database at start (a worker that died between a
         commit and telling Redis left it behind)."""
         try:
-            await self.redis.ping()  # type: ignore[misc]
-            self._sha = await self.redis.script_load(SCRIPT)
-        except (aioredis.ConnectionError, aioredis.TimeoutError, OSError) as exc:
+            await self.redis.unguarded("PING")
+            self._sha = await self.redis.unguarded("SCRIPT", "LOAD", SCRIPT)
+            if isinstance(self._sha, bytes):
+                self._sha = self._sha.decode()
+            gen = f"{self.prefix}:gen"
+            await self.redis.unguarded("SET", gen, secrets.token_hex(8), "NX")
+            self._gen = (await self.redis.unguarded("GET", gen) or b"").decode()
+        except (rx.ConnectionError, rx.TimeoutError, rx.ResponseError, OSError) as exc:
             raise RuntimeError(f"ADVISOR_REDIS_URL: Redis does not answer ({exc})") from None
         for d in self.catalog.states():
             await self._run("version", d.name, d.version)
         self._catalog_epoch = int(await self.redis.get(f"{self.prefix}:catalog") or 0)
+
+    async def _probe(self) -> bytes | None:
+        """The breaker's probe: Redis' generation key (a command Redis refuses while it is
+        still loading its data, unlike PING)."""
+        answer: bytes | None = await self.redis.unguarded("GET", f"{self.prefix}:gen")
+        return answer
+
+    async def _back(self, gen: bytes | None) -> None:
+        """Redis answers again: if without its data, the sessions held here are lost; either
+        way, it hears this worker's data versions again if a change was not told."""
+        if (gen or b"").decode() != self._gen:
+            await self._data_lost()
+        elif self._owed:
+            await self._tell_versions()
+
+    async def _tell_versions(self) -> None:
+        self._owed = False
+        try:
+            for d in self.catalog.states():
+                await self._run("version", d.name, d.version)
+            await self.redis.incr(f"{self.prefix}:catalog")  # every worker checks its list
+        except RedisDown:
+            self._owed = True
+            raise
+
+    async def _data_lost(self) -> set[str]:
+        """Redis lost its data (its generation is not the one this worker knew): the sessions
+        this worker held that Redis no longer has are marked lost (once for all who ask
+        meanwhile); which they are."""
+        running = self._losing
+        if running is None:
+            running = self._losing = asyncio.ensure_future(self._mark_lost())
+            running.add_done_callback(lambda _: setattr(self, "_losing", None))
+        return await asyncio.shield(running)
+
+    async def _mark_lost(self) -> set[str]:
+        ids = [s.id for s in self.registry.sessions()]
+        fresh = secrets.token_hex(8)
+        lost: set[str] = set()
+        gen = b""
+        for i in range(0, max(len(ids), 1), 1000):
+            gen, marked = await self._run("lost", self._ttl(), fresh, *ids[i : i + 1000])
+            lost.update(m.decode() for m in marked)
+        self._gen = gen.decode()
+        for sid in lost:
+            self.registry.forget(sid)
+        log.log(
+            logging.WARNING if lost else logging.INFO,
+            "Redis came back without its data: %d live sessions this worker held are lost "
+            "(their requests answer 410)", len(lost),
+        )  # fmt: skip
+        self._owed = True
+        await self._tell_versions()
+        return lost
+
+    async def _absent(self, session_id: str, got: list[Any]) -> SessionNotFound:
+        """What to raise for a session Redis does not hold (the script's ``gone`` or
+        ``lost``): lost with Redis' data (410), or not found (404)."""
+        lost = got[0] == b"lost"
+        if not lost and len(got) > 1 and got[1].decode() != self._gen:
+            lost = session_id in await self._data_lost()
+        self.registry.forget(session_id)
+        return SessionLost(session_id) if lost else SessionNotFound(session_id)
+
+    async def ready(self) -> str | None:
+        """Whether Redis answers now (a PING within the timeout; at once while it is known to
+        be down): None, or why not."""
+        try:
+            await self.redis.ping()  # type: ignore[misc]
+        except RedisDown as exc:
+            return exc.why
+        return None
 
     async def domain(self, name: str) -> DomainState:
         return await self.fresh_domain(name)
@@ -350,10 +526,18 @@ class SharedSessions:
     async def domain_changed(self, name: str, version: int, made_or_gone: bool) -> None:
         """This worker changed domain ``name`` (to data ``version``; a deleted domain's last
         version plus one): other workers read it again from their next request that uses it
-        (the catalog's epoch goes up too when a domain was made or deleted)."""
-        await self._run("version", name, version)
-        if made_or_gone:
-            await self.redis.incr(f"{self.prefix}:catalog")
+        (the catalog's epoch goes up too when a domain was made or deleted). With Redis down,
+        they are told once it answers again: the change is in the database, and the request
+        that made it is acknowledged."""
+        try:
+            await self._run("version", name, version)
+            if made_or_gone:
+                await self.redis.incr(f"{self.prefix}:catalog")
+        except RedisDown as exc:
+            self._owed = True
+            log.warning(
+                "domain %r changed while Redis is down (%s): told when it is back", name, exc.why
+            )
 
     async def _prepare(self, domain: DomainState, strategy: str) -> None:
         """What ``strategy`` reads of ``domain`` built (in a worker thread, the first time)."""
@@ -375,6 +559,7 @@ class SharedSessions:
     async def create(
         self, domain: DomainState, settings: SessionSettings, client: str | None
     ) -> tuple[LiveSession, Decision]:
+        self.breaker.check()  # Redis known to be down: nothing built
         for _ in range(ATTEMPTS):
             session, decision = self.registry.create(domain, settings, client)
             now = int(time.time() * 1000)
@@ -407,9 +592,8 @@ class SharedSessions:
 
     async def _load(self, session_id: str) -> LiveSession:
         got = await self._run("load", session_id, lane=session_id)
-        if got[0] == b"gone":
-            self.registry.forget(session_id)
-            raise SessionNotFound(session_id)
+        if got[0] != b"ok":
+            raise await self._absent(session_id, got)
         return await self._adopt(got[1], int(got[3]))
 
     async def _adopt(self, blob: bytes, version: int) -> LiveSession:
@@ -455,7 +639,10 @@ class SharedSessions:
         self, session_id: str, moves: Moves, first_step: int | None, one: bool = False
     ) -> DecisionBatch | Decision:
         """Apply ``moves`` to the session and write its new state to Redis before answering;
-        again from what Redis holds when another worker or a prior update came between."""
+        again from what Redis holds when another worker or a prior update came between.
+        While Redis is known to be down, refused before anything is computed (this worker's
+        copy stays as Redis holds it)."""
+        self.breaker.check()
         async with self._lock(session_id):
             session = self.registry.cached(session_id) or await self._load(session_id)
             for _ in range(ATTEMPTS):
@@ -493,9 +680,9 @@ class SharedSessions:
                         return out
                     assert isinstance(out, DecisionBatch)
                     return joined([done, out])
+                if verdict in (b"gone", b"lost"):
+                    raise await self._absent(session_id, got)
                 self.registry.forget(session_id)  # this copy went ahead of what Redis holds
-                if verdict == b"gone":
-                    raise SessionNotFound(session_id)
                 session = await self._adopt(got[1], int(got[3]))
             raise RuntimeError(f"session {session_id} kept changing while its events were applied")
 
@@ -613,6 +800,10 @@ class SharedSessions:
         return int(await self._run("end_domain", name))
 
     async def sweep(self) -> None:
+        """Idle sessions go (every worker's), and Redis hears of a domain's change it was not
+        told of when it failed."""
+        if self._owed:
+            await self._tell_versions()
         now = int(time.time() * 1000)
         gone = await self._run("expire", now, int(self.registry.idle_seconds * 1000), SWEEP_BATCH)
         for sid in gone:
@@ -621,6 +812,7 @@ class SharedSessions:
         self.registry.forget_old()
 
     async def close(self) -> None:
+        await self.breaker.close()
         await self.redis.aclose()
         for lane in self._lanes:
             await lane.close()

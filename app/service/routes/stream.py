@@ -5,11 +5,14 @@ a websocket), the subprotocols ``advisor`` and ``token.<session token>`` (the se
 ``advisor``); ``?token=<session token>`` is still accepted, but a URL is what logs and proxies
 keep (the service's own log writes ``token=***``). The connection is accepted first, so that a
 refusal can say why: it is closed with code 4401 (no token), 4403 (another session's token) or
-4404 (no such session), and the reason in the close frame.
+4404 (no such session), 4410 (the session was lost: Redis came back without its data), and
+the reason in the close frame; when Redis (or the database) does not answer, with 1013 (try
+again later) and a reason naming it.
 
 Each text frame gets exactly one answer frame, in order: the decisions (an object for one event,
 a list for a list), or for a bad frame an error ``{"detail": "...", "status": 422}`` (413 for
-too many events or bytes, 409 for a step out of turn); a refused frame changes nothing and the
+too many events or bytes, 409 for a step out of turn; 503 with ``retry_after``, in seconds,
+when Redis or the database does not answer); a refused frame changes nothing and the
 connection stays usable. Events carrying ``step`` are answered as on the REST route: a client
 that reconnects resends its unanswered frames with their steps, and those already applied are
 answered again, not applied twice. If
@@ -31,7 +34,14 @@ from starlette.websockets import WebSocketState
 
 from app.service import ops
 from app.service.deps import service_of
-from app.service.errors import STORE_DOWN, STORE_DOWN_TEXT
+from app.service.errors import (
+    DATABASE_DOWN,
+    DATABASE_DOWN_TEXT,
+    DATABASE_RETRY_AFTER,
+    STORE_DOWN,
+    store_down_detail,
+)
+from app.service.live.faults import RETRY_AFTER, SessionLost
 from app.service.live.registry import LiveSession, SessionNotFound
 from app.service.problems import BadInput
 from app.service.security import AuthError, check_session_token
@@ -44,9 +54,12 @@ CLOSE_REASONS = {  # a close reason holds at most 123 bytes
     4401: "no token: send Authorization: Bearer <token>, or subprotocols advisor, token.<token>",
     4403: "this token does not belong to this session",
     4404: "no live session with this id (never created, ended or expired)",
+    4410: "the live session was lost: Redis came back without its data; start a new session",
     4422: "format must be json (the default) or binary",
     1013: "the live sessions are kept in Redis, which does not answer now: connect again",
 }
+#: 1013 (try again later) when the database does not answer
+DATABASE_CLOSE_REASON = "the database does not answer now: connect again"
 FORMATS = ("json", "binary")
 
 
@@ -75,8 +88,8 @@ async def _authorize(state: ServiceState, session_id: str, ws: WebSocket) -> Liv
     return session
 
 
-def _error(status: int, detail: str) -> str:
-    return json.dumps({"detail": detail, "status": status})
+def _error(status: int, detail: str, **extra: object) -> str:
+    return json.dumps({"detail": detail, "status": status, **extra})
 
 
 @router.websocket("/sessions/{session_id}/stream")
@@ -97,11 +110,16 @@ async def _serve(websocket: WebSocket, session_id: str) -> None:
         session = await _authorize(state, session_id, websocket)
     except (AuthError, SessionNotFound) as exc:
         code = 4400 + exc.status % 100 if isinstance(exc, AuthError) else 4404
+        code = 4410 if isinstance(exc, SessionLost) else code
         await websocket.close(code, CLOSE_REASONS[code])
         return
     except STORE_DOWN as exc:  # 1013: try again later
-        log.warning("Redis does not answer: %s", exc)
+        log.debug("Redis does not answer: %s", exc)
         await websocket.close(1013, CLOSE_REASONS[1013])
+        return
+    except DATABASE_DOWN as exc:
+        log.debug("the database does not answer: %s", exc)
+        await websocket.close(1013, DATABASE_CLOSE_REASON)
         return
     answer_format = websocket.query_params.get("format", "json")
     if answer_format not in FORMATS:
@@ -128,10 +146,16 @@ async def _serve(websocket: WebSocket, session_id: str) -> None:
                 await websocket.send_text(answer.decode())
         except BadInput as exc:
             await websocket.send_text(_error(exc.status, exc.detail))
-        except STORE_DOWN as exc:  # nothing applied: the client may send the frame again
-            log.warning("Redis does not answer: %s", exc)
-            await websocket.send_text(_error(503, STORE_DOWN_TEXT))
-        except SessionNotFound:
+        except STORE_DOWN as exc:  # not applied (or not known to be): send the frame again
+            log.debug("Redis does not answer: %s", exc)
+            detail = store_down_detail(exc)
+            await websocket.send_text(_error(503, detail, retry_after=RETRY_AFTER))
+        except DATABASE_DOWN as exc:
+            log.debug("the database does not answer: %s", exc)
+            text = _error(503, DATABASE_DOWN_TEXT, retry_after=DATABASE_RETRY_AFTER)
+            await websocket.send_text(text)
+        except SessionNotFound as exc:
+            code = 4410 if isinstance(exc, SessionLost) else 4404
             if websocket.client_state == WebSocketState.CONNECTED:
-                await websocket.close(4404, CLOSE_REASONS[4404])
+                await websocket.close(code, CLOSE_REASONS[code])
             return

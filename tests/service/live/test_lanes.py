@@ -8,7 +8,7 @@ import asyncio
 
 import pytest
 
-from app.service.live.lanes import Lane, LaneError
+from app.service.live.lanes import Lane, LaneError, LaneTimeout, LaneUnreachable
 from tests.client.test_client import run_async  # off the browser tests' loop
 
 
@@ -130,3 +130,65 @@ def test_a_closed_connection_or_a_garbled_answer_fails_the_calls_at_once(reply: 
             await lane.close()
 
     run_async(run())
+
+
+def test_a_connection_refused_is_lane_unreachable_and_the_next_call_tries_again() -> None:
+    async def run() -> None:
+        from tests.client.conftest import free_port
+
+        port = free_port()  # nothing listens there
+        lane = Lane(f"redis://127.0.0.1:{port}/0", timeout=5.0)
+        with pytest.raises(LaneUnreachable, match="cannot connect to Redis"):
+            await lane.call("PING")
+        server, port2, _ = await _server(answer=True)
+        async with server:
+            lane.options["port"] = port2
+            assert await lane.call("PING") == 1
+            await lane.close()
+
+    run_async(run())
+
+
+def test_a_call_to_a_server_that_stopped_reading_fails_at_the_timeout_not_at_its_return() -> None:
+    """A Redis paused (SIGSTOP) reads nothing: a call larger than what the connection buffers
+    waits for the buffer to drain, and still fails at the timeout (the connection aborted,
+    what it held dropped), never waiting for the server to read again."""
+
+    async def run() -> None:
+        stalled = asyncio.Event()
+
+        async def handle(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+            await stalled.wait()  # reads nothing until the test ends
+            writer.close()
+
+        server = await asyncio.start_server(handle, "127.0.0.1", 0)
+        async with server:
+            port = server.sockets[0].getsockname()[1]
+            lane = Lane(f"redis://127.0.0.1:{port}/0", timeout=0.2)
+            big = b"x" * (8 << 20)  # beyond the socket buffers and the lane's 1 MiB mark
+            with pytest.raises(LaneTimeout):
+                await asyncio.wait_for(lane.call("SET", "k", big), 30)
+            assert not lane.connected and not lane._waiting
+            stalled.set()
+            await lane.close()
+
+    run_async(run())
+
+
+def test_rediss_options_make_the_tls_context() -> None:
+    """``rediss://`` URLs: the CA file, the certificate checks and a client certificate come
+    from the query string, as redis-py reads them (the lanes and redis-py's pool agree)."""
+    import ssl
+
+    from app.service.live.lanes import tls_context
+
+    plain = Lane("rediss://:pw@redis.example:6380/1")
+    assert plain.tls and plain._tls_context is not None
+    assert plain._tls_context.verify_mode == ssl.CERT_REQUIRED
+    assert plain._tls_context.check_hostname
+    assert plain.options["password"] == "pw" and plain.options["port"] == 6380
+    loose = tls_context({"ssl_cert_reqs": "none"})
+    assert loose.verify_mode == ssl.CERT_NONE and not loose.check_hostname
+    named = tls_context({"ssl_check_hostname": "false"})
+    assert not named.check_hostname and named.verify_mode == ssl.CERT_REQUIRED
+    assert Lane("redis://127.0.0.1:6379/0")._tls_context is None
