@@ -360,6 +360,38 @@
     }
   }
 
+  // What the service relies on (GET /health: 503 when the database or Redis is down, with the
+  // same list), in plain words; refreshed every few seconds.
+  const DEPENDENCY_NAMES = { database: "Database", redis: "Redis", mqtt: "MQTT bridge", viewer: "3D viewer" };
+  const DEPENDENCY_MS = 5000;
+
+  async function dependencies() {
+    const strip = $("dependencies");
+    try {
+      const response = await fetch("/health");
+      const body = await response.json().catch(() => null);
+      const deps = (body && body.dependencies) || {};
+      strip.replaceChildren(...Object.entries(DEPENDENCY_NAMES).filter(([key]) => key in deps)
+        .map(([key, name]) => {
+          const d = deps[key];
+          const item = document.createElement("span");
+          item.className = `dependency ${d.state.replace(/ /g, "-")}${d.required ? " required" : ""}`;
+          item.dataset.dependency = key;
+          item.textContent = `${name}: ${d.state}`;
+          item.title = d.detail || (d.required ? "The service cannot work without it" :
+            "The service works without it");
+          return item;
+        }));
+      strip.classList.toggle("error", !response.ok);
+    } catch (err) {
+      strip.textContent = `Cannot read the service's health (${err.message})`;
+      strip.classList.add("error");
+    } finally {
+      setTimeout(dependencies, DEPENDENCY_MS);
+    }
+  }
+
   poll();
+  dependencies();
   fetchJSON("/viewer").then((v) => showViewerLink($("viewer-link"), v)).catch(() => {});
 })();

@@ -150,3 +150,17 @@ def test_dashboard_shows_each_session_s_advice_left(service: Service, page: Page
     left = page.locator(f'tr[data-session-id="{budgeted}"] td').nth(12)
     expect(left).to_have_text("4 of 5, 3/min of 4")  # the start decision took one
     expect(page.locator(f'tr[data-session-id="{muted}"] td').nth(12)).to_have_text("muted")
+
+
+def test_dashboard_shows_what_the_service_relies_on(service: Service, page: Page) -> None:
+    """Each dependency of GET /health, by name and state: the database up, Redis not used
+    (sessions in this process), the MQTT bridge off, the viewer as the service sees it."""
+    health = service.http.get("/health").json()["dependencies"]
+    page.goto(service.base + "/")
+    strip = page.locator("#dependencies")
+    expect(strip.locator('[data-dependency="database"]')).to_have_text("Database: up")
+    expect(strip.locator('[data-dependency="redis"]')).to_have_text("Redis: not used")
+    expect(strip.locator('[data-dependency="mqtt"]')).to_have_text("MQTT bridge: off")
+    viewer = strip.locator('[data-dependency="viewer"]')
+    expect(viewer).to_have_text(f"3D viewer: {health['viewer']['state']}")
+    expect(strip.locator(".dependency.down.required")).to_have_count(0)
