@@ -12,7 +12,10 @@ Nothing a browser sends to the viewer reaches this process.
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 from functools import partial
+from subprocess import Popen
 
 from fastapi import APIRouter, Request, Response
 
@@ -55,8 +58,40 @@ def _seconds(text: str) -> float | None:
 
 @router.get("/viewer")
 async def viewer_status(request: Request) -> ViewerStatus:
-    """Where the 3D viewer is: this host, this port (``serve`` starts it unless --no-viewer)."""
+    """Where the 3D viewer is: this host, this port (``serve`` starts it unless --no-viewer),
+    and whether it is running now (pages show their link to it only then)."""
     settings = request.app.state.settings
     if not settings.viewer_enabled:
-        return ViewerStatus(enabled=False, port=None, host=None)
-    return ViewerStatus(enabled=True, port=settings.viewer_port, host=settings.viewer_host)
+        return ViewerStatus(enabled=False, running=False, port=None, host=None)
+    process = getattr(request.app.state, "viewer_process", None)
+    running = await viewer_running(process, settings.viewer_host, settings.viewer_port)
+    return ViewerStatus(
+        enabled=True, running=running, port=settings.viewer_port, host=settings.viewer_host
+    )
+
+
+#: how long GET /viewer waits for the viewer's port to take a connection
+PROBE_SECONDS = 0.5
+
+
+async def viewer_running(process: Popen[bytes] | None, host: str, port: int) -> bool:
+    """Whether the viewer runs: its process (``serve`` started it: the single worker holds
+    it) has not exited, and its port takes a connection (with several workers, or a viewer
+    started apart, the port alone says)."""
+    if process is not None and process.poll() is not None:
+        return False
+    try:
+        _, writer = await asyncio.wait_for(
+            asyncio.open_connection(_loopback(host), port), PROBE_SECONDS
+        )
+    except (OSError, TimeoutError):
+        return False
+    writer.close()
+    with contextlib.suppress(OSError):
+        await writer.wait_closed()
+    return True
+
+
+def _loopback(host: str) -> str:
+    """The address to reach a server listening on ``host`` from this machine."""
+    return "127.0.0.1" if host in ("", "0.0.0.0") else "::1" if host in ("::", "[::]") else host
