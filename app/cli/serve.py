@@ -8,6 +8,7 @@ import os
 import socket
 import subprocess
 import sys
+import threading
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -72,7 +73,7 @@ def serve(
             app.state.viewer_process = viewer  # GET /viewer: whether it is still alive
             uvicorn.run(app, **uvicorn_options(settings, log_level))
         else:
-            run_workers(settings, overrides, log_level)
+            run_workers(settings, overrides, log_level, viewer)
     finally:
         if viewer is not None:
             viewer.terminate()
@@ -82,7 +83,12 @@ def serve(
                 viewer.kill()
 
 
-def run_workers(settings: Settings, overrides: dict[str, Any], log_level: str) -> None:
+def run_workers(
+    settings: Settings,
+    overrides: dict[str, Any],
+    log_level: str,
+    viewer: subprocess.Popen[bytes] | None = None,
+) -> None:
     """``settings.workers`` processes on one port (uvicorn's supervisor, which starts a new
     one when one dies), sharing live sessions through Redis and data through the database.
     The first start (the default domain, the keys) happens here, once, before they start;
@@ -91,10 +97,14 @@ def run_workers(settings: Settings, overrides: dict[str, Any], log_level: str) -
 
     import uvicorn
 
+    from app.service.routes.viewer import VIEWER_PID
     from app.service.state import open_state
 
     for name, value in overrides.items():
         os.environ[f"ADVISOR_{name.upper()}"] = str(value)
+    if viewer is not None:  # GET /viewer in each worker: whether it is alive
+        os.environ[VIEWER_PID] = str(viewer.pid)
+        threading.Thread(target=viewer.wait, name="viewer-reaper", daemon=True).start()
     state, messages = open_state(settings)  # made once: the workers find it all there
     state.close()
     for message in messages:

@@ -474,8 +474,8 @@ class ViewerSnapshot(BaseModel):
 class ViewerStatus(BaseModel):
     enabled: bool = Field(description="Whether `serve` starts the viser viewer beside the API.")
     running: bool = Field(
-        description="Whether it runs now: its process is alive and its port takes "
-        "connections (false when it is not enabled, has not started yet, or has died)."
+        description="Whether it runs now: false when it is not enabled, or its process (which "
+        "`serve` started) has exited."
     )
     port: int | None = Field(description="Its port (null when not enabled).")
     host: str | None = Field(description="The interface it listens on (null when not enabled).")

@@ -5,15 +5,14 @@ started by ``serve``) and reads the service over HTTP like any client:
   the version of its prior (the viewer fetches a domain's map and prior, ``GET /domains/{name}``
   and ``/prior``, only when they change), and the 64 most recently active sessions with their
   recent history; made at most 20 times a second, in a worker thread;
-* ``GET /viewer``: where the viewer runs, for pages that link to it.
+* ``GET /viewer``: where the viewer runs and whether it is alive, for pages that link to it.
 
 Nothing a browser sends to the viewer reaches this process.
 """
 
 from __future__ import annotations
 
-import asyncio
-import contextlib
+import os
 from functools import partial
 from subprocess import Popen
 
@@ -64,34 +63,32 @@ async def viewer_status(request: Request) -> ViewerStatus:
     if not settings.viewer_enabled:
         return ViewerStatus(enabled=False, running=False, port=None, host=None)
     process = getattr(request.app.state, "viewer_process", None)
-    running = await viewer_running(process, settings.viewer_host, settings.viewer_port)
     return ViewerStatus(
-        enabled=True, running=running, port=settings.viewer_port, host=settings.viewer_host
+        enabled=True,
+        running=viewer_running(process, os.environ.get(VIEWER_PID)),
+        port=settings.viewer_port,
+        host=settings.viewer_host,
     )
 
 
-#: how long GET /viewer waits for the viewer's port to take a connection
-PROBE_SECONDS = 0.5
+#: the viewer's process id, which ``serve`` puts in its workers' environment (one worker holds
+#: the process itself: ``app.state.viewer_process``)
+VIEWER_PID = "ADVISOR_VIEWER_PID"
 
 
-async def viewer_running(process: Popen[bytes] | None, host: str, port: int) -> bool:
-    """Whether the viewer runs: its process (``serve`` started it: the single worker holds
-    it) has not exited, and its port takes a connection (with several workers, or a viewer
-    started apart, the port alone says)."""
-    if process is not None and process.poll() is not None:
-        return False
+def viewer_running(process: Popen[bytes] | None, pid: str | None) -> bool:
+    """Whether the viewer ``serve`` started is alive: its process (one worker: ``serve`` hands
+    it to the app) has not exited, or the process of that id (workers: ``serve`` reaps it when
+    it exits, so the id goes) exists. A viewer this service did not start (tests, one run
+    apart) is taken to be running."""
+    if process is not None:
+        return process.poll() is None
+    if pid is None or not pid.isdigit():
+        return True
     try:
-        _, writer = await asyncio.wait_for(
-            asyncio.open_connection(_loopback(host), port), PROBE_SECONDS
-        )
-    except (OSError, TimeoutError):
+        os.kill(int(pid), 0)
+    except ProcessLookupError:
         return False
-    writer.close()
-    with contextlib.suppress(OSError):
-        await writer.wait_closed()
+    except PermissionError:  # another user's process: it exists
+        return True
     return True
-
-
-def _loopback(host: str) -> str:
-    """The address to reach a server listening on ``host`` from this machine."""
-    return "127.0.0.1" if host in ("", "0.0.0.0") else "::1" if host in ("::", "[::]") else host
