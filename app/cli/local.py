@@ -1,5 +1,5 @@
 """Where this machine's service is, as ``serve`` reads it: the commands that talk to a running
-service (``simulate``, ``viewer``) take their defaults from the same
+service (``simulate``, ``viewer``, ``domain put``) take their defaults from the same
 ``ADVISOR_*`` settings as ``serve`` (``ADVISOR_HOST``, ``ADVISOR_PORT``, ``ADVISOR_DATA_DIR``,
 ``ADVISOR_ADMIN_KEY``, ``ADVISOR_VIEWER_*``), so that one variable set once moves them all."""
 

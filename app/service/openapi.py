@@ -14,19 +14,23 @@ from fastapi.openapi.utils import get_openapi
 from pydantic import TypeAdapter
 
 from app.service.config import Settings
-from app.service.schemas import ErrorPublic, EventIn, TrajectoriesCreate
+from app.service.schemas import DomainPut, ErrorPublic, EventIn, TrajectoriesCreate
 
 REF = "#/components/schemas/{model}"
 BODIES: dict[str, TypeAdapter[Any]] = {
     "Events": TypeAdapter(EventIn | list[EventIn]),
     "TrajectoriesCreate": TypeAdapter(TrajectoriesCreate),
+    "DomainPut": TypeAdapter(DomainPut),
 }
 EXAMPLES: dict[str, Any] = {
     "Events": [{"state": [28, 0], "action": "E"}, {"state": [28, 1], "next_state": [27, 1]}],
     "TrajectoriesCreate": {
         "trajectories": [{"agent_type": "visitor", "steps": [{"state": [28, 0], "action": "E"}]}]
     },
+    "DomainPut": {"map": ["#######", "#G..#G#", "#.#.#.#", "#S....#", "#######"]},
 }
+#: a map file as ``maze import`` writes it (a text/plain PUT /domains/{name})
+MAP_FILE = "resolution: 0.5\norigin: -12.0 4.5 0.0\n#######\n#G..#G#\n#.#.#.#\n#S....#\n#######\n"
 
 
 def body(name: str) -> dict[str, Any]:
@@ -34,6 +38,17 @@ def body(name: str) -> dict[str, Any]:
     schema = {"$ref": REF.format(model=name)}
     content = {"application/json": {"schema": schema, "example": EXAMPLES[name]}}
     return {"requestBody": {"required": True, "content": content}}
+
+
+def domain_body() -> dict[str, Any]:
+    """``openapi_extra`` of PUT /domains/{name}: JSON (``DomainPut``) or the map file as
+    text/plain."""
+    extra = body("DomainPut")
+    extra["requestBody"]["content"]["text/plain"] = {
+        "schema": {"type": "string", "description": "The map file as it is (header lines, rows)."},
+        "example": MAP_FILE,
+    }
+    return extra
 
 
 def install_openapi(app: FastAPI) -> None:
