@@ -16,7 +16,7 @@ from app.service import metrics
 from app.service.config import VERSION, Settings
 from app.service.errors import BodyLimit, NoWebSocketRoute, install_error_handlers
 from app.service.logs import announce, quiet_event_routes
-from app.service.openapi import install_openapi
+from app.service.openapi import install_openapi, operation_id
 from app.service.ops import warm_up
 from app.service.routes import ROUTERS, apidocs
 from app.service.routes import metrics as metrics_route
@@ -99,6 +99,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         # trajectories routes (which read their bytes themselves) always did; a Content-Type
         # that is not JSON is refused (415) by BodyLimit on every route
         strict_content_type=False,
+        # operationIds are the route functions' names (create_session, put_domain, ...): what
+        # a client generated from the document calls its functions
+        generate_unique_id_function=operation_id,
     )
     app.state.settings = settings
     install_error_handlers(app)

@@ -11,6 +11,7 @@ from typing import Any
 
 from fastapi import FastAPI
 from fastapi.openapi.utils import get_openapi
+from fastapi.routing import APIRoute
 from pydantic import TypeAdapter
 
 from app.service.config import Settings
@@ -68,13 +69,34 @@ def install_openapi(app: FastAPI) -> None:
                 js = adapter.json_schema(ref_template=REF)
                 components.update(js.pop("$defs", {}))
                 components[name] = js
-            # validation errors are answered as {"detail": "where: what", "errors": [...]}
-            components["HTTPValidationError"] = ErrorPublic.model_json_schema(ref_template=REF)
+            # validation errors are answered as {"detail": "where: what", "errors": [...]}, an
+            # ErrorPublic: FastAPI's own schemas of them go, so that no two schemas have one
+            # title (a generated client would name two classes alike and drop one)
+            components.setdefault("ErrorPublic", ErrorPublic.model_json_schema(ref_template=REF))
+            for name in ("HTTPValidationError", "ValidationError"):
+                components.pop(name, None)
+            schema["paths"] = refer(schema["paths"], "HTTPValidationError", "ErrorPublic")
             state_limits(components, app.state.settings)
             app.openapi_schema = schema
         return app.openapi_schema
 
     app.openapi = openapi  # type: ignore[method-assign]
+
+
+def operation_id(route: APIRoute) -> str:
+    """A route's operationId: its function's name (``create_session``, ``put_domain``)."""
+    return route.name
+
+
+def refer(value: Any, old: str, new: str) -> Any:
+    """``value`` with every ``$ref`` to the schema ``old`` pointing at ``new`` instead."""
+    if isinstance(value, dict):
+        if value.get("$ref") == REF.format(model=old):
+            return {**value, "$ref": REF.format(model=new)}
+        return {k: refer(v, old, new) for k, v in value.items()}
+    if isinstance(value, list):
+        return [refer(v, old, new) for v in value]
+    return value
 
 
 def state_limits(components: dict[str, Any], settings: Settings) -> None:
