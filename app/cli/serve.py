@@ -182,8 +182,9 @@ def uvicorn_options(settings: Settings, log_level: str = "info") -> dict[str, An
     """How ``serve`` runs uvicorn (one worker); the benchmarks' baseline apps run the same.
     HTTP goes through :mod:`app.service.guard` (bounded headers, read deadlines, caps on
     connections, in all and per client), and so do websocket handshakes (refusals as JSON);
-    uvicorn's reading of X-Forwarded-For is off (it would trust any from 127.0.0.1):
-    :mod:`app.service.clients` reads it from the proxies the settings trust."""
+    uvicorn's switch for X-Forwarded-For is off (it would trust any from 127.0.0.1): the app
+    puts uvicorn's ProxyHeadersMiddleware in front of itself with the proxies the settings
+    trust (:mod:`app.service.clients`)."""
     from app.service.guard import JsonWebSocket, guarded_http_of
 
     options: dict[str, Any] = {
