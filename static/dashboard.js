@@ -6,7 +6,7 @@
 "use strict";
 
 (() => {
-  const { ACTIONS, ARROWS, fetchJSON, showViewerLink, fmt } = MazeUI;
+  const { ACTIONS, ARROWS, fetchJSON, watchViewerLink, fmt } = MazeUI;
   const POLL_MS = 1000;
   const KEY = "advisor-operator-key";
   const $ = (id) => document.getElementById(id);
@@ -393,5 +393,5 @@
 
   poll();
   dependencies();
-  fetchJSON("/viewer").then((v) => showViewerLink($("viewer-link"), v)).catch(() => {});
+  watchViewerLink($("viewer-link"));
 })();

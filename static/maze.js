@@ -25,15 +25,27 @@ const MazeUI = (() => {
     return body;
   }
 
-  /** Point a link at the viser viewer: same host, the viewer's port; hide it if there is none. */
+  /** Point a link at the viser viewer: same host, the viewer's port; hide it when there is
+   *  none or it is not running (GET /viewer says). */
   function showViewerLink(link, viewer) {
     if (!link) return;
-    if (!viewer || !viewer.enabled || !viewer.port) {
+    if (!viewer || !viewer.enabled || !viewer.running || !viewer.port) {
       link.hidden = true;
       return;
     }
     link.href = `${location.protocol}//${location.hostname}:${viewer.port}/`;
     link.hidden = false;
+  }
+
+  /** Keep the viewer link in step with GET /viewer: now, then every few seconds (a viewer
+   *  that dies, or starts late, shows so). An unanswered check hides it. */
+  function watchViewerLink(link, everyMs = 5000) {
+    if (!link) return;
+    const check = () => fetchJSON("/viewer")
+      .then((v) => showViewerLink(link, v))
+      .catch(() => showViewerLink(link, null));
+    check();
+    setInterval(check, everyMs);
   }
 
   /** Cell size in CSS pixels so that a rows x cols map fits in maxSize. */
@@ -118,7 +130,7 @@ const MazeUI = (() => {
   }
 
   return {
-    ACTIONS, MOVES, ARROWS, COLOURS, fetchJSON, showViewerLink, fitCanvas, drawMaze, centre,
-    drawArrow, goalIndex, fmt,
+    ACTIONS, MOVES, ARROWS, COLOURS, fetchJSON, showViewerLink, watchViewerLink, fitCanvas,
+    drawMaze, centre, drawArrow, goalIndex, fmt,
   };
 })();

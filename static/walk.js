@@ -398,5 +398,5 @@
   Promise.all([loadStrategies(), loadDomains()])
     .then(newWalk)
     .catch((err) => setStatus(`Could not load the mazes: ${err.message}`, true));
-  fetchJSON("/viewer").then((v) => MazeUI.showViewerLink($("viewer-link"), v)).catch(() => {});
+  MazeUI.watchViewerLink($("viewer-link"));
 })();

@@ -193,3 +193,58 @@ def test_every_help_reads_whole_at_80_columns() -> None:
     train = runner.invoke(cli, ["train", "--help"], env={"COLUMNS": "80"}).output
     column = "".join(line[50:].strip(" │") for line in train.splitlines() if "│" in line)
     assert "(app/domain/maps/default.txt)" in column
+
+
+def test_cli_serve_finds_the_viewers_busy_port_and_names_its_option(tmp_path: Path) -> None:
+    """The viewer's port is checked with the API's, before anything is created: the refusal
+    names the port, the option and the setting that move it."""
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        data = tmp_path / "data"
+        args = ["serve", "--port", "0", "--viewer-port", str(port), "--data-dir", str(data)]
+        result = runner.invoke(cli, args, env={"COLUMNS": "200"})
+    assert result.exit_code == 2, result.output
+    assert f"the 3D viewer's port {port} on 127.0.0.1 is in use" in result.output
+    assert "--viewer-port or ADVISOR_VIEWER_PORT" in result.output
+    assert "--no-viewer" in result.output
+    assert not data.exists()
+    same = runner.invoke(cli, ["serve", "--port", "8123", "--viewer-port", "8123"])
+    assert same.exit_code == 2 and "both want port 8123" in same.output
+
+
+def test_cli_serve_names_the_api_ports_option(tmp_path: Path) -> None:
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        result = runner.invoke(cli, ["serve", "--port", str(port), "--no-viewer"])
+    assert result.exit_code == 2
+    assert "pick another port with --port or ADVISOR_PORT" in result.output
+
+
+def test_cli_clients_read_the_service_address_serve_reads(monkeypatch: Any) -> None:
+    """simulate and viewer call the service where serve listens: ADVISOR_HOST and
+    ADVISOR_PORT (an address of every interface is called on loopback)."""
+    from app.cli.local import service_url, settings_or_exit
+
+    monkeypatch.setenv("ADVISOR_PORT", "8123")
+    assert service_url(settings_or_exit()) == "http://127.0.0.1:8123"
+    monkeypatch.setenv("ADVISOR_HOST", "0.0.0.0")
+    assert service_url(settings_or_exit()) == "http://127.0.0.1:8123"
+    monkeypatch.setenv("ADVISOR_HOST", "::1")
+    assert service_url(settings_or_exit()) == "http://[::1]:8123"
+
+
+def test_cli_simulate_calls_the_port_of_advisor_port() -> None:
+    """Nothing listens on the port ADVISOR_PORT names: simulate says it could not reach that
+    URL (not :8000)."""
+    with socket.socket() as free:
+        free.bind(("127.0.0.1", 0))
+        port = free.getsockname()[1]  # bound, never listening: connections are refused
+        env = {"ADVISOR_PORT": str(port), "COLUMNS": "200"}
+        args = ["simulate", "--episodes", "1", "--no-progress"]
+        result = runner.invoke(cli, args, env=env)
+    assert result.exit_code == 2
+    assert f"http://127.0.0.1:{port}" in result.output

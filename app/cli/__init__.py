@@ -4,8 +4,9 @@ Each command wires the parts it needs and nothing else: ``serve`` builds the ser
 learns the default domain's prior from simulated experts on first start) and starts ``viewer``,
 the 3D viewer, in a process of its own that reads the service over HTTP; ``simulate`` drives
 simulated explorers through a running service as a client, ``experiment`` runs the paper's
-experiments in process, ``maze`` and ``train`` work on maps and priors. Heavy imports (the
-service, numba kernels, matplotlib) wait until a command runs.
+experiments in process, ``maze`` and ``train`` work on maps and priors, ``domain put`` sends a
+map file to a running service. Heavy imports (the service, numba kernels, matplotlib) wait
+until a command runs.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from typing import Annotated
 import typer
 
 from app.cli import options  # noqa: F401  (how every command shows its options)
+from app.cli.domain import domain_cli
 from app.cli.experiment import experiment_cli
 from app.cli.maze import maze_cli
 from app.cli.serve import serve
@@ -62,6 +64,7 @@ cli.add_typer(experiment_cli, name="experiment")
 cli.command()(serve)
 cli.command()(simulate)
 cli.command()(viewer)
+cli.add_typer(domain_cli, name="domain")
 
 
 def main() -> None:

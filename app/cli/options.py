@@ -7,6 +7,9 @@
 * A default too long for its column (a URL, a path, at 80 columns) is wrapped onto the next
   lines, not cut with "…": rich crops a table cell's words with an ellipsis unless the text
   says ``overflow="fold"``, and typer makes the ``[default: ...]`` text without it.
+
+Both patch typer's internals: typer (0.29) has no setting for either (a flag's ``metavar=""``
+would not reach its own ``--help``): docs/ARCHITECTURE.md, "Written here, or a library's".
 """
 
 from __future__ import annotations

@@ -8,12 +8,13 @@ import os
 import socket
 import subprocess
 import sys
+import threading
 from pathlib import Path
 from typing import Annotated, Any
 
 import typer
-from pydantic import ValidationError
 
+from app.cli.local import settings_or_exit
 from app.cli.options import choice
 from app.service.config import Settings
 from app.service.logs import announce
@@ -24,7 +25,13 @@ LOG_LEVELS = ("critical", "error", "warning", "info", "debug", "trace")
 
 def serve(
     host: Annotated[str | None, typer.Option(help="Interface (default 127.0.0.1).")] = None,
-    port: Annotated[int | None, typer.Option(help="HTTP port (default 8000).")] = None,
+    port: Annotated[
+        int | None, typer.Option(help="HTTP port of the API (default 8000; ADVISOR_PORT).")
+    ] = None,
+    viewer_port: Annotated[
+        int | None,
+        typer.Option(help="Port of the 3D viewer (default 8080; ADVISOR_VIEWER_PORT)."),
+    ] = None,
     data_dir: Annotated[Path | None, typer.Option(help="SQLite file and admin key.")] = None,
     database_url: Annotated[
         str | None, typer.Option(help="SQLAlchemy URL, e.g. postgresql+psycopg://...")
@@ -48,28 +55,25 @@ def serve(
     from app.service.main import create_app
 
     given: dict[str, Any] = {
-        "host": host, "port": port, "data_dir": data_dir, "database_url": database_url,
-        "workers": workers, "redis_url": redis_url,
+        "host": host, "port": port, "viewer_port": viewer_port, "data_dir": data_dir,
+        "database_url": database_url, "workers": workers, "redis_url": redis_url,
     }  # fmt: skip
     overrides = {k: v for k, v in given.items() if v is not None}
     if no_viewer:
         overrides["viewer_enabled"] = False
-    try:
-        settings = Settings(**overrides)
-    except ValidationError as exc:
-        wanted = os.environ.get("ADVISOR_LOG_FORMAT", "text").lower()  # if valid itself
-        announce(f"error: bad setting: {setting_errors(exc)}", wanted, logging.ERROR)
-        raise typer.Exit(code=2) from None
-    busy = port_taken(settings.host, settings.port)
+    settings = settings_or_exit(**overrides)
+    busy = ports_taken(settings)
     if busy:  # before anything is created (the data directory, a new admin key)
         announce(f"error: {busy}", settings.log_format, logging.ERROR)
         raise typer.Exit(code=2)
     viewer = start_viewer(settings) if settings.viewer_enabled else None
     try:
         if settings.workers == 1:
-            uvicorn.run(create_app(settings), **uvicorn_options(settings, log_level))
+            app = create_app(settings)
+            app.state.viewer_process = viewer  # GET /viewer: whether it is still alive
+            uvicorn.run(app, **uvicorn_options(settings, log_level))
         else:
-            run_workers(settings, overrides, log_level)
+            run_workers(settings, overrides, log_level, viewer)
     finally:
         if viewer is not None:
             viewer.terminate()
@@ -79,7 +83,12 @@ def serve(
                 viewer.kill()
 
 
-def run_workers(settings: Settings, overrides: dict[str, Any], log_level: str) -> None:
+def run_workers(
+    settings: Settings,
+    overrides: dict[str, Any],
+    log_level: str,
+    viewer: subprocess.Popen[bytes] | None = None,
+) -> None:
     """``settings.workers`` processes on one port (uvicorn's supervisor, which starts a new
     one when one dies), sharing live sessions through Redis and data through the database.
     The first start (the default domain, the keys) happens here, once, before they start;
@@ -88,10 +97,14 @@ def run_workers(settings: Settings, overrides: dict[str, Any], log_level: str) -
 
     import uvicorn
 
+    from app.service.routes.viewer import VIEWER_PID
     from app.service.state import open_state
 
     for name, value in overrides.items():
         os.environ[f"ADVISOR_{name.upper()}"] = str(value)
+    if viewer is not None:  # GET /viewer in each worker: whether it is alive
+        os.environ[VIEWER_PID] = str(viewer.pid)
+        threading.Thread(target=viewer.wait, name="viewer-reaper", daemon=True).start()
     state, messages = open_state(settings)  # made once: the workers find it all there
     state.close()
     for message in messages:
@@ -125,20 +138,31 @@ def start_viewer(settings: Settings) -> subprocess.Popen[bytes]:
     return subprocess.Popen(cmd, env=os.environ | env)
 
 
-def setting_errors(exc: ValidationError) -> str:
-    """Pydantic's errors as ``name (ADVISOR_NAME): what``, one line each, without the
-    "Value error," that pydantic puts before a validator's own message."""
-    lines = []
-    for e in exc.errors():
-        name = ".".join(str(part) for part in e["loc"])
-        what = e["msg"].removeprefix("Value error, ")
-        lines.append(f"{name} (ADVISOR_{name.upper()}): {what}" if name else what)  # a rule of
-        # several settings names them itself
-    return "; ".join(lines)
+def ports_taken(settings: Settings) -> str | None:
+    """Why ``serve`` cannot listen where the settings say (the API's port, and the viewer's
+    when it starts one), naming the port, its option and its setting; or None."""
+    if settings.viewer_enabled and settings.port == settings.viewer_port != 0:
+        return (
+            f"the API and the 3D viewer both want port {settings.port}: give the viewer "
+            "another with --viewer-port or ADVISOR_VIEWER_PORT (or --no-viewer)"
+        )
+    api = port_taken(
+        settings.host, settings.port, "--port or ADVISOR_PORT", "--host or ADVISOR_HOST"
+    )
+    if api:
+        return api
+    if not settings.viewer_enabled:
+        return None
+    viewer = port_taken(
+        settings.viewer_host, settings.viewer_port,
+        "--viewer-port or ADVISOR_VIEWER_PORT", "ADVISOR_VIEWER_HOST",
+    )  # fmt: skip
+    return f"the 3D viewer's {viewer}, or start no viewer with --no-viewer" if viewer else None
 
 
-def port_taken(host: str, port: int) -> str | None:
-    """Why ``host:port`` cannot be listened on (in use, or not an address here), or None."""
+def port_taken(host: str, port: int, port_setting: str = "", host_setting: str = "") -> str | None:
+    """Why ``host:port`` cannot be listened on (in use, or not an address here), saying which
+    option or setting picks another (``port_setting``, ``host_setting``), or None."""
     if port == 0:
         return None
     with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET) as sock:
@@ -147,11 +171,10 @@ def port_taken(host: str, port: int) -> str | None:
             sock.bind((host, port))
         except OSError as exc:
             if exc.errno == errno.EADDRINUSE:
-                return (
-                    f"port {port} on {host} is in use (another advisor?): stop it, or pick "
-                    "another port with --port or ADVISOR_PORT"
-                )
-            return f"cannot listen on {host}:{port}: {exc.strerror or exc}"
+                fix = f": stop it, or pick another port with {port_setting}" if port_setting else ""
+                return f"port {port} on {host} is in use (another advisor?){fix}"
+            fix = f": pick another interface with {host_setting}" if host_setting else ""
+            return f"cannot listen on {host}:{port}: {exc.strerror or exc}{fix}"
     return None
 
 
@@ -159,8 +182,9 @@ def uvicorn_options(settings: Settings, log_level: str = "info") -> dict[str, An
     """How ``serve`` runs uvicorn (one worker); the benchmarks' baseline apps run the same.
     HTTP goes through :mod:`app.service.guard` (bounded headers, read deadlines, caps on
     connections, in all and per client), and so do websocket handshakes (refusals as JSON);
-    uvicorn's reading of X-Forwarded-For is off (it would trust any from 127.0.0.1):
-    :mod:`app.service.clients` reads it from the proxies the settings trust."""
+    uvicorn's switch for X-Forwarded-For is off (it would trust any from 127.0.0.1): the app
+    puts uvicorn's ProxyHeadersMiddleware in front of itself with the proxies the settings
+    trust (:mod:`app.service.clients`)."""
     from app.service.guard import JsonWebSocket, guarded_http_of
 
     options: dict[str, Any] = {

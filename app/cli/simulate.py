@@ -25,6 +25,7 @@ from tqdm import tqdm
 from app import strategies
 from app.advice.advisor import DEFAULT_KAPPA, DEFAULT_STRATEGY, DEFAULT_WINDOW
 from app.agents.explorers import FIXED_EXPLORERS, make_explorer
+from app.cli.local import URL_HELP, service_url, settings_or_exit
 from app.cli.options import choice
 from app.domain.grid import ACTIONS, GridDomain
 
@@ -153,7 +154,7 @@ def summary(outcomes: list[Outcome], plan: Plan) -> str:
 
 
 def simulate(
-    server: Annotated[str, typer.Option(help="Service URL.")] = "http://127.0.0.1:8000",
+    server: Annotated[str | None, typer.Option(help=f"Service URL ({URL_HELP}).")] = None,
     explorer: Annotated[str, choice(FIXED_EXPLORERS, "The simulated explorer.")] = "random",
     advice: Annotated[
         bool,
@@ -178,6 +179,7 @@ def simulate(
     progress: Annotated[bool, typer.Option(help="A progress bar (on stderr).")] = True,
 ) -> None:
     """Drive simulated explorers through the live service and print their outcomes."""
+    server = server or service_url(settings_or_exit())  # where serve listens
     plan = Plan(
         domain, explorer, advice, episodes, explorers, steps, kappa, window, delay, keep, strategy,
     )  # fmt: skip

@@ -18,14 +18,21 @@ from typing import Annotated
 
 import typer
 
+from app.cli.local import URL_HELP, service_url, settings_or_exit
+
 LOOPBACK = ("127.0.0.1", "localhost", "::1")
 KEY_ENV = "ADVISOR_OPERATOR_KEY"
 
 
 def viewer(
-    api: Annotated[str, typer.Option(help="The service's URL.")] = "http://127.0.0.1:8000",
-    host: Annotated[str, typer.Option(help="Interface for browsers.")] = "127.0.0.1",
-    port: Annotated[int, typer.Option(help="Port for browsers.")] = 8080,
+    api: Annotated[str | None, typer.Option(help=f"The service's URL ({URL_HELP}).")] = None,
+    host: Annotated[
+        str | None,
+        typer.Option(help="Interface for browsers (default: ADVISOR_VIEWER_HOST, 127.0.0.1)."),
+    ] = None,
+    port: Annotated[
+        int | None, typer.Option(help="Port for browsers (default: ADVISOR_VIEWER_PORT, 8080).")
+    ] = None,
     key_file: Annotated[
         Path | None,
         typer.Option(help=f"File holding the operator key (default: ${KEY_ENV})."),
@@ -38,8 +45,7 @@ def viewer(
         typer.Option(
             help="Origin of a page a browser may open the viewer from, beyond its own "
             "address's (loopback ones for a loopback or 0.0.0.0 host), e.g. "
-            "http://127.0.0.1:9090; repeat for more (ADVISOR_VIEWER_ORIGINS when serve "
-            "starts it)."
+            "http://127.0.0.1:9090; repeat for more (default: ADVISOR_VIEWER_ORIGINS)."
         ),
     ] = None,
 ) -> None:
@@ -61,6 +67,10 @@ def viewer(
     except ValueError as exc:
         say(f"error: --origin: {exc}", logging.ERROR)
         raise typer.Exit(code=2) from None
+    settings = settings_or_exit(viewer_host=host, viewer_port=port)  # what serve reads
+    api = api or service_url(settings)
+    host, port = settings.viewer_host, settings.viewer_port
+    origins = origins or tuple(settings.viewer_origins)
     key = key_file.read_text(encoding="utf-8").strip() if key_file else os.environ.get(KEY_ENV)
     if not key:
         say(f"error: no operator key: set {KEY_ENV} or give --key-file", logging.ERROR)

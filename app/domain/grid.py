@@ -54,6 +54,13 @@ class MapError(ValueError):
         self.line = line
         self.column = column
 
+    def below(self, lines: int) -> MapError:
+        """The same problem in a text whose first ``lines`` lines (a header) came before the
+        rows this error counted from."""
+        if self.line is None or not lines:
+            return self
+        return MapError(self.message, self.line + lines, self.column)
+
 
 def action_index(action: int | str) -> int:
     """``"N"``/``"n"``/``0`` -> 0 etc.; raises ``ValueError`` naming what is allowed."""
@@ -193,6 +200,14 @@ def parse_header(lines: Sequence[str]) -> tuple[Frame | None, int]:
         raise MapError(exc.message, values["origin"][0]) from None
 
 
+def split_text(text: str) -> tuple[Frame | None, list[str], int]:
+    """A map file's text as (the frame its header gives, its rows, the header's line count);
+    :class:`MapError` names a bad header line."""
+    lines = text.splitlines()
+    frame, skip = parse_header(lines)
+    return frame, lines[skip:], skip
+
+
 @dataclass(frozen=True, eq=False)
 class GridDomain:
     """A grid world D = (S, A, T) shared by many tasks; a task only picks the goal.
@@ -254,14 +269,13 @@ class GridDomain:
     @classmethod
     def from_text(cls, text: str, name: str = "maze") -> GridDomain:
         """A map file's text: optional header lines (the frame), then the rows."""
-        lines = text.splitlines()
-        frame, skip = parse_header(lines)
+        frame, rows, skip = split_text(text)
         try:
-            return cls.from_strings(lines[skip:], name=name, frame=frame)
+            return cls.from_strings(rows, name=name, frame=frame)
         except MapError as exc:
             if exc.line is None or not skip:
                 raise
-            raise MapError(exc.message, exc.line + skip, exc.column) from None
+            raise exc.below(skip) from None
 
     @classmethod
     def from_file(cls, path: str | Path, name: str | None = None) -> GridDomain:

@@ -5,9 +5,11 @@ key, or one of ``ADVISOR_CLIENT_KEYS`` (:class:`ClientKeys`). Otherwise (no key,
 service does not know: anyone could invent keys) it is its address: the peer's address, or, for
 a request from a proxy the operator trusts (``ADVISOR_TRUSTED_PROXIES``), the last address of
 ``X-Forwarded-For`` that is not such a proxy (each proxy appends the address it got the request
-from, so the addresses left of the first untrusted one are whatever the client wrote).
-uvicorn's own reading of forwarded headers is off (``serve``): it would trust any
-``X-Forwarded-For`` from 127.0.0.1.
+from, so the addresses left of the first untrusted one are whatever the client wrote). That
+reading is uvicorn's ``ProxyHeadersMiddleware``, which ``create_app`` puts in front of the app
+with the trusted proxies (:func:`trusted_hosts`) when there are some: it rewrites the request's
+client (and its scheme from ``X-Forwarded-Proto``). uvicorn's own switch for it stays off
+(``serve``): it would trust any ``X-Forwarded-For`` from 127.0.0.1.
 
 Over MQTT (:mod:`app.service.mqtt`) a client is the device its topic names (the broker's ACL
 makes it the publisher's user name): ``"mqtt <device>"`` (:func:`device_client`), a name no
@@ -37,6 +39,16 @@ def networks(entries: Sequence[str]) -> tuple[Network, ...]:
     return tuple(out)
 
 
+def trusted_hosts(entries: Sequence[str]) -> list[str]:
+    """The trusted proxies as uvicorn's ``ProxyHeadersMiddleware`` reads them: an address as
+    an address, a network as its network (``10.0.0.5/24`` is ``10.0.0.0/24``: uvicorn would
+    take a network with host bits for a name that matches nothing)."""
+    return [
+        str(n.network_address) if n.prefixlen == n.max_prefixlen else str(n)
+        for n in networks(entries)
+    ]
+
+
 def trusted(address: str, among: Sequence[Network]) -> bool:
     """Whether ``address`` is in one of the networks ``among`` (not if it is no address)."""
     if not among:
@@ -48,16 +60,10 @@ def trusted(address: str, among: Sequence[Network]) -> bool:
     return any(ip in net for net in among)
 
 
-def client_address(conn: HTTPConnection, proxies: Sequence[Network]) -> str:
-    """The client's address: the peer's, or behind trusted proxies the forwarded one."""
-    peer = conn.client.host if conn.client else "unknown"
-    if not proxies or not trusted(peer, proxies):
-        return peer
-    hops = [h.strip() for v in conn.headers.getlist("x-forwarded-for") for h in v.split(",")]
-    for hop in reversed(hops):
-        if hop and not trusted(hop, proxies):
-            return hop
-    return peer
+def client_address(conn: HTTPConnection) -> str:
+    """The client's address: the peer's, or behind trusted proxies the forwarded one (which
+    uvicorn's ``ProxyHeadersMiddleware`` has made the request's client)."""
+    return conn.client.host if conn.client else "unknown"
 
 
 OPERATOR = "operator key"

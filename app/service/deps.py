@@ -157,7 +157,7 @@ def client_of(conn: HTTPConnection, state: ServiceState) -> str | None:
         named = state.client_keys.client(key)
         if named is not None:
             return named
-    return "address " + client_address(conn, state.trusted)
+    return "address " + client_address(conn)
 
 
 AdminDep = Depends(require_admin)

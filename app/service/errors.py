@@ -3,7 +3,9 @@
 * request validation: 422, ``detail`` one readable line (``where: what``), ``errors`` the list;
 * our own checks (:class:`BadInput`), unknown domains/sessions, credentials: their status;
 * bodies over the limit: 413 from :class:`BodyLimit` before the app reads them, bodies that say
-  they are not JSON (a ``Content-Type`` other than ``application/json``): 415;
+  they are not JSON (a ``Content-Type`` other than ``application/json``; a form, what ``curl
+  -d`` sends, says so and how to send JSON): 415, but for a map file's text (``text/plain``) to
+  ``PUT /domains/{name}``;
 * JSON nested too deeply for the parser: 400 (instead of the RecursionError's 500);
 * a websocket to a path without a websocket route: 404 (:class:`NoWebSocketRoute`);
 * Redis failing (:class:`~app.service.live.faults.RedisDown`) or the database not answering:
@@ -249,11 +251,39 @@ NOT_JSON = (
     "every request body is JSON: send it with 'Content-Type: application/json' (or without a "
     "Content-Type)"
 )
+FORM = (
+    "this route reads JSON, and this body came as a form (Content-Type: "
+    "application/x-www-form-urlencoded, which curl -d sends unless told otherwise): add "
+    "-H 'Content-Type: application/json'"
+)
+#: the route that also reads a text body (PUT /domains/{name}: a map file as it is)
+TEXT_ROUTE = re.compile(r"^/domains/[^/]+$")
+MAP_FILE = (
+    "; or send the map file as it is: -H 'Content-Type: text/plain' --data-binary @MAP.txt "
+    "(curl -d drops its line breaks)"
+)
+
+
+def _media(kind: bytes) -> bytes:
+    return kind.split(b";", 1)[0].strip().lower()
+
+
+def _not_json(kind: bytes, scope: Scope) -> str | None:
+    """Why a body of type ``kind`` is refused here (415), or None: JSON goes everywhere, a
+    map file's text (text/plain) to PUT /domains/{name}."""
+    if _is_json(kind):
+        return None
+    text_route = scope["method"] == "PUT" and TEXT_ROUTE.match(scope["path"]) is not None
+    media = _media(kind)
+    if text_route and media == b"text/plain":
+        return None
+    detail = FORM if media == b"application/x-www-form-urlencoded" else NOT_JSON
+    return detail + (MAP_FILE if text_route else "")
 
 
 def _is_json(kind: bytes) -> bool:
     """``application/json`` or a ``+json`` type, with any parameters (``; charset=utf-8``)."""
-    media = kind.split(b";", 1)[0].strip().lower()
+    media = _media(kind)
     return media == b"application/json" or (
         media.startswith(b"application/") and media.endswith(b"+json")
     )
@@ -273,9 +303,11 @@ class BodyLimit:
             return
         headers = dict(scope["headers"])
         kind = headers.get(b"content-type")
-        if kind is not None and scope["method"] in BODY_METHODS and not _is_json(kind):
-            await _json(415, NOT_JSON)(scope, receive, send)
-            return
+        if kind is not None and scope["method"] in BODY_METHODS:
+            refused = _not_json(kind, scope)
+            if refused is not None:
+                await _json(415, refused)(scope, receive, send)
+                return
         length = headers.get(b"content-length")
         if length is not None:
             if not length.isdigit() or int(length) > self.max_bytes:

@@ -11,8 +11,10 @@ from fastapi import FastAPI
 from fastapi.staticfiles import StaticFiles
 from fastapi_offline import FastAPIOffline
 from starlette.concurrency import run_in_threadpool
+from uvicorn.middleware.proxy_headers import ProxyHeadersMiddleware
 
 from app.service import metrics
+from app.service.clients import trusted_hosts
 from app.service.config import VERSION, Settings
 from app.service.errors import (
     DATABASE_DOWN,
@@ -22,7 +24,7 @@ from app.service.errors import (
     install_error_handlers,
 )
 from app.service.logs import announce, quiet_event_routes
-from app.service.openapi import install_openapi
+from app.service.openapi import install_openapi, operation_id
 from app.service.ops import warm_up
 from app.service.routes import ROUTERS, apidocs
 from app.service.routes import metrics as metrics_route
@@ -109,12 +111,17 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         version=VERSION,
         description="Advice for explorers with hidden goals (Rosman & Ramamoorthy, ICRA 2014). "
         f"Request bodies are JSON of at most {settings.max_body_bytes} bytes (413 beyond, 415 "
-        "for another Content-Type); request headers at most 16 KiB in all (431).",
+        "for another Content-Type; PUT /domains/{name} also takes a map file as text/plain); "
+        "request headers at most 16 KiB in all (431).",
         lifespan=lifespan,
         # a body without a Content-Type is read as JSON on every route, as the events and
         # trajectories routes (which read their bytes themselves) always did; a Content-Type
-        # that is not JSON is refused (415) by BodyLimit on every route
+        # that is not JSON is refused (415) by BodyLimit on every route (but a map file's
+        # text/plain to PUT /domains/{name})
         strict_content_type=False,
+        # operationIds are the route functions' names (create_session, put_domain, ...): what
+        # a client generated from the document calls its functions
+        generate_unique_id_function=operation_id,
     )
     app.state.settings = settings
     install_error_handlers(app)
@@ -128,6 +135,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         request_ids = settings.log_format == "json"
         methods = metrics.route_methods(app.router, *routers)  # the method label's values
         app.add_middleware(metrics.MetricsMiddleware, request_ids=request_ids, methods=methods)
+    if settings.trusted_proxies:  # outermost: everything after it sees the forwarded client
+        proxies = trusted_hosts(settings.trusted_proxies)
+        app.add_middleware(ProxyHeadersMiddleware, trusted_hosts=proxies)
     if settings.static_dir.is_dir():
         app.mount("/static", StaticFiles(directory=settings.static_dir), "static")
     install_openapi(app)

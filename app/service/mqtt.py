@@ -121,7 +121,7 @@ from app.service.schemas import NAME_PATTERN, SessionCreate
 from app.service.state import ServiceState
 from app.service.wire.encode import decision_json
 
-log = logging.getLogger(__name__)
+log = logging.getLogger("uvicorn.error")  # uvicorn's handler: the default format writes it too
 
 LOCK_FILE = "mqtt-bridge.lock"
 SESSION_EXPIRY = 60  # seconds the broker keeps the bridge's subscriptions and queue

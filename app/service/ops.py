@@ -20,7 +20,7 @@ from app.advice.models import AdviceTables
 from app.advice.params import StrategyParams
 from app.advice.priors import GoalPriors
 from app.arrays import IntArray
-from app.domain.grid import ACTIONS, Frame, GridDomain, MapError
+from app.domain.grid import ACTIONS, GridDomain, MapError
 from app.domain.paths import expert_trajectories, path_within
 from app.service.data.domains import DomainNotFound, DomainState
 from app.service.data.ingest import parse_trajectories, to_trajectories
@@ -36,6 +36,7 @@ from app.service.live.registry import (
     TooManySessions,
 )
 from app.service.live.replay import StepConflict
+from app.service.mapbody import map_of
 from app.service.metrics import METRICS, ingested
 from app.service.problems import BadInput
 from app.service.public import overview_domain, overview_session, viewer_session
@@ -251,14 +252,11 @@ def put_domain(state: ServiceState, name: str, body: DomainPut) -> tuple[DomainS
     """*Worker thread.* Create or replace a domain: (state, created, kept_data). With
     ``experts``, a domain whose prior is empty after the put learns it from simulated experts
     (made before the put, so a bad request changes nothing)."""
-    frame = None
-    if body.resolution is not None:
-        ox, oy, *yaw = body.origin if body.origin is not None else (0.0, 0.0)
-        frame = Frame(body.resolution, (ox, oy, yaw[0] if yaw else 0.0))
+    frame, rows, header_lines = map_of(body)  # rows, or a map file's text
     try:
-        grid = state.catalog.parse_map(body.map, name, frame)
+        grid = state.catalog.parse_map(rows, name, frame)
     except MapError as exc:
-        raise BadInput(f"map: {exc}") from None
+        raise BadInput(f"map: {exc.below(header_lines)}") from None
     goals, most = len(grid.goals), state.settings.max_goal_cells
     if goals * grid.n_states > most:
         raise BadInput(

@@ -125,10 +125,20 @@ class NotReadyPublic(BaseModel):
 
 # ---- domains ---------------------------------------------------------------------------------
 class DomainBase(Strict):
-    map: list[str] = Field(
-        description="ASCII map, one string per row: '#' wall, '.' free, 'S' start, 'G' goal.",
+    map: list[str] | None = Field(
+        None,
+        description="ASCII map, one string per row: '#' wall, '.' free, 'S' start, 'G' goal. "
+        "Give it or text.",
         examples=[["#####", "#S.G#", "#####"]],
         min_length=1,
+    )
+    text: str | None = Field(
+        None,
+        description="The map file's text as `maze import` and `maze generate` write it: header "
+        "lines (`resolution: M`, `origin: X Y YAW`) if any, then one row a line. Its header "
+        "gives the resolution and origin (not the fields). Give it or map; errors name the "
+        "line and column of the text, as `maze check` does.",
+        examples=["resolution: 0.5\norigin: -12.0 4.5 0.0\n#####\n#S.G#\n#####"],
     )
     alpha0: float = Field(
         1.0,
@@ -161,6 +171,15 @@ class DomainBase(Strict):
 
     @model_validator(mode="after")
     def _origin_needs_resolution(self) -> DomainBase:
+        if (self.map is None) == (self.text is None):
+            raise ValueError(
+                "give the map as map (a list of rows) or as text (the map file's text), one of them"
+            )
+        if self.text is not None and (self.resolution, self.origin) != (None, None):
+            raise ValueError(
+                "with text, the resolution and origin are the text's header lines "
+                "(resolution: M, origin: X Y YAW), not fields"
+            )
         if self.origin is not None and self.resolution is None:
             raise ValueError("origin needs resolution (the cell side in metres)")
         return self
@@ -532,6 +551,10 @@ class ViewerSnapshot(BaseModel):
 
 class ViewerStatus(BaseModel):
     enabled: bool = Field(description="Whether `serve` starts the viser viewer beside the API.")
+    running: bool = Field(
+        description="Whether it runs now: false when it is not enabled, or its process (which "
+        "`serve` started) has exited."
+    )
     port: int | None = Field(description="Its port (null when not enabled).")
     host: str | None = Field(description="The interface it listens on (null when not enabled).")
 

@@ -7,7 +7,7 @@ import time
 from dataclasses import dataclass, field
 
 from app.service.cache import Fresh
-from app.service.clients import OPERATOR, ClientKeys, Network, networks
+from app.service.clients import OPERATOR, ClientKeys
 from app.service.config import Settings
 from app.service.data.bootstrap import bootstrap
 from app.service.data.domains import DomainCatalog
@@ -26,7 +26,6 @@ class ServiceState:
     admin_key: str
     operator_key: str = ""
     started: float = field(default_factory=time.monotonic)
-    trusted: tuple[Network, ...] = ()  # proxies whose X-Forwarded-For is believed
     client_keys: ClientKeys = field(default_factory=ClientKeys)  # keys that are clients
     fresh: Fresh = field(default_factory=Fresh)  # answers made at most once a second
     sessions: Sessions = None  # type: ignore[assignment]  # the live sessions (below)
@@ -69,7 +68,6 @@ def open_state(settings: Settings) -> tuple[ServiceState, list[str]]:
     made = bootstrap(catalog, settings)
     if made:
         messages.append(made)
-    trusted = networks(settings.trusted_proxies)
     sessions: Sessions | None = None
     if settings.redis_url:  # sessions in Redis; this registry a cache of those it used
         from app.service.live.shared import SharedSessions
@@ -85,7 +83,7 @@ def open_state(settings: Settings) -> tuple[ServiceState, list[str]]:
             settings.redis_timeout,
         )  # fmt: skip
     state = ServiceState(
-        settings, store, catalog, registry, admin_key, operator_key, trusted=trusted,
+        settings, store, catalog, registry, admin_key, operator_key,
         client_keys=client_keys, sessions=sessions,  # type: ignore[arg-type]
     )  # fmt: skip
     kept = state.sessions.restore(store)

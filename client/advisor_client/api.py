@@ -87,6 +87,8 @@ class Call:
     path: str
     json: Any = None
     params: dict[str, Any] = field(default_factory=dict)
+    #: a body that is not JSON (its Content-Type in ``headers``): a map file's text
+    content: bytes | None = None
     headers: dict[str, str] = field(default_factory=dict)
     admin: bool = False
     idempotent: bool = False
@@ -131,6 +133,30 @@ def put_domain(
     if experts is not None:
         body["experts"] = dict(experts)
     return Call("PUT", f"/domains/{_name(name)}", body, admin=True)
+
+
+def put_domain_file(
+    name: str,
+    text: str | bytes,
+    alpha0: float | None = None,
+    *,
+    experts: str | Mapping[str, Any] | None = None,
+) -> Call:
+    """PUT a map file as it is (``text/plain``): its header lines (``resolution:``,
+    ``origin:``) and rows as ``maze import`` or ``maze generate`` wrote them. ``experts``:
+    ``"start"`` or ``"anywhere"``, or ``{"source", "per_goal", "seed"}`` as the JSON body has
+    it; the service refuses a bad file naming its line and column."""
+    params: dict[str, Any] = {}
+    if alpha0 is not None:
+        params["alpha0"] = alpha0
+    if experts is not None:
+        given = {"source": experts} if isinstance(experts, str) else dict(experts)
+        params["experts"] = given.get("source", "start")
+        params |= {k: given[k] for k in ("per_goal", "seed") if k in given}
+    body = text.encode("utf-8") if isinstance(text, str) else bytes(text)
+    headers = {"Content-Type": "text/plain; charset=utf-8"}
+    return Call("PUT", f"/domains/{_name(name)}", params=params, headers=headers,
+                content=body, admin=True)  # fmt: skip
 
 
 def delete_domain(name: str) -> Call:

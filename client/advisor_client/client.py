@@ -10,7 +10,9 @@ websocket stream over ``websockets``. Talks HTTP only; imports nothing of the se
 from __future__ import annotations
 
 import json
+import os
 from collections.abc import Awaitable, Callable, Mapping, Sequence
+from pathlib import Path
 from types import TracebackType
 from typing import Any, Self, cast
 
@@ -175,6 +177,8 @@ class _Base:
         kwargs: dict[str, Any] = {"params": call.params, "headers": headers}
         if call.json is not None:
             kwargs["json"] = call.json
+        if call.content is not None:
+            kwargs["content"] = call.content
         return kwargs
 
 
@@ -322,6 +326,22 @@ class AdvisorClient(_Base):
         says False then."""
         response = self._respond(api.put_domain(name, rows, alpha0, **frame_and_experts))
         return cast(DomainInfo, _parse(response)), response.status_code == 201
+
+    def put_domain_file(
+        self,
+        name: str,
+        path: str | os.PathLike[str],
+        alpha0: float | None = None,
+        *,
+        experts: str | Mapping[str, Any] | None = None,
+    ) -> DomainInfo:
+        """Create or replace a domain from a map file as the project writes it (``maze
+        import``, ``maze generate``: header lines with the resolution and origin, then the
+        rows), sent as it is. ``experts``: ``"start"``, ``"anywhere"`` or ``{"source",
+        "per_goal", "seed"}``. A bad file raises :class:`AdvisorError` naming its line and
+        column, as ``maze check`` does."""
+        text = Path(path).read_bytes()
+        return cast(DomainInfo, self.call(api.put_domain_file(name, text, alpha0, experts=experts)))
 
     def delete_domain(self, name: str) -> None:
         self.call(api.delete_domain(name))
@@ -515,6 +535,18 @@ class AsyncAdvisorClient(_Base):
     ) -> tuple[DomainInfo, bool]:
         response = await self._respond(api.put_domain(name, rows, alpha0, **frame_and_experts))
         return cast(DomainInfo, _parse(response)), response.status_code == 201
+
+    async def put_domain_file(
+        self,
+        name: str,
+        path: str | os.PathLike[str],
+        alpha0: float | None = None,
+        *,
+        experts: str | Mapping[str, Any] | None = None,
+    ) -> DomainInfo:
+        text = Path(path).read_bytes()  # a map file: small, read at once
+        call = api.put_domain_file(name, text, alpha0, experts=experts)
+        return cast(DomainInfo, await self.call(call))
 
     async def delete_domain(self, name: str) -> None:
         await self.call(api.delete_domain(name))

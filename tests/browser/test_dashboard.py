@@ -6,7 +6,7 @@ from __future__ import annotations
 import re
 
 import pytest
-from playwright.sync_api import Page, expect
+from playwright.sync_api import Page, Route, expect
 
 from tests.browser.conftest import ADMIN, Problems, Service, screenshot
 
@@ -47,6 +47,28 @@ def test_dashboard_lists_a_session_and_refreshes_its_figures(service: Service, p
     expect(row.locator("td").nth(6)).to_have_text("[28, 1]")
     link = page.locator("#viewer-link")
     expect(link).to_be_visible()
+    expect(link).to_have_attribute("href", re.compile(rf":{service.viewer.port}/$"))
+
+
+def test_dashboard_hides_the_viewer_link_while_the_viewer_is_down(
+    service: Service, page: Page
+) -> None:
+    """The page asks GET /viewer again every few seconds: a viewer that died hides the link,
+    one that runs again shows it (the answer is the service's, with ``running`` set here)."""
+    running = {"now": True}
+
+    def viewer(route: Route) -> None:
+        answer = service.http.get("/viewer").json() | {"running": running["now"]}
+        route.fulfill(json=answer)
+
+    page.route("**/viewer", viewer)
+    page.goto(service.base + "/")
+    link = page.locator("#viewer-link")
+    expect(link).to_be_visible()
+    running["now"] = False
+    expect(link).to_be_hidden(timeout=15_000)
+    running["now"] = True
+    expect(link).to_be_visible(timeout=15_000)
     expect(link).to_have_attribute("href", re.compile(rf":{service.viewer.port}/$"))
 
 

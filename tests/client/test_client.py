@@ -8,12 +8,14 @@ import socket
 import threading
 from collections.abc import Coroutine
 from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
 from typing import Any, TypeVar
 from urllib.parse import urlsplit
 
 import numpy as np
 import pytest
 from advisor_client import AdvisorClient, AdvisorError, AsyncAdvisorClient, DecisionFrame, api
+from advisor_client.types import DomainInfo
 
 from app.advice.advisor import Advisor
 from app.advice.models import AdviceTables
@@ -216,6 +218,33 @@ def test_client_domains_in_metres_with_experts(server: Server) -> None:
 
         assert [d["state"] for d in run_async(scenario())] == [[5, 2]]
         client.delete_domain("tiny-m")
+
+
+def test_client_puts_a_map_file_as_the_project_writes_it(server: Server, tmp_path: Path) -> None:
+    """put_domain_file sends the file as it is: the header a ROS map's import writes gives the
+    domain its metres; a bad file is refused naming the file's line and column."""
+    from app.domain.grid import Frame, GridDomain
+
+    path = tmp_path / "lobby.txt"
+    path.write_text(GridDomain.from_strings(TINY, frame=Frame(0.5, (-2.0, 1.0, 0.0))).to_text())
+    with AdvisorClient(server.url, admin_key=server.admin_key) as client:
+        made = client.put_domain_file("lobby-file", path, experts="anywhere")
+        assert made["resolution"] == 0.5 and made["origin"] == [-2.0, 1.0, 0.0]
+        assert made["map"] == TINY and made["trajectories"] == 10 * 2
+        again = client.put_domain_file("lobby-file", path, 2.0, experts={"per_goal": 1})
+        assert again["alpha0"] == 2.0 and again["trajectories"] == 10 * 2  # the same map: kept
+        bad = tmp_path / "bad.txt"
+        bad.write_text(path.read_text().replace("#G..#G#", "#G..?G#"))
+        with pytest.raises(AdvisorError, match=r"^422: map: line 4, column 5: unknown character"):
+            client.put_domain_file("lobby-file", bad)
+
+        async def scenario() -> DomainInfo:
+            async with AsyncAdvisorClient(server.url, admin_key=server.admin_key) as aclient:
+                return await aclient.put_domain_file("lobby-file-async", path, experts="start")
+
+        assert run_async(scenario())["resolution"] == 0.5
+        client.delete_domain("lobby-file")
+        client.delete_domain("lobby-file-async")
 
 
 def test_the_stream_url_carries_no_token_the_header_does() -> None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -9,6 +10,8 @@ from pathlib import Path
 from advisor_client import AdvisorClient
 
 from tests.client.conftest import REPO, Server, start_server, stop_server
+
+TINY = ["#######", "#G..#G#", "#.#.#.#", "#...#.#", "###...#", "#S....#", "#######"]
 
 
 def simulate(*args: str) -> subprocess.CompletedProcess[str]:
@@ -69,3 +72,40 @@ def test_serve_says_where_a_generated_key_is_kept_and_never_logs_it(tmp_path: Pa
     _, err = stop_server(second)
     assert second.admin_key == first.admin_key
     assert first.admin_key not in err and "Created domain" not in err
+
+
+def advisor(*args: str, **env: str) -> subprocess.CompletedProcess[str]:
+    cmd = [sys.executable, "-m", "app", *args]
+    environ = {k: v for k, v in os.environ.items() if not k.startswith("ADVISOR_")} | env
+    return subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=120, env=environ)
+
+
+def test_domain_put_sends_a_map_file_to_the_service_serve_settings_name(
+    server: Server, tmp_path: Path
+) -> None:
+    """`domain put NAME FILE` finds the service and its admin key as serve's settings say
+    (ADVISOR_PORT, ADVISOR_DATA_DIR's admin_key), sends the file as it is, and says what the
+    service made; a bad map is refused in maze check's words."""
+    port = server.url.rsplit(":", 1)[1]
+    env = {"ADVISOR_PORT": port, "ADVISOR_DATA_DIR": str(server.data_dir)}
+    imported = tmp_path / "office.txt"  # as `maze import office.yaml` writes a ROS map
+    imported.write_text("resolution: 0.25\norigin: 1.0 2.0 0.0\n" + "\n".join(TINY) + "\n")
+    run = advisor("domain", "put", "office", str(imported), "--experts", "start", **env)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.startswith(f"created domain 'office' at {server.url}: 7x7, ")
+    assert "cells of 0.25 m; prior from 20 expert trajectories" in run.stdout
+    again = advisor("domain", "put", "office", str(imported), **env)
+    assert again.returncode == 0 and again.stdout.startswith("replaced domain 'office'")
+    bad = tmp_path / "bad.txt"
+    bad.write_text(imported.read_text().replace("#S....#", "#S..x.#"))
+    check = advisor("maze", "check", str(bad))
+    refused = advisor("domain", "put", "office", str(bad), **env)
+    assert refused.returncode == 2 == check.returncode
+    assert refused.stderr == check.stderr  # error: PATH: line 8, column 5: unknown character ...
+    assert "line 8, column 5" in refused.stderr
+    # without a key: what to set
+    nokey = advisor("domain", "put", "office", str(imported), "--url", server.url,
+                    ADVISOR_DATA_DIR=str(tmp_path / "nowhere"))  # fmt: skip
+    assert nokey.returncode == 2 and "no admin key: set ADVISOR_ADMIN_KEY" in nokey.stderr
+    with AdvisorClient(server.url, admin_key=server.admin_key) as client:
+        client.delete_domain("office")

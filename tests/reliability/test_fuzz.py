@@ -56,6 +56,10 @@ SEMANTIC = (
     "a jump this far is refused",  # a reading more than max_jump moves from the last
     "experts:",  # more simulated experts than the service learns from
     "origin needs resolution",  # a rule between two fields
+    # PUT /domains/{name}: the map as rows or as a file's text, one of them; a file's header
+    # gives the metres; query options go with a text/plain body, per_goal and seed with experts
+    "one of them", "header lines", "only go with a text/plain body", "go with experts",
+    "this text/plain body is JSON",
 )  # fmt: skip
 #: JSON Schema's "integer" admits 1.0; the service takes only 1 (on purpose: a float is not a
 #: cell or a move, see schemas.py). Refusals that say so are allowed when the body has one.

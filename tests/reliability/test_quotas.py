@@ -113,6 +113,37 @@ def test_behind_a_trusted_proxy_the_forwarded_address_is_the_client(tmp_path: Pa
         stop(live)
 
 
+def test_trusted_proxies_are_read_by_uvicorns_middleware_networks_included(
+    tmp_path: Path,
+) -> None:
+    """A network given with host bits (``127.0.0.9/8``) is the network, as the settings have
+    always taken it; behind it the forwarded address is the client, a port on it dropped."""
+    from app.service.clients import trusted_hosts
+
+    assert trusted_hosts(["127.0.0.9/8", "10.0.0.5", "::1", "fd00::/8"]) == [
+        "127.0.0.0/8", "10.0.0.5", "::1", "fd00::/8",
+    ]  # fmt: skip
+    settings = make_settings(tmp_path / "data", trusted_proxies=["127.0.0.9/8"],
+                             client_max_sessions=1)  # fmt: skip
+    app = create_app(settings)
+    with TestClient(app, client=("127.0.0.1", 5000)) as proxy:
+
+        def create(forwarded: str) -> int:
+            r = proxy.post("/domains/default/sessions", json={},
+                           headers={"X-Forwarded-For": forwarded})  # fmt: skip
+            return int(r.status_code)
+
+        assert create("10.0.0.7") == 201
+        assert create("10.0.0.7:4321") == 429  # the same client, another port
+        assert create("1.2.3.4, 10.0.0.7") == 429  # the client's own entry is not believed
+        assert create("10.0.0.8, 127.0.0.2") == 201  # a second proxy of the network: 10.0.0.8
+    with TestClient(app, client=("192.0.2.1", 5000)) as direct:  # not a trusted proxy
+        codes = [direct.post("/domains/default/sessions", json={},
+                             headers={"X-Forwarded-For": f"10.1.0.{i}"}).status_code
+                 for i in range(2)]  # fmt: skip
+        assert codes == [201, 429]
+
+
 def test_counts_that_would_pass_int32_are_refused_and_nothing_is_stored(
     tmp_path: Path,
 ) -> None:

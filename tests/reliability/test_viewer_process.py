@@ -48,7 +48,9 @@ def test_serve_runs_the_viewer_apart_and_a_browser_cannot_reach_the_api(tmp_path
         viewer = viewers[0]
         assert eventually(lambda: _answers(f"http://127.0.0.1:{viewer_port}/"), 30)
         status = httpx.get(f"{live.url}/viewer").json()
-        assert status == {"enabled": True, "port": viewer_port, "host": "127.0.0.1"}
+        assert status == {
+            "enabled": True, "running": True, "port": viewer_port, "host": "127.0.0.1"
+        }  # fmt: skip
         # a page of another site cannot open the viewer's websocket
         with pytest.raises(InvalidStatus) as refused:
             Browser(viewer_port, origin="https://evil.example")
@@ -74,6 +76,25 @@ def test_serve_runs_the_viewer_apart_and_a_browser_cannot_reach_the_api(tmp_path
         os.kill(live.pid(), signal.SIGKILL)
         live.process.wait(30)
         assert eventually(lambda: not Path(f"/proc/{viewer}").exists(), 30)
+    finally:
+        stop(live)
+
+
+def test_a_viewer_that_dies_shows_as_down(tmp_path: Path) -> None:
+    """GET /viewer says whether the viewer runs (the pages hide their link when it does not):
+    the viewer killed while the service goes on is down at once, its port freed or not."""
+    viewer_port = free_port()
+    live = start(tmp_path / "data", viewer_port=viewer_port)
+    try:
+        assert eventually(lambda: httpx.get(f"{live.url}/viewer").json()["running"], 30)
+        (viewer,) = [p for p, cmd in children(live.pid()) if " app viewer " in cmd]
+        os.kill(viewer, signal.SIGKILL)
+        assert eventually(lambda: not httpx.get(f"{live.url}/viewer").json()["running"], 30)
+        status = httpx.get(f"{live.url}/viewer").json()
+        assert status == {
+            "enabled": True, "running": False, "port": viewer_port, "host": "127.0.0.1"
+        }  # fmt: skip
+        assert httpx.get(f"{live.url}/health").status_code == 200  # the API goes on
     finally:
         stop(live)
 

@@ -1,14 +1,20 @@
 from __future__ import annotations
 
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Query, Request, Response
+from fastapi.exceptions import RequestValidationError
+from pydantic import ValidationError
 from starlette.concurrency import run_in_threadpool
 
 from app.service import answers, ops
 from app.service.deps import AdminDep, DomainDep, DomainName, StateDep
-from app.service.openapi import body
+from app.service.mapbody import text_of
+from app.service.openapi import body, domain_body
+from app.service.problems import BadInput
 from app.service.schemas import (
+    ALPHA0_MAX,
+    ALPHA0_MIN,
     AgentType,
     DomainPublic,
     DomainPut,
@@ -44,15 +50,108 @@ async def read_domain(domain: DomainDep) -> Response:
     "/domains/{name}",
     dependencies=[AdminDep],
     response_model=DomainPublic,
+    openapi_extra=domain_body(),
     responses={201: {"model": DomainPublic, "description": "Created"}} | ADMIN | INVALID | BODY,
 )
-async def put_domain(name: DomainName, body: DomainPut, state: StateDep) -> Response:
+async def put_domain(
+    name: DomainName,
+    request: Request,
+    state: StateDep,
+    alpha0: Annotated[
+        float | None,
+        Query(
+            ge=ALPHA0_MIN,
+            le=ALPHA0_MAX,
+            allow_inf_nan=False,
+            description="With a text/plain body: the Dirichlet hyperprior alpha0 (default 1).",
+        ),
+    ] = None,
+    experts: Annotated[
+        Literal["start", "anywhere"] | None,
+        Query(
+            description="With a text/plain body: learn the prior from simulated experts "
+            "starting there (as the JSON body's experts.source)."
+        ),
+    ] = None,
+    per_goal: Annotated[
+        int | None,
+        Query(ge=1, le=1000, description="With experts: walks per goal (default 10)."),
+    ] = None,
+    seed: Annotated[
+        int | None,
+        Query(ge=0, le=2**32 - 1, description="With experts: the random seed (default 0)."),
+    ] = None,
+) -> Response:
     """Create (201) or replace (200) a domain. The same map keeps its trajectories and its
-    live sessions; a new map starts with an empty prior and ends the old map's sessions."""
+    live sessions; a new map starts with an empty prior and ends the old map's sessions.
+
+    The body is JSON (`DomainPut`: the map as rows, or as the map file's `text`), or the map
+    file as it is with `Content-Type: text/plain` (its header lines give the resolution and
+    origin; alpha0 and the simulated experts then come as query parameters). A bad map is
+    refused (422) naming the line and column, as `maze check` does."""
+    raw = await request.body()
+    query = {"alpha0": alpha0, "experts": experts, "per_goal": per_goal, "seed": seed}
+    if is_text(request.headers.get("content-type")):
+        body = text_body(text_of(raw), query)
+    else:
+        body = json_body(raw, query)
     await state.sessions.sync_domain(name)
     domain, created, kept = await run_in_threadpool(ops.put_domain, state, name, body)
     await ops.after_put(state, domain, created, kept)
     return Response(await answers.domain(domain), 201 if created else 200, media_type=JSON)
+
+
+def is_text(kind: str | None) -> bool:
+    return kind is not None and kind.split(";", 1)[0].strip().lower() == "text/plain"
+
+
+def text_body(text: str, query: dict[str, Any]) -> DomainPut:
+    """A text/plain PUT: the map file's text, its options from the query."""
+    if text.lstrip().startswith("{"):
+        raise BadInput(
+            "this text/plain body is JSON: send it with Content-Type: application/json "
+            "(text/plain is for the map file as it is)"
+        )
+    if query["experts"] is None and (query["per_goal"], query["seed"]) != (None, None):
+        raise BadInput("per_goal and seed go with experts (start or anywhere)")
+    fields: dict[str, Any] = {"text": text}
+    if query["alpha0"] is not None:
+        fields["alpha0"] = query["alpha0"]
+    if query["experts"] is not None:
+        given = {"per_goal": query["per_goal"], "seed": query["seed"]}
+        experts = {"source": query["experts"]} | {k: v for k, v in given.items() if v is not None}
+        fields["experts"] = experts
+    try:
+        return DomainPut.model_validate(fields)
+    except ValidationError as exc:
+        errors = exc.errors(include_url=False, include_context=False, include_input=False)
+        raise RequestValidationError([{**e, "loc": ("query", *e["loc"])} for e in errors]) from None
+
+
+def json_body(raw: bytes, query: dict[str, Any]) -> DomainPut:
+    """A JSON PUT (or one without a Content-Type), validated as FastAPI would (422, the
+    problems listed under ``errors``)."""
+    given = [k for k, v in query.items() if v is not None]
+    if given:
+        raise BadInput(
+            f"{', '.join(given)}: query parameters only go with a text/plain body (the map "
+            "file as it is); a JSON body carries them itself"
+        )
+    if not raw.strip():
+        raise BadInput(
+            'no body: send the domain as JSON, {"map": [rows]} or {"text": "the map '
+            'file"}, or the map file as it is with Content-Type: text/plain'
+        )
+    try:
+        return DomainPut.model_validate_json(raw)
+    except ValidationError as exc:
+        errors = exc.errors(include_url=False, include_context=False, include_input=False)
+        if raw.lstrip()[:1] not in (b"{", b"[") and errors[0]["type"] == "json_invalid":
+            raise BadInput(
+                "the body is not JSON: a map file goes as it is with Content-Type: "
+                "text/plain (curl --data-binary @MAP.txt -H 'Content-Type: text/plain')"
+            ) from None
+        raise RequestValidationError([{**e, "loc": ("body", *e["loc"])} for e in errors]) from None
 
 
 @router.delete(

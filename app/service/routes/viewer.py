@@ -5,14 +5,16 @@ started by ``serve``) and reads the service over HTTP like any client:
   the version of its prior (the viewer fetches a domain's map and prior, ``GET /domains/{name}``
   and ``/prior``, only when they change), and the 64 most recently active sessions with their
   recent history; made at most 20 times a second, in a worker thread;
-* ``GET /viewer``: where the viewer runs, for pages that link to it.
+* ``GET /viewer``: where the viewer runs and whether it is alive, for pages that link to it.
 
 Nothing a browser sends to the viewer reaches this process.
 """
 
 from __future__ import annotations
 
+import os
 from functools import partial
+from subprocess import Popen
 
 from fastapi import APIRouter, Request, Response
 
@@ -55,8 +57,38 @@ def _seconds(text: str) -> float | None:
 
 @router.get("/viewer")
 async def viewer_status(request: Request) -> ViewerStatus:
-    """Where the 3D viewer is: this host, this port (``serve`` starts it unless --no-viewer)."""
+    """Where the 3D viewer is: this host, this port (``serve`` starts it unless --no-viewer),
+    and whether it is running now (pages show their link to it only then)."""
     settings = request.app.state.settings
     if not settings.viewer_enabled:
-        return ViewerStatus(enabled=False, port=None, host=None)
-    return ViewerStatus(enabled=True, port=settings.viewer_port, host=settings.viewer_host)
+        return ViewerStatus(enabled=False, running=False, port=None, host=None)
+    process = getattr(request.app.state, "viewer_process", None)
+    return ViewerStatus(
+        enabled=True,
+        running=viewer_running(process, os.environ.get(VIEWER_PID)),
+        port=settings.viewer_port,
+        host=settings.viewer_host,
+    )
+
+
+#: the viewer's process id, which ``serve`` puts in its workers' environment (one worker holds
+#: the process itself: ``app.state.viewer_process``)
+VIEWER_PID = "ADVISOR_VIEWER_PID"
+
+
+def viewer_running(process: Popen[bytes] | None, pid: str | None) -> bool:
+    """Whether the viewer ``serve`` started is alive: its process (one worker: ``serve`` hands
+    it to the app) has not exited, or the process of that id (workers: ``serve`` reaps it when
+    it exits, so the id goes) exists. A viewer this service did not start (tests, one run
+    apart) is taken to be running."""
+    if process is not None:
+        return process.poll() is None
+    if pid is None or not pid.isdigit():
+        return True
+    try:
+        os.kill(int(pid), 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process: it exists
+        return True
+    return True
