@@ -50,8 +50,10 @@ async def put_domain(name: DomainName, body: DomainPut, state: StateDep) -> Resp
     """Create (201) or replace (200) a domain. The same map keeps its trajectories and its
     live sessions; a new map starts with an empty prior and ends the old map's sessions."""
     await state.sessions.sync_domain(name)
+    replaced = [state.catalog.find(name)]  # the state this PUT replaces: freed off the loop
     domain, created, kept = await run_in_threadpool(ops.put_domain, state, name, body)
     await ops.after_put(state, domain, created, kept)
+    await ops.let_go(replaced)
     return Response(await answers.domain(domain), 201 if created else 200, media_type=JSON)
 
 
@@ -63,6 +65,9 @@ async def delete_domain(name: DomainName, state: StateDep) -> None:
     domain = await state.sessions.domain(name)
     await run_in_threadpool(state.catalog.delete, name)
     await ops.after_delete(state, name, domain.version)
+    gone = [domain]
+    del domain
+    await ops.let_go(gone)
 
 
 @router.post(
