@@ -311,13 +311,15 @@ def put_domain(state: ServiceState, name: str, body: DomainPut) -> tuple[DomainS
     experts = None
     if body.experts is not None and not _keeps_data(state, name, grid):
         experts = simulated_experts(grid, body.experts, state.settings.max_expert_pairs)
-    domain, created, kept = state.catalog.put(name, grid, body.alpha0)
-    if body.experts is not None and domain.view.trajectories.get(POOLED, 0) == 0:
-        if experts is None:  # the data it would have kept went meanwhile
-            experts = simulated_experts(grid, body.experts, state.settings.max_expert_pairs)
-        domain = state.catalog.add_trajectories(domain, experts)
-        ingested(name, len(experts), sum(len(t.pairs) for t in experts))
-    state.catalog.prepare_all(domain)  # with the event paths' texts and lists (wire.warm)
+    domain, created, kept = state.catalog.put(name, grid, body.alpha0, preparing=True)
+    try:
+        if body.experts is not None and domain.view.trajectories.get(POOLED, 0) == 0:
+            if experts is None:  # the data it would have kept went meanwhile
+                experts = simulated_experts(grid, body.experts, state.settings.max_expert_pairs)
+            domain = state.catalog.add_trajectories(domain, experts)
+            ingested(name, len(experts), sum(len(t.pairs) for t in experts))
+    finally:  # published as being prepared: prepared whatever happened
+        state.catalog.prepare_all(domain)  # with the event paths' texts and lists (wire.warm)
     return domain, created, kept
 
 

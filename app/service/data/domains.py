@@ -95,16 +95,18 @@ class DomainState:
     guide_lock: threading.Lock = field(default_factory=threading.Lock)
     view: PriorView = field(init=False)
     # per-goal counts for goal-aware sessions: built from the stored trajectories when the
-    # first such session starts, then kept up to date (replaced whole, never changed)
+    # domain is prepared (DomainCatalog.prepare_all), then kept up to date (replaced whole,
+    # never changed)
     goal_priors: GoalPriors | None = None
     # guide sessions: distances to every destination, with the experts' counts of
-    # ``goal_priors``; built with them when the first guide session starts
+    # ``goal_priors``; built with them when the domain is prepared
     guide_map: GuideMap | None = None
     version: int = 0  # the store's data version this state holds (store.py)
     # what cannot be built for this domain, and why (its map cannot have it, or it would pass
     # the per-domain memory limit): sessions that need it are refused with the reason
     refused: dict[Need, str] = field(default_factory=dict)
-    # :meth:`DomainCatalog.prepare_all` is building what the strategies need
+    # :meth:`DomainCatalog.prepare_all` is building what the strategies need, or is about to
+    # (a state published by a PUT or a refresh, prepared next by the same thread)
     preparing: bool = False
 
     def __post_init__(self) -> None:
@@ -209,14 +211,19 @@ class DomainCatalog:
                 return old.domain.with_frame(frame)
         return GridDomain.from_strings(rows, name=name, frame=frame)
 
-    def put(self, name: str, domain: GridDomain, alpha0: float) -> tuple[DomainState, bool, bool]:
+    def put(
+        self, name: str, domain: GridDomain, alpha0: float, preparing: bool = False
+    ) -> tuple[DomainState, bool, bool]:
         """Create or replace ``name`` (store first); returns (state, created, kept_data): the
-        same map keeps its trajectories and counts, a new map starts with none."""
+        same map keeps its trajectories and counts, a new map starts with none. ``preparing``:
+        the caller prepares the state next (:meth:`prepare_all`), so it is published as being
+        prepared."""
         with self._lock:
             old = self._domains.get(name)
             with old.lock if old else nullcontext():
                 rec, created, kept = self.store.put_domain(name, domain.to_text(), alpha0)
                 state = self._state(rec, domain, old if old and kept else None)
+                state.preparing = preparing
                 self._domains[name] = state
         return state, created, kept
 
@@ -408,7 +415,7 @@ class DomainCatalog:
                 guide = old.guide_map.replace_counts(goals)
         state = DomainState(
             name, grid, prior, rec.created_at, rec.updated_at, goal_priors=goals,
-            guide_map=guide, version=rec.version,
+            guide_map=guide, version=rec.version, preparing=True,  # refresh prepares it next
         )  # fmt: skip
         self._domains[name] = state
         return state
