@@ -276,6 +276,8 @@ def test_a_stored_domain_over_a_lowered_limit_refuses_the_sessions_that_need_it(
     catalog = DomainCatalog(store, 250_000, max_memory=1000)  # a start: load prepares
     catalog.load()
     state = catalog.get("maze")
+    with pytest.raises(ValueError, match="ADVISOR_MAX_DOMAIN_MEMORY"):
+        catalog.prepare(state, [Need.GUIDE_MAP])  # nor built by one that asks for it
     store.close()
     assert state.goal_priors is None and state.guide_map is None
     assert set(state.refused) == {Need.GOAL_PRIORS, Need.GUIDE_MAP}

@@ -280,8 +280,13 @@ class DomainCatalog:
 
     def prepare(self, state: DomainState, needs: Iterable[Need]) -> None:
         """*Worker thread* the first time: build what a strategy ``needs`` of ``state``
-        (ValueError, such as :class:`GuideError`, says why a map cannot have it)."""
+        (ValueError, such as :class:`GuideError`, says why a map cannot have it, or why
+        :meth:`prepare_all` did not build it: ``state.refused``, the memory limit included).
+        A domain is prepared when made or changed (:meth:`prepare_all`): this builds only
+        what is still missing, for callers that need it there and then."""
         for need in needs:
+            if need in state.refused:
+                raise ValueError(state.refused[need])
             self._builders[need](state)
 
     @property
