@@ -102,7 +102,7 @@ async def _validation(_: Request, exc: Exception) -> JSONResponse:
 
 async def _bad_input(_: Request, exc: Exception) -> JSONResponse:
     assert isinstance(exc, BadInput)
-    return _json(exc.status, exc.detail)
+    return _json(exc.status, exc.detail, exc.headers)
 
 
 async def _auth(_: Request, exc: Exception) -> JSONResponse:
