@@ -23,7 +23,8 @@ by at most that fraction of itself, ``tan(lat0) |y| / 6,370 km`` for the largest
 north or south of the reference) it spans. For a building within 250 m of its reference point
 at 60 degrees of latitude, 6.8e-5: 3.4 cm over 500 m, a fifteenth of a 0.5 m cell (tested
 against the straight-line distance between the points on the ellipsoid:
-``tests/mapio/test_venue.py``).
+``tests/mapio/test_venue.py``). The reader refuses features more than
+:data:`~app.mapio.imdf.build.MAX_OFFSET_M` from the reference point.
 """
 
 from __future__ import annotations
