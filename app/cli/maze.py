@@ -256,7 +256,8 @@ def maze_import(
             raise ValueError("--start takes one cell ROW,COL")
         goal_list = parse_cells(goal_cells, "--goal-cells") if goal_cells is not None else None
         budget = MemoryBudget.of_mib(max_memory, len(goal_list) if goal_list else goals)
-        if fmt is ImportFormat.imdf or (fmt is ImportFormat.auto and _looks_imdf(file)):
+        imdf = fmt is ImportFormat.imdf or (fmt is ImportFormat.auto and _looks_imdf(file))
+        if imdf:
             imported = _read_imdf(file, resolution, level, budget)
         elif resolution is not None or level is not None:
             raise ValueError(
@@ -273,14 +274,18 @@ def maze_import(
         if goal_list is None and imported.goals:
             named, outside = _named_goals(imported.goals, kept)
             if outside:
+                shown = ", ".join(outside[:5]) + (
+                    f" and {len(outside) - 5} more" if len(outside) > 5 else ""
+                )
                 imported.notes.append(
-                    f"{len(outside)} destination(s) outside the kept region, left out: "
-                    + ", ".join(outside)
+                    f"{len(outside)} destination(s) outside the kept region, left out: {shown}"
                 )
         if named:
             goal_list = sorted(named)
-        elif imported.goals and goal_list is None:
-            imported.notes.append(f"no destination in the kept region: {goals} goal(s) picked")
+        elif imdf and goal_list is None:
+            imported.notes.append(
+                f"no named destination in the kept region of this level: {goals} goal(s) picked"
+            )
         rows = place(
             kept, np.random.default_rng(seed), start=starts[0], goals=goal_list, n_goals=goals
         )

@@ -128,3 +128,19 @@ def test_cli_import_imdf_many_levels_are_listed_short(tmp_path: Path) -> None:
     assert result.exit_code == 2
     assert "11 (Level 11) and 9 more: give --level ORDINAL" in " ".join(result.output.split())
     assert len(result.output) < 500
+
+
+def test_cli_import_imdf_level_without_destinations_picks_goals(tmp_path: Path) -> None:
+    d = docs()
+    for name in ("occupant", "anchor", "amenity"):
+        d[f"{name}.geojson"]["features"] = []
+    for unit in features(d, "unit"):
+        unit["properties"]["name"] = None
+    out = tmp_path / "plain.txt"
+    args = ["maze", "import", str(write(tmp_path, d)), "--level", "2", "--goals", "3"]
+    result = runner.invoke(cli, [*args, "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert "no named destination in the kept region of this level: 3 goal(s) picked" in (
+        result.output
+    )
+    assert len(GridDomain.from_file(out).goals) == 3
