@@ -11,6 +11,8 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from app.mapio import MapImportError
 from app.mapio.budget import MIB, MemoryBudget
@@ -358,3 +360,42 @@ def test_imdf_a_resolution_that_is_not_a_length_is_refused(tmp_path: Path) -> No
     path = write(tmp_path)
     refused(path, "resolution must be a positive number of metres, got 0", resolution=0.0)
     refused(path, "storey height must be a positive", storey_height=float("nan"))
+
+
+@pytest.fixture(scope="module")
+def hospital_zip(tmp_path_factory: pytest.TempPathFactory) -> bytes:
+    return write(tmp_path_factory.mktemp("zip")).read_bytes()
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.data())
+def test_imdf_a_damaged_zip_is_refused_in_one_line_or_read(
+    hospital_zip: bytes, tmp_path_factory: pytest.TempPathFactory, data: st.DataObject
+) -> None:
+    """Any archive cut short or with bytes changed: a MapImportError (the zlib error, a zip
+    version zipfile does not read, a name that is not UTF-8, an empty name were tracebacks
+    found this way) or a venue, nothing else."""
+    raw = bytearray(hospital_zip)
+    if data.draw(st.booleans()):
+        raw = raw[: data.draw(st.integers(0, len(raw) - 1))]
+    else:
+        for _ in range(data.draw(st.integers(1, 20))):
+            raw[data.draw(st.integers(0, len(raw) - 1))] = data.draw(st.integers(0, 255))
+    path = tmp_path_factory.mktemp("damaged") / "damaged.zip"
+    path.write_bytes(bytes(raw))
+    try:
+        read_imdf(path)
+    except MapImportError as exc:
+        assert "\n" not in str(exc) and len(str(exc)) < 500
+
+
+def test_imdf_a_zip_member_with_no_name_is_refused(tmp_path: Path) -> None:
+    path = _zip(tmp_path / "noname.zip", {**_members(), "x": b"{}"})
+    raw = path.read_bytes()
+    at = raw.rfind(b"PK\x01\x02")  # the last member's directory entry: its name, made empty
+    raw = raw[: at + 28] + b"\x00\x00" + raw[at + 30 : at + 46] + raw[at + 47 :]
+    end = raw.rfind(b"PK\x05\x06")
+    size = struct.unpack_from("<L", raw, end + 12)[0] - 1  # the directory, a byte shorter
+    raw = raw[: end + 12] + struct.pack("<L", size) + raw[end + 16 :]
+    path.write_bytes(raw)
+    refused(path, "a member has no name: the archive is damaged")

@@ -19,10 +19,12 @@ exists.
 
 from __future__ import annotations
 
+import lzma
 import os
 import posixpath
 import struct
 import zipfile
+import zlib
 from collections.abc import Collection, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -77,7 +79,13 @@ class Archive:
                 assert self._folder is not None
                 with (self._folder / name).open("rb") as f:
                     data = f.read(size + 1)
-        except (zipfile.BadZipFile, zipfile.LargeZipFile, EOFError) as exc:
+        except (
+            zipfile.BadZipFile,
+            zipfile.LargeZipFile,
+            EOFError,
+            zlib.error,
+            lzma.LZMAError,
+        ) as exc:
             raise MapImportError(f"{where}: the archive is damaged: {brief(exc)}") from None
         except (NotImplementedError, RuntimeError) as exc:  # compression method, encryption
             raise MapImportError(f"{where}: cannot be read: {brief(exc)}") from None
@@ -108,13 +116,14 @@ def open_archive(path: Path) -> Iterator[Archive]:
     except OSError as exc:
         raise MapImportError(f"{where}: cannot read: {brief(exc.strerror or exc)}") from None
     with f:
+        _check_end_record(f, where)
         try:
-            _check_end_record(f, where)
             zf = zipfile.ZipFile(f)
-        except zipfile.BadZipFile as exc:
-            raise MapImportError(f"{where}: not a zip archive ({brief(exc, 80)})") from None
-        except OSError as exc:
-            raise MapImportError(f"{where}: cannot read: {brief(exc.strerror or exc)}") from None
+        # a damaged directory: bad signatures, offsets before the file's start (EINVAL), a
+        # version of the format zipfile does not read, names that are not UTF-8 as flagged
+        except (zipfile.BadZipFile, NotImplementedError, EOFError, OSError, ValueError) as exc:
+            text = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
+            raise MapImportError(f"{where}: not a zip archive ({brief(text, 80)})") from None
         with zf:
             yield _zipped(zf, where)
 
@@ -150,6 +159,8 @@ def _leaves(name: str) -> bool:
 def _zipped(zf: zipfile.ZipFile, where: str) -> Archive:
     infos = zf.infolist()
     for info in infos:
+        if not info.filename:
+            raise MapImportError(f"{where}: a member has no name: the archive is damaged")
         if _leaves(info.filename):
             raise MapImportError(
                 f"{where}: member {shorten(info.filename)} is an absolute path or climbs out "
