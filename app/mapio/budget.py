@@ -64,15 +64,19 @@ TEXT_ROW_BYTES = 128
 #: of empty lists or objects (``[[],[],...]``) costs 25 bytes a byte once parsed (measured with
 #: tracemalloc; real IMDF files 3 to 7)
 JSON_BYTE_COST = 32
-#: bytes a byte of GeoJSON costs once read into records (their arrays and strings), kept while
-#: the levels are drawn (measured: 1.2 to 1.5 for files written with indents, up to 3 compact)
-RECORD_BYTE_COST = 4
-#: bytes a cell costs on every level of a venue while connections are found (the unit labels,
-#: walkable and free masks, each unit's window), and once more while a level is drawn (walls,
-#: temporaries): measured with tracemalloc on venues of 0.4 to 1.6 million cells a level, 2 to
-#: 10 levels, 50 to 1,600 rooms a level, the peaks were 68 to 87 % of the estimate
-VENUE_LEVEL_CELL_BYTES = 8
-VENUE_BUILD_CELL_BYTES = 16
+#: bytes a byte of GeoJSON costs once read into records (their arrays and strings: measured 1.2
+#: to 3), kept while the levels are drawn, and while one polygon is drawn its edges (about 115
+#: bytes an edge, an edge at least 6 bytes of GeoJSON)
+RECORD_BYTE_COST = 24
+#: bytes a cell costs on every level of a venue while connections are found (its owners, the
+#: walkable and free masks, the level's copy, and the connections' cells there, 8 bytes each
+#: at worst), and once more for the level being drawn or the stop being gathered (walls,
+#: windows, temporaries). Measured with tracemalloc against the estimate: 34 to 40 % on rooms
+#: along corridors (2 to 10 levels of 0.4 to 1.6 million cells, 50 to 1,600 rooms a level) and
+#: on 300 thin walkways across each level, 60 % with every room a stairwell, 85 % with one
+#: stairwell over each whole level, stacked on 4 levels
+VENUE_LEVEL_CELL_BYTES = 16
+VENUE_BUILD_CELL_BYTES = 24
 
 #: the smallest cost of a pixel (a grey image merged into few cells): Pillow's own limit on an
 #: image's pixels (``Image.MAX_IMAGE_PIXELS``) is the budget divided by it while decoding

@@ -25,7 +25,7 @@ import numpy as np
 from app.arrays import BoolArray, FloatArray
 
 #: (rows x edges) and (rows x columns) pairs held at once while filling
-BLOCK = 1 << 20
+BLOCK = 1 << 18
 
 Window = tuple[int, int, BoolArray]  # first row, first column, the cells from there
 
@@ -67,7 +67,7 @@ def fill(rings: Sequence[FloatArray], shape: tuple[int, int]) -> Window | None:
     if b0 > b1 or c0 > c1:
         return None
     width = c1 - c0 + 1
-    inside = np.zeros((b1 - b0 + 1, width), dtype=bool)  # bottom row first
+    inside = np.zeros((b1 - b0 + 1, width), dtype=bool)  # top row (b1) first
     u0, v0, u1, v1 = e[:, 0], e[:, 1], e[:, 2], e[:, 3]
     step = max(1, BLOCK // max(len(e), width + 1))
     for start in range(b0, b1 + 1, step):
@@ -81,11 +81,12 @@ def fill(rings: Sequence[FloatArray], shape: tuple[int, int]) -> Window | None:
         first = np.clip(np.ceil(uc - 0.5), c0, c1 + 1).astype(np.int64) - c0
         toggles = np.zeros((len(v), width + 1), dtype=np.int64)
         np.add.at(toggles, (k, first), 1)
-        inside[start - b0 : start - b0 + len(v)] = (np.cumsum(toggles, axis=1)[:, :width] & 1) == 1
+        block = (np.cumsum(toggles, axis=1)[:, :width] & 1) == 1
+        first_row = b1 - (start + len(v) - 1)  # the block's top row, in the window
+        inside[first_row : first_row + len(v)] = block[::-1]
     if not inside.any():
         return None
-    top = rows - 1 - b1  # the window's first row from the top
-    return top, c0, inside[::-1].copy()
+    return rows - 1 - b1, c0, inside
 
 
 def fill_mask(rings: Sequence[FloatArray], shape: tuple[int, int]) -> BoolArray:

@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from app.arrays import BoolArray, IntArray
+from app.arrays import BoolArray, KeyArray
 from app.domain.grid import Frame
 
 #: WGS 84: the semi-major axis (m) and the first eccentricity squared
@@ -119,14 +119,14 @@ class Level:
 @dataclass(frozen=True, eq=False)
 class Stop:
     """Where a connection touches one level: its free ``cells`` there, an (n, 2) array of
-    (row, col), read-only; ``ids``: the IMDF units or openings it is made of there."""
+    (row, col) (int32), read-only; ``ids``: the IMDF units or openings it is made of there."""
 
     ordinal: int
-    cells: IntArray = field(repr=False)
+    cells: KeyArray = field(repr=False)
     ids: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
-        cells = np.asarray(self.cells, dtype=np.int64).reshape(-1, 2)
+        cells = np.asarray(self.cells, dtype=np.int32).reshape(-1, 2)
         object.__setattr__(self, "cells", _frozen(cells))
 
 

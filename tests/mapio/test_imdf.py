@@ -222,3 +222,32 @@ def test_imdf_names_are_cleaned_and_cut(tmp_path: Path) -> None:
 def test_imdf_unit_ids_are_those_of_the_plan() -> None:
     units = {f["id"] for f in features(docs(), "unit")}
     assert unit_id(0, "radiology") in units and len(units) == len(ROOMS)
+
+
+def test_imdf_a_relationship_between_openings_joins_their_doors(tmp_path: Path) -> None:
+    d = docs()
+    features(d, "relationship").append(
+        {
+            "id": "stairs-doors",
+            "type": "Feature",
+            "feature_type": "relationship",
+            "geometry": None,
+            "properties": {
+                "category": "stairs",
+                "direction": "undirected",
+                "origin": {"id": fid("opening", "0/stairs"), "feature_type": "opening"},
+                "intermediary": None,
+                "destination": {"id": fid("opening", "1/stairs"), "feature_type": "opening"},
+            },
+        }
+    )
+    v = read_imdf(write(tmp_path, d), 0.5)
+    doors = next(c for c in v.connections if c.name == "stairs 2")
+    assert (doors.kind, doors.ordinals, doors.source) == ("stairs", (0, 1), "relationships")
+    for stop in doors.stops:
+        cells = {tuple(x) for x in stop.cells.tolist()}
+        # the 1.2 m door at 0.5 m: two cells wide, a cell each side of the line
+        assert len(cells) == 4 and all(v.level(stop.ordinal).free[c] for c in cells)
+        rows = {r for r, _ in cells}
+        stairs = room_cells(v, stop.ordinal, "stairs")
+        assert len(rows) == 2 and len(cells & stairs) == 2

@@ -214,16 +214,13 @@ def _unit_notes(drawn: dict[int, Drawn], resolution: float) -> list[str]:
     empty: list[str] = []
     closed: list[str] = []
     for o, d in drawn.items():
-        entered = set()
-        for r, c, m in d.openings.values():
-            entered |= set(np.unique(d.label[r : r + m.shape[0], c : c + m.shape[1]][m]).tolist())
         for i, u in enumerate(d.units):
             if u.category in BLOCKED:
                 continue
             label = u.name or f"{u.category} {u.id[:8]}"
-            if not len(d.unit_cells(i)):
+            if not d.unit_count(i):
                 empty.append(f"{label} (level {o})")
-            elif u.category not in OPEN and i not in entered:
+            elif u.category not in OPEN and i not in d.entered:
                 closed.append(f"{label} (level {o})")
     notes = []
     if empty:

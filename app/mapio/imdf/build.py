@@ -4,18 +4,19 @@ between units, doors from openings (the rules are :mod:`app.mapio.imdf`'s docstr
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from itertools import pairwise
 
 import numpy as np
 
-from app.arrays import BoolArray, FloatArray, IntArray, KeyArray
+from app.arrays import BoolArray, FloatArray, KeyArray
 from app.domain.grid import Frame
 from app.mapio import MapImportError, shorten
 from app.mapio.budget import MemoryBudget
 from app.mapio.imdf.features import Rings
 from app.mapio.imdf.records import Records, UnitRec
-from app.mapio.polygons import Window, band, fill
+from app.mapio.polygons import BLOCK, Window, band, fill
 from app.mapio.venue import LocalProjection
 
 #: the farthest a feature may lie from the venue's reference point (the projection's error
@@ -79,40 +80,70 @@ class Grid:
         return out
 
 
+Box = tuple[int, int, int, int]  # first row, first column, end row, end column
+
+
 @dataclass
 class Drawn:
     """A level drawn: the owner of each cell (an index into ``units``, -1 none), the cells of
-    walkable units, the free cells, each unit's window, each opening's carved window."""
+    walkable units, the free cells; each unit's bounding box (no masks are kept: the owner
+    grid says which cells are a unit's), the units openings enter, and each opening's line in
+    grid coordinates (its cells are found again when a connection needs them)."""
 
     ordinal: int
     label: KeyArray  # int32
     walkable: BoolArray
     free: BoolArray
     units: list[UnitRec]
-    windows: list[Window | None]
-    openings: dict[str, Window] = field(default_factory=dict)
+    boxes: list[Box | None]
+    entered: set[int] = field(default_factory=set)
+    lines: dict[str, FloatArray] = field(default_factory=dict)
 
-    def unit_cells(self, i: int, free_only: bool = True) -> IntArray:
-        """The cells (rows, cols) unit ``i`` owns (and that are free)."""
-        w = self.windows[i]
-        if w is None:
-            return np.empty((0, 2), dtype=np.int64)
-        r, c, m = w
-        h, wd = m.shape
-        mine = m & (self.label[r : r + h, c : c + wd] == i)
-        if free_only:
-            mine &= self.free[r : r + h, c : c + wd]
-        out: IntArray = np.argwhere(mine) + np.array([r, c])
-        return out
+    def unit_count(self, i: int) -> int:
+        """How many free cells unit ``i`` owns."""
+        box = self.boxes[i]
+        if box is None:
+            return 0
+        r0, c0, r1, c1 = box
+        return int(np.count_nonzero((self.label[r0:r1, c0:c1] == i) & self.free[r0:r1, c0:c1]))
 
-    def opening_cells(self, fid: str) -> IntArray:
-        w = self.openings.get(fid)
-        if w is None:
-            return np.empty((0, 2), dtype=np.int64)
-        r, c, m = w
-        h, wd = m.shape
-        out: IntArray = np.argwhere(m & self.free[r : r + h, c : c + wd]) + np.array([r, c])
-        return out
+    def cells(self, units: Sequence[int], openings: Sequence[str] = ()) -> KeyArray:
+        """The free cells (rows, cols; int32, row-major) the ``units`` own and the
+        ``openings`` carve."""
+        windows: list[Window] = []
+        for i in units:
+            box = self.boxes[i]
+            if box is not None:
+                r0, c0, r1, c1 = box
+                windows.append((r0, c0, self.label[r0:r1, c0:c1] == i))
+        for fid in openings:
+            for r, c, m in _bands(self.lines.get(fid, np.empty((0, 2))), self.label.shape):
+                h, w = m.shape
+                windows.append((r, c, m & self.walkable[r : r + h, c : c + w]))
+        if not windows:
+            return np.empty((0, 2), dtype=np.int32)
+        r0 = min(w[0] for w in windows)
+        c0 = min(w[1] for w in windows)
+        r1 = max(w[0] + w[2].shape[0] for w in windows)
+        c1 = max(w[1] + w[2].shape[1] for w in windows)
+        mask = np.zeros((r1 - r0, c1 - c0), dtype=bool)
+        for r, c, m in windows:
+            mask[r - r0 : r - r0 + m.shape[0], c - c0 : c - c0 + m.shape[1]] |= m
+        del windows
+        mask &= self.free[r0:r1, c0:c1]
+        return cells_of(mask, r0, c0)
+
+
+def cells_of(mask: BoolArray, r0: int = 0, c0: int = 0) -> KeyArray:
+    """The true cells of ``mask`` as (row + r0, col + c0) rows of int32, row-major, found a
+    band of rows at a time (no int64 array of them all)."""
+    parts = [np.empty((0, 2), dtype=np.int32)]
+    step = max(1, BLOCK // max(1, mask.shape[1]))
+    for r in range(0, mask.shape[0], step):
+        rr, cc = np.nonzero(mask[r : r + step])
+        parts.append(np.column_stack((rr + (r + r0), cc + c0)).astype(np.int32))
+    out: KeyArray = np.concatenate(parts)
+    return out
 
 
 def reference(rec: Records, where: str) -> LocalProjection:
@@ -170,14 +201,14 @@ def draw_level(
     where they touch another walkable unit."""
     rows, cols = grid.shape
     label = np.full(grid.shape, -1, dtype=np.int32)
-    windows: list[Window | None] = [None] * len(units)
+    boxes: list[Box | None] = [None] * len(units)
     order = sorted(range(len(units)), key=lambda i: units[i].category in BLOCKED)
     for i in order:
         w = fill([grid.uv(r) for r in unit_xy[units[i].id]], grid.shape)
-        windows[i] = w
         if w is not None:
             r, c, m = w
             label[r : r + m.shape[0], c : c + m.shape[1]][m] = i
+            boxes[i] = (r, c, r + m.shape[0], c + m.shape[1])
     walkable = np.array([u.category not in BLOCKED for u in units] + [False])
     room = np.array([u.category not in BLOCKED | OPEN for u in units] + [False])
     walk = walkable[label]  # label -1 picks the extra False
@@ -188,36 +219,27 @@ def draw_level(
         nb = pad[1 + dr : 1 + dr + rows, 1 + dc : 1 + dc + cols]
         rim |= (nb != label) & walkable[nb]
     free = walk & ~(rim & room[label])
-    return Drawn(ordinal, label, walk, free, units, windows)
+    return Drawn(ordinal, label, walk, free, units, boxes)
 
 
 def carve(grid: Grid, drawn: Drawn, fid: str, line_xy: FloatArray) -> None:
     """An opening: the walkable cells within :data:`DOOR_HALF_WIDTH` cells of each of its
     segments (beside it, not past its ends) become free."""
     uv = grid.uv(line_xy)
-    walkable = drawn.walkable
+    drawn.lines[fid] = uv
+    for r, c, m in _bands(uv, grid.shape):
+        h, w = m.shape
+        cut = m & drawn.walkable[r : r + h, c : c + w]
+        drawn.free[r : r + h, c : c + w] |= cut
+        drawn.entered.update(np.unique(drawn.label[r : r + h, c : c + w][cut]).tolist())
+
+
+def _bands(uv: FloatArray, shape: tuple[int, int]) -> Iterator[Window]:
+    """The cells of the band around each segment of a line (grid coordinates)."""
     for p, q in pairwise(uv):
-        w = fill([band(p, q, DOOR_HALF_WIDTH, DOOR_LEAST_LENGTH)], grid.shape)
-        if w is None:
-            continue
-        r, c, m = w
-        h, wd = m.shape
-        cut = m & walkable[r : r + h, c : c + wd]
-        drawn.free[r : r + h, c : c + wd] |= cut
-        old = drawn.openings.get(fid)
-        drawn.openings[fid] = _union(old, (r, c, cut))
-
-
-def _union(a: Window | None, b: Window) -> Window:
-    if a is None:
-        return b
-    r0, c0 = min(a[0], b[0]), min(a[1], b[1])
-    r1 = max(a[0] + a[2].shape[0], b[0] + b[2].shape[0])
-    c1 = max(a[1] + a[2].shape[1], b[1] + b[2].shape[1])
-    m = np.zeros((r1 - r0, c1 - c0), dtype=bool)
-    for r, c, x in (a, b):
-        m[r - r0 : r - r0 + x.shape[0], c - c0 : c - c0 + x.shape[1]] |= x
-    return r0, c0, m
+        w = fill([band(p, q, DOOR_HALF_WIDTH, DOOR_LEAST_LENGTH)], shape)
+        if w is not None:
+            yield w
 
 
 def too_far(where: str, what: str, xy: FloatArray) -> None:

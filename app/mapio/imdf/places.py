@@ -8,11 +8,11 @@ from itertools import pairwise
 
 import numpy as np
 
-from app.arrays import FloatArray, IntArray
+from app.arrays import FloatArray
 from app.mapio.imdf.build import BLOCKED, Drawn, Grid, names
 from app.mapio.imdf.features import clean_name
 from app.mapio.imdf.records import Records
-from app.mapio.polygons import nearest
+from app.mapio.polygons import BLOCK, nearest
 from app.mapio.venue import Connection, Destination, Stop
 
 #: unit categories stacked across levels to make connections
@@ -59,19 +59,11 @@ def connections(
     opening_level = {o.id: level_of[o.level_id] for o in rec.openings}
     sets = _Sets()
     stacked: set[Place] = set()
-    ordinals = sorted(drawn)
-    for below, above in pairwise(ordinals):
+    for below, above in pairwise(sorted(drawn)):
         a, b = drawn[below], drawn[above]
-        for i, ua in enumerate(a.units):
-            if ua.category not in VERTICAL:
-                continue
-            cells_a = {tuple(x) for x in a.unit_cells(i, free_only=False).tolist()}
-            for j, ub in enumerate(b.units):
-                if ub.category != ua.category or not cells_a:
-                    continue
-                if any(tuple(x) in cells_a for x in b.unit_cells(j, free_only=False).tolist()):
-                    sets.join(("unit", ua.id), ("unit", ub.id))
-                    stacked |= {("unit", ua.id), ("unit", ub.id)}
+        for i, j in _stacked(a, b):
+            sets.join(("unit", a.units[i].id), ("unit", b.units[j].id))
+            stacked |= {("unit", a.units[i].id), ("unit", b.units[j].id)}
     kind_of: dict[Place, str] = {}
     same_level = 0
     for rel in rec.relationships:
@@ -105,21 +97,22 @@ def connections(
         units = [rec.units[order[p]] for p in members if p[0] == "unit"]
         kind = next((kind_of[p] for p in members if p in kind_of), None)
         kind = kind or (units[0].category if units else "traversal")
-        per_level: dict[int, list[IntArray]] = defaultdict(list)
+        units_on: dict[int, list[int]] = defaultdict(list)
+        openings_on: dict[int, list[str]] = defaultdict(list)
         ids: dict[int, list[str]] = defaultdict(list)
-        for place in members:
-            if place[0] == "unit":
-                ordinal, i = where_unit[place[1]]
-                per_level[ordinal].append(drawn[ordinal].unit_cells(i))
+        for kind_, fid in members:
+            if kind_ == "unit":
+                ordinal, i = where_unit[fid]
+                units_on[ordinal].append(i)
             else:
-                ordinal = opening_level[place[1]]
-                per_level[ordinal].append(drawn[ordinal].opening_cells(place[1]))
-            ids[ordinal].append(place[1])
+                ordinal = opening_level[fid]
+                openings_on[ordinal].append(fid)
+            ids[ordinal].append(fid)
         counts[kind] += 1
         name = next((u.name for u in units if u.name), f"{kind} {counts[kind]}")
         stops = []
-        for ordinal in sorted(per_level):
-            cells = np.unique(np.vstack(per_level[ordinal]), axis=0)
+        for ordinal in sorted(ids):
+            cells = drawn[ordinal].cells(units_on[ordinal], openings_on[ordinal])
             if len(cells):
                 stops.append(Stop(ordinal, cells, tuple(ids[ordinal])))
             else:
@@ -140,6 +133,28 @@ def connections(
     return out, notes
 
 
+def _stacked(a: Drawn, b: Drawn) -> list[tuple[int, int]]:
+    """The pairs (unit of ``a``, unit of ``b``) of one vertical category that share a cell,
+    found a band of rows at a time (the cells' owners as one key each, their distinct keys)."""
+    kinds = sorted(VERTICAL)
+    code_a = np.array([kinds.index(u.category) if u.category in VERTICAL else -1 for u in a.units])
+    code_b = np.array([kinds.index(u.category) if u.category in VERTICAL else -2 for u in b.units])
+    if not (code_a >= 0).any() or not (code_b >= 0).any():
+        return []
+    code_a, code_b = np.append(code_a, -1), np.append(code_b, -2)  # label -1: none
+    n_b = np.int64(len(b.units) + 1)
+    rows, cols = a.label.shape
+    found = [np.empty(0, dtype=np.int64)]
+    step = max(1, BLOCK // cols)
+    for r in range(0, rows, step):
+        la, lb = a.label[r : r + step], b.label[r : r + step]
+        same = code_a[la] == code_b[lb]
+        if same.any():
+            found.append(np.unique(la[same].astype(np.int64) * n_b + lb[same]))
+    keys = np.unique(np.concatenate(found))
+    return [(int(k // n_b), int(k % n_b)) for k in keys]
+
+
 def destinations(
     rec: Records, drawn: dict[int, Drawn], grid: Grid, unit_level: dict[str, int]
 ) -> tuple[list[Destination], list[str]]:
@@ -158,7 +173,7 @@ def destinations(
         ordinal = unit_level[unit_ids[0]]
         d = drawn[ordinal]
         same = [u for u in unit_ids if unit_level[u] == ordinal]
-        cells = np.vstack([d.unit_cells(index[u]) for u in same])
+        cells = d.cells([index[u] for u in same])
         if not len(cells):
             dropped.append(name)
             return
