@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from app.mapio.imdf import read_imdf
-from app.mapio.imdf.sample import CORRIDOR, WIDTH, fid, plan
+from app.mapio.imdf.sample import CORRIDOR, WIDTH, fid, plan, to_lonlat
 from app.mapio.venue import Venue
 from tests.mapio.imdf_helpers import (
     box_cells,
@@ -251,3 +251,18 @@ def test_imdf_a_relationship_between_openings_joins_their_doors(tmp_path: Path) 
         rows = {r for r, _ in cells}
         stairs = room_cells(v, stop.ordinal, "stairs")
         assert len(rows) == 2 and len(cells & stairs) == 2
+
+
+def test_imdf_units_too_small_for_a_cell_are_noted_and_not_destinations(tmp_path: Path) -> None:
+    d = docs()
+    closet = dict(features(d, "unit")[0])
+    corners = ((41.3, 5.3), (41.45, 5.3), (41.45, 5.45), (41.3, 5.45), (41.3, 5.3))
+    box = [to_lonlat(x, y) for x, y in corners]  # no cell centre (at .25 and .75 m) inside
+    closet["id"] = "closet"
+    closet["geometry"] = {"type": "Polygon", "coordinates": [box]}
+    closet["properties"] = closet["properties"] | {"category": "room", "name": {"en": "Closet"}}
+    features(d, "unit").append(closet)
+    v = read_imdf(write(tmp_path, d), 0.5)
+    assert any("hold no free cell at 0.5 m" in n and "Closet" in n for n in v.notes)
+    assert any("left out" in n and "Closet" in n for n in v.notes)
+    assert "Closet" not in {x.name for x in v.destinations}

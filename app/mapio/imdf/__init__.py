@@ -214,11 +214,12 @@ def _unit_notes(drawn: dict[int, Drawn], resolution: float) -> list[str]:
     empty: list[str] = []
     closed: list[str] = []
     for o, d in drawn.items():
+        free = np.bincount(d.label[d.free], minlength=len(d.units))  # free cells per unit
         for i, u in enumerate(d.units):
             if u.category in BLOCKED:
                 continue
             label = u.name or f"{u.category} {u.id[:8]}"
-            if not d.unit_count(i):
+            if not free[i]:
                 empty.append(f"{label} (level {o})")
             elif u.category not in OPEN and i not in d.entered:
                 closed.append(f"{label} (level {o})")

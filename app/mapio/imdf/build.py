@@ -99,14 +99,6 @@ class Drawn:
     entered: set[int] = field(default_factory=set)
     lines: dict[str, FloatArray] = field(default_factory=dict)
 
-    def unit_count(self, i: int) -> int:
-        """How many free cells unit ``i`` owns."""
-        box = self.boxes[i]
-        if box is None:
-            return 0
-        r0, c0, r1, c1 = box
-        return int(np.count_nonzero((self.label[r0:r1, c0:c1] == i) & self.free[r0:r1, c0:c1]))
-
     def cells(self, units: Sequence[int], openings: Sequence[str] = ()) -> KeyArray:
         """The free cells (rows, cols; int32, row-major) the ``units`` own and the
         ``openings`` carve."""
