@@ -5,9 +5,9 @@ An archive is a folder or a .zip of GeoJSON files (:mod:`app.mapio.imdf.archive`
 is bounded; :mod:`app.mapio.imdf.features` what is read of each file). The rules:
 
 Frame. The venue's ``display_point`` is the reference point (else the middle of its outline);
-every position is projected to metres east and north of it (:class:`~app.mapio.venue.
-LocalProjection`, equirectangular; its error is in :mod:`app.mapio.venue`). The grid's columns
-run east and its rows north (no yaw), cells of ``resolution`` metres, the origin (lower-left
+every position is projected to metres east and north of it (equirectangular:
+:class:`~app.mapio.venue.LocalProjection`, its error in :mod:`app.mapio.venue`). The grid's
+columns run east and its rows north (no yaw), cells of ``resolution`` metres, the origin (lower-left
 corner) on a multiple of the resolution from the reference point, one cell of margin around
 every level and unit. Every level uses the same grid. The memory an import will take is checked
 before anything is drawn: the GeoJSON's bytes, then the cells (levels x rows x columns).
@@ -32,9 +32,9 @@ overlap, a blocked unit wins, else the later in the file. Unit categories are of
 
 Openings are the doors: an opening frees the walkable cells within one cell of its line,
 beside it (:func:`~app.mapio.polygons.band`, the line lengthened to 1.5 cells when shorter).
-A room is entered only where an opening crosses its boundary; one with no opening is walled
-off (the import's notes name such rooms). An opening that reaches a corner where a third
-walkable unit meets may open onto it too.
+A room is entered only where an opening lies on its boundary (within a cell of it); one with
+no opening is walled off (the import's notes name such rooms). An opening that reaches a corner
+where a third walkable unit meets may open onto it too.
 
 Connections (:class:`~app.mapio.venue.Connection`) are found two ways and merged where they
 share a unit: stairs, elevator and escalator units of the same category on consecutive levels

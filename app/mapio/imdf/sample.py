@@ -10,8 +10,8 @@ desk and the first floor's restrooms are amenities, a few rooms are named units.
 relationship (origin ground floor, intermediary first, destination second), the stairs are
 only stacked, and an escalator joins the ground floor's south-east corner to the first floor's
 room west of it by a relationship only. Positions are metres east and north of the venue's
-display point, written as longitude and latitude with :class:`~app.mapio.venue.
-LocalProjection`.
+display point, written as longitude and latitude with
+:class:`~app.mapio.venue.LocalProjection`.
 
 ``python -m app.mapio.imdf.sample hospital.zip`` (or a folder name) writes it.
 """
