@@ -69,9 +69,10 @@ def describe(domain: GridDomain) -> str:
         frame = f", cells of {domain.frame.resolution:g} m, origin ({ox:g}, {oy:g}) m" + (
             f" yaw {yaw:g} rad" if yaw else ""
         )
+    names = domain.goal_names or (None,) * len(domain.goals)
     goals = ", ".join(
-        f"G{i}{list(domain.cell(g))} at {int(d)}"
-        for i, (g, d) in enumerate(zip(domain.goals, dist, strict=True))
+        f"G{i}{list(domain.cell(g))}" + (f" {name!r}" if name else "") + f" at {int(d)}"
+        for i, (g, name, d) in enumerate(zip(domain.goals, names, dist, strict=True))
     )
     return (
         f"{domain.name}: {rows}x{cols}, {domain.n_states} free cells, "

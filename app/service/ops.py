@@ -252,11 +252,11 @@ def put_domain(state: ServiceState, name: str, body: DomainPut) -> tuple[DomainS
     """*Worker thread.* Create or replace a domain: (state, created, kept_data). With
     ``experts``, a domain whose prior is empty after the put learns it from simulated experts
     (made before the put, so a bad request changes nothing)."""
-    frame, rows, header_lines = map_of(body)  # rows, or a map file's text
+    header, rows = map_of(body)  # rows, or a map file's text
     try:
-        grid = state.catalog.parse_map(rows, name, frame)
+        grid = state.catalog.parse_map(rows, name, header.frame, header.names)
     except MapError as exc:
-        raise BadInput(f"map: {exc.below(header_lines)}") from None
+        raise BadInput(f"map: {exc.below(header.lines)}") from None
     goals, most = len(grid.goals), state.settings.max_goal_cells
     if goals * grid.n_states > most:
         raise BadInput(

@@ -27,6 +27,8 @@ from typing_extensions import TypedDict
 from app import strategies
 from app.advice.advisor import DEFAULT_KAPPA, DEFAULT_STRATEGY, DEFAULT_WINDOW
 from app.advice.params import StrategyParams as CoreStrategyParams
+from app.domain.grid import NAME_MAX
+from app.domain.grid import NAME_RULE as NAME_RULE_DESTINATION
 
 NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
 NAME_RULE = "1-64 characters: letters, digits, '_', '.', '-' (starting with a letter or digit)"
@@ -75,6 +77,8 @@ RESOLUTION_MAX = 1e4
 #: alpha0 bounds: beyond them theta over- or underflows (4 alpha0 is inf, alpha0 / count is 0)
 #: and a prior's tables cannot be built; the store must never hold such a domain.
 ALPHA0_MIN, ALPHA0_MAX = 1e-6, 1e6
+#: names a PUT body may give at most (a map with more goals names them in its text)
+MAX_DESTINATION_NAMES = 100_000
 
 
 class Strict(BaseModel):
@@ -124,6 +128,17 @@ class NotReadyPublic(BaseModel):
 
 
 # ---- domains ---------------------------------------------------------------------------------
+class DestinationIn(Strict):
+    """A destination's name: its cell (a 'G' of the map) and what people call it."""
+
+    cell: Cell
+    name: str = Field(
+        max_length=4 * NAME_MAX,  # checked against the rule with the map, naming its index
+        description=f"{NAME_RULE_DESTINATION}.",
+        examples=["Lecture hall B"],
+    )
+
+
 class DomainBase(Strict):
     map: list[str] | None = Field(
         None,
@@ -169,11 +184,25 @@ class DomainBase(Strict):
         examples=[[-12.0, 4.5, 0.0]],
     )
 
+    destinations: list[DestinationIn] | None = Field(
+        None,
+        max_length=MAX_DESTINATION_NAMES,
+        description="Names of the map's destinations ('G' cells), any of them (optional): "
+        f"each name is {NAME_RULE_DESTINATION}, each cell and name (ignoring case) once. "
+        "With text, the names are its header's `destination: ROW COL NAME` lines.",
+        examples=[[{"cell": [1, 3], "name": "Lecture hall B"}]],
+    )
+
     @model_validator(mode="after")
     def _origin_needs_resolution(self) -> DomainBase:
         if (self.map is None) == (self.text is None):
             raise ValueError(
                 "give the map as map (a list of rows) or as text (the map file's text), one of them"
+            )
+        if self.text is not None and self.destinations is not None:
+            raise ValueError(
+                "with text, the destinations' names are the text's header lines "
+                "(destination: ROW COL NAME), not a field"
             )
         if self.text is not None and (self.resolution, self.origin) != (None, None):
             raise ValueError(
@@ -218,6 +247,9 @@ class DomainPublic(BaseModel):
     )
     start: Cell
     goals: list[Cell]
+    goal_names: list[str | None] = Field(
+        description="Each goal's name, in the order of goals (null: the map names it not)."
+    )
     actions: list[ActionName]
     alpha0: float
     n_states: int

@@ -18,7 +18,7 @@ from datetime import datetime
 from app.advice.guide import GuideMap
 from app.advice.models import AdviceTables
 from app.advice.priors import ActionPrior, GoalPriors
-from app.domain.grid import Frame, GridDomain, MapError
+from app.domain.grid import Frame, GridDomain, MapError, NamedCell
 from app.service.data.store import POOLED, DomainRecord, Store, TableCounts, Trajectory
 from app.strategies import DomainData, Need
 
@@ -135,11 +135,15 @@ class DomainCatalog:
         except KeyError:
             raise DomainNotFound(name) from None
 
-    def parse_map(self, rows: Sequence[str], name: str, frame: Frame | None = None) -> GridDomain:
-        """A validated grid; :class:`MapError` names the problem (line and column)."""
+    def parse_map(
+        self, rows: Sequence[str], name: str, frame: Frame | None = None,
+        names: Sequence[NamedCell] = (),
+    ) -> GridDomain:  # fmt: skip
+        """A validated grid (with its destinations' ``names``); :class:`MapError` names the
+        problem (line and column)."""
         if len(rows) * max((len(r) for r in rows), default=0) > self.max_cells:
             raise MapError(f"the map is larger than {self.max_cells} cells")
-        return GridDomain.from_strings(rows, name=name, frame=frame)
+        return GridDomain.from_strings(rows, name=name, frame=frame, names=names)
 
     def put(self, name: str, domain: GridDomain, alpha0: float) -> tuple[DomainState, bool, bool]:
         """Create or replace ``name`` (store first); returns (state, created, kept_data): the
