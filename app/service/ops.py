@@ -341,14 +341,16 @@ def ingest(
 
 
 def overview(
-    state: ServiceState, detail: bool, aggregates: dict[str, Aggregate],
+    state: ServiceState, role: str | None, aggregates: dict[str, Aggregate],
     sessions: list[SessionSnapshot],
 ) -> bytes:  # fmt: skip
     """*Worker thread.* ``GET /overview``: per domain its figures over its live sessions; with
-    ``detail`` (an operator's key) also the most recently active sessions, where each is and
-    was (``sessions``, read by the route)."""
+    a ``role`` (the admin or the operator key) also the most recently active sessions, where
+    each is and was (``sessions``, read by the route), and the role, which the dashboard reads
+    to know what the key may do."""
     return orjson.dumps({
-        "detail": detail,
+        "detail": role is not None,
+        "role": role,
         "domains": [overview_domain(d, aggregates.get(d.name)) for d in state.catalog.states()],
         "total_sessions": sum(a.sessions for a in aggregates.values()),
         "sessions": [overview_session(s) for s in sessions],

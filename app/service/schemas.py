@@ -547,6 +547,11 @@ class Overview(BaseModel):
         description="Whether live sessions are listed: for the admin key or the read-only "
         "operator key (X-API-Key) only; anyone else sees the figures per domain."
     )
+    role: Literal["admin", "operator"] | None = Field(
+        None,
+        description="Which key asked: admin (reads live sessions, and ends them), operator "
+        "(reads only), null (no key). The dashboard offers what the key may do.",
+    )
     domains: list[OverviewDomain]
     total_sessions: int
     sessions: list[OverviewSession] = Field(
