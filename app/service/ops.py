@@ -39,7 +39,12 @@ from app.service.live.replay import StepConflict
 from app.service.mapbody import map_of
 from app.service.metrics import METRICS, ingested
 from app.service.problems import BadInput
-from app.service.public import overview_domain, overview_session, viewer_session
+from app.service.public import (
+    decision_leads_to,
+    overview_domain,
+    overview_session,
+    viewer_session,
+)
 from app.service.schemas import (
     Cell,
     DomainPut,
@@ -180,7 +185,8 @@ async def answer_events(
             if move is not None:
                 d = await sessions.observe_one(session, *move)
                 _count(state, session, 1, int(d.advise))
-                return decision_json(d, grid)
+                leads = decision_leads_to(sessions.current(session), d) if d.advise else None
+                return decision_json(d, grid, leads)
         moves, _, first = read_moves(grid, raw, state.settings.max_batch_events)
         out = await sessions.observe(session, moves, first)
     except StepConflict as exc:

@@ -408,6 +408,41 @@ class GoalBelief(BaseModel):
     ruled_out: bool = Field(description="The explorer stood on this goal and went on.")
 
 
+class DestinationPublic(BaseModel):
+    """A destination of the map (one of its goals)."""
+
+    goal: int = Field(description="Its index in the domain's goals (G0, G1, ... on the maps).")
+    cell: Cell
+    name: str | None = Field(description="Its name, if the map names it.")
+
+
+class FigurePublic(BaseModel):
+    """One thing the advisor believes of the explorer."""
+
+    name: str = Field(
+        description="In plain words: 'moves like someone who knows the building', 'looks "
+        "lost', 'on its way'.",
+    )
+    symbol: str = Field(description="The same in the paper's notation: 'P(M1|H)', 'P(M2|H)'.")
+    p: float = Field(description="How likely, 0 to 1.")
+    tone: Literal["good", "neutral", "bad"] = Field(
+        description="How it reads, as the strategy decides: good (nothing to do), neutral "
+        "(the advisor is handling it: guide leading a lost explorer), bad (it looks lost and "
+        "the advisor cannot help now)."
+    )
+
+
+class BeliefsPublic(BaseModel):
+    """What the advisor believes of the explorer, as its strategy reads it: the pages show
+    these rather than reading P(M1|H) themselves."""
+
+    figures: list[FigurePublic] = Field(description="In an order fixed per strategy.")
+    headline: int = Field(description="The index of the figure that says most now.")
+    leads_to: DestinationPublic | None = Field(
+        description="The destination its advice leads to now (guide), else null."
+    )
+
+
 class CostPublic(BaseModel):
     advice_count: int
     total: float = Field(description="kappa x advice_count.")
@@ -431,6 +466,13 @@ class DecisionPublic(BaseModel):
     kl: float = Field(description="KL[theta_s || P(A | s, H)] in nats.")
     p_normal: float = Field(description="P(M1 | H), the posterior of the normal model.")
     cost: CostPublic
+    leads_to: DestinationPublic | None = Field(
+        None,
+        exclude_if=lambda v: v is None,  # absent, not null: the answers before it stay as they were
+        description="The destination the advice leads to (guide), in the answer to one event "
+        "that advises and in a new session's first decision; absent otherwise (a batch's "
+        "decisions: the session's beliefs.leads_to says it).",
+    )
 
 
 EventStep = Annotated[
@@ -496,6 +538,9 @@ class SessionBase(BaseModel):
     advice_per_100: float
     muted: bool = Field(False, description="The visitor asked for no more advice.")
     budget: BudgetPublic | None = Field(None, description="Its advice budget (null: none).")
+    beliefs: BeliefsPublic | None = Field(
+        None, description="What the advisor believes of the explorer, in plain words."
+    )
 
 
 class SessionPublic(SessionBase):
