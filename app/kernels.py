@@ -19,6 +19,8 @@ kernel                    the readable form (and its test)
 ``episode``               ``run_episode`` (app/agents/episodes.py) with the explorers of
                           app/agents/explorers.py and every compiled strategy's advisor
 ``q_learning``            ``run_learning`` with ``QLearningExplorer`` (app/agents/qlearning.py)
+``guide_distances``,      ``bfs_distances_each`` and ``compass_detours_each``
+``guide_detours``         (app/domain/grid.py): a guide map's searches, without the GIL
 ========================  ====================================================================
 
 Tables are passed as the tuple ``AdviceTables.arrays``: (log_probs (M, S*4), log_weights (M,),
@@ -891,6 +893,83 @@ def guide_stream(
         count_out[i] = count
         benefit_out[i] = benefit
     return target, last, heading, count, benefit
+
+
+# ---- a domain's guide map, built without the GIL -------------------------------------------------
+# A service builds these in a worker thread while its event loop serves others: compiled with
+# ``nogil``, the searches never hold the GIL, so the loop runs while they do.
+@njit(cache=True, nogil=True)
+def guide_distances(next_state: IntArray, targets: IntArray) -> IntArray:  # pragma: no cover
+    """``grid.bfs_distances_each``: ``out[i, s]``, the fewest moves from ``s`` to
+    ``targets[i]`` (-1: none), one breadth-first search outward from each target (moves are
+    reversible on a grid)."""
+    n = next_state.shape[0]
+    out = np.full((targets.shape[0], n), -1, dtype=np.int64)
+    queue = np.empty(n, dtype=np.int64)
+    for i in range(targets.shape[0]):
+        dist = out[i]
+        dist[targets[i]] = 0
+        queue[0] = targets[i]
+        head, tail = 0, 1
+        while head < tail:
+            v = queue[head]
+            head += 1
+            for a in range(4):
+                u = next_state[v, a]
+                if dist[u] < 0:
+                    dist[u] = dist[v] + 1
+                    queue[tail] = u
+                    tail += 1
+    return out
+
+
+@njit(cache=True, nogil=True)
+def guide_detours(
+    next_state: IntArray, cells: IntArray, targets: IntArray
+) -> IntArray:  # pragma: no cover
+    """``grid.compass_detours_each``: ``out[i, s]``, the fewest moves on any way from ``s`` to
+    ``targets[i]`` that someone heading there as the crow flies would not make by itself (-1:
+    no way): a 0-1 breadth-first search outward from each target over a double-ended queue,
+    the move of ``u`` into ``v`` costing 0 when it is one of :func:`guide_own_moves`'s."""
+    n = next_state.shape[0]
+    out = np.full((targets.shape[0], n), -1, dtype=np.int64)
+    size = 4 * n + 2  # every move relaxed once at most, and the target
+    ring = np.empty(size, dtype=np.int64)
+    best = np.empty(n, dtype=np.int64)
+    done = np.empty(n, dtype=np.bool_)
+    for i in range(targets.shape[0]):
+        t = targets[i]
+        best[:] = n * 4 + 1  # more than any way's detours
+        done[:] = False
+        best[t] = 0
+        ring[0] = t
+        head, count = 0, 1
+        while count > 0:
+            v = ring[head]
+            head = (head + 1) % size
+            count -= 1
+            if done[v]:
+                continue
+            done[v] = True
+            for a in range(4):
+                u = next_state[v, a]
+                if u == v or done[u]:
+                    continue
+                back = (a + 2) % 4  # u's move into v
+                m0, m1 = guide_own_moves(next_state, cells, t, u)
+                cost = 0 if (m0 == back or m1 == back) else 1
+                if best[v] + cost < best[u]:
+                    best[u] = best[v] + cost
+                    if cost == 0:  # to the front: the same number of detours as v
+                        head = (head - 1 + size) % size
+                        ring[head] = u
+                    else:
+                        ring[(head + count) % size] = u
+                    count += 1
+        for s in range(n):
+            if done[s]:
+                out[i, s] = best[s]
+    return out
 
 
 # ---- explorers ----------------------------------------------------------------------------------

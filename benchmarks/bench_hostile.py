@@ -24,7 +24,10 @@ the largest map the service takes), ``redis_pause`` (the combined load with the 
 in a Redis of its own, ``redis-server`` on a free port, stopped with SIGSTOP for 10 s in the
 middle: the explorers send each event with its step and send it again after a refusal; what
 was acknowledged against what Redis holds at the end, how every refusal was answered, and
-how soon latency is back).
+how soon latency is back), ``loop`` (the event loop's lag, from a probe task inside
+the service that sleeps 10 ms over and over, and ``/health``'s slowest answer, during each
+costly request on a 500 x 500 domain of 8 destinations: its PUT, same-map PUTs, the first
+goal_aware and guide sessions, an ingestion, a PUT over live sessions, its delete).
 """
 
 from __future__ import annotations
@@ -443,6 +446,168 @@ def bench_memory(root: Path, workdir: Path, seconds: float) -> Rows:
         (f"{label}, windows full", (after - before) / MiB, "MiB"),
         *rows,
     ]
+
+
+# ---- loop lag ------------------------------------------------------------------------------------
+#: Run as ``python -c PROBED serve ...`` from a source tree: the service as ``python -m app serve``
+#: runs it, with a task on its event loop that sleeps 10 ms over and over and writes, for each
+#: wake, when it woke (``time.monotonic()``, the same clock in every process) and how late
+#: (ms) to the file ``BENCH_LOOP_LAG`` names. Nothing of the service is changed, so an older
+#: tree (``--root``) is measured the same way.
+PROBED = """
+import asyncio, os, sys, time
+import uvicorn
+
+_serve = uvicorn.Server.serve
+
+
+async def _probe(path):
+    with open(path, "a", buffering=1) as out:
+        while True:
+            t = time.monotonic()
+            await asyncio.sleep(0.01)
+            now = time.monotonic()
+            out.write(f"{now:.6f} {1000 * (now - t - 0.01):.3f}\\n")
+
+
+async def _probed(self, *args, **kwargs):
+    task = asyncio.get_running_loop().create_task(_probe(os.environ["BENCH_LOOP_LAG"]))
+    try:
+        await _serve(self, *args, **kwargs)
+    finally:
+        task.cancel()
+
+
+uvicorn.Server.serve = _probed
+from app.cli import main
+
+sys.argv = ["app", *sys.argv[1:]]
+main()
+"""
+
+
+@contextmanager
+def probed_service(root: Path, workdir: Path, lags: Path) -> Iterator[Server]:
+    """:func:`service` with the loop-lag probe (:data:`PROBED`) writing to ``lags``."""
+    port = free_port()
+    cmd = [sys.executable, "-c", PROBED, "serve", "--port", str(port), "--data-dir",
+           str(workdir / f"data-{port}"), "--log-level", "warning", "--no-viewer"]  # fmt: skip
+    settings = {"ADVISOR_ADMIN_KEY": "bench", "ADVISOR_BOOTSTRAP_PER_GOAL": "2",
+                "BENCH_LOOP_LAG": str(lags)}  # fmt: skip
+    server = _start(cmd, root, os.environ | settings, workdir / f"advisor-{port}.log", "/health")
+    try:
+        yield server
+    finally:
+        server.stop()
+
+
+def worst_lag(lags: Path, began: float, ended: float) -> float:
+    """The latest the probe woke (ms) between ``began`` and shortly after ``ended``
+    (``time.monotonic()``): a wake after ``ended`` that was late was held by the request."""
+    worst = 0.0
+    for line in lags.read_text().splitlines():
+        at, late = (float(v) for v in line.split())
+        if began <= at <= ended + 0.2 + late / 1000:
+            worst = max(worst, late)
+    return worst
+
+
+def wide_map() -> list[str]:
+    """A 500 x 500 floor with 8 destinations (8 goals x 250,000 cells: near the goals x cells
+    cap, ADVISOR_MAX_GOAL_CELLS)."""
+    rows = open_map(500, 500)
+    rows[1] = "#S" + "G" * 7 + rows[1][9:]
+    return rows
+
+
+Call = Callable[[], httpx.Response]
+
+
+def loop_phases(admin: httpx.Client, anyone: httpx.Client, name: str) -> list[tuple[str, Call]]:
+    """The requests :func:`bench_loop` measures, in order, on domain ``name`` (each answered
+    2xx): none (the probe's own lateness), an admin's PUT of a new domain, same-map PUTs, the
+    first sessions that need the goal priors and the guide map (no credential), an
+    ingestion, a same-map PUT with them live, another map over them, the domain's delete."""
+    rows_of = wide_map()
+    other = [*rows_of[:-2], rows_of[-2][:-3] + "#G#", rows_of[-1]]  # a wall added
+    # a step from the start along the top row, ended at the first destination, 100 times
+    ingest = {"trajectories": [{"steps": [{"state": [1, 1], "action": "E"}], "goal": [1, 2]}
+                               for _ in range(100)]}  # fmt: skip
+    url = f"/domains/{name}"
+    return [
+        ("no request (1 s)", lambda: (time.sleep(1), anyone.get("/health"))[1]),
+        ("PUT of a new 500 x 500 domain (8 destinations)",
+         lambda: admin.put(url, json={"map": rows_of})),
+        ("same-map PUT, alpha0 changed",
+         lambda: admin.put(url, json={"map": rows_of, "alpha0": 2.0})),
+        ("same-map PUT, resolution changed",
+         lambda: admin.put(url, json={"map": rows_of, "alpha0": 2.0, "resolution": 0.5})),
+        ("first goal_aware session, no credential",
+         lambda: anyone.post(f"{url}/sessions", json={"strategy": "goal_aware"})),
+        ("first guide session, no credential",
+         lambda: anyone.post(f"{url}/sessions", json={"strategy": "guide"})),
+        ("100 trajectories ingested (prior and goal priors rebuilt)",
+         lambda: admin.post(f"{url}/trajectories", json=ingest)),
+        ("same-map PUT with live goal_aware and guide sessions",
+         lambda: admin.put(url, json={"map": rows_of, "alpha0": 1.5})),
+        ("PUT of another map over those sessions", lambda: admin.put(url, json={"map": other})),
+        ("DELETE of the domain", lambda: admin.delete(url)),
+    ]  # fmt: skip
+
+
+def bench_loop(root: Path, workdir: Path, seconds: float) -> Rows:
+    """The event loop's lag (a task sleeping 10 ms, how late it woke) during each request of
+    :func:`loop_phases` on a 500 x 500 domain of 8 destinations, and ``/health``'s slowest
+    answer meanwhile (asked every 20 ms by a thread); each the worst of ``REPEATS`` domains."""
+    lags = workdir / "loop-lag.txt"
+    worst: dict[str, list[float]] = {}
+    health: dict[str, list[float]] = {}
+    took: dict[str, list[float]] = {}
+    grew: dict[str, list[float]] = {}
+    with (
+        probed_service(root, workdir, lags) as srv,
+        httpx.Client(base_url=srv.url, timeout=300, headers=ADMIN) as admin,
+        httpx.Client(base_url=srv.url, timeout=300) as anyone,  # no credential
+    ):
+        time.sleep(1)  # the probe's first wakes
+        for k in range(REPEATS):
+            for label, call in loop_phases(admin, anyone, f"wide{k}"):
+                waits: list[float] = []
+                stop = threading.Event()
+
+                def poll(waits: list[float] = waits, stop: threading.Event = stop) -> None:
+                    with httpx.Client(timeout=60) as h:
+                        while not stop.is_set():
+                            t = time.perf_counter()
+                            h.get(srv.url + "/health")
+                            waits.append(1000 * (time.perf_counter() - t))
+                            time.sleep(0.02)
+
+                poller = threading.Thread(target=poll)
+                poller.start()
+                rss = srv.rss_bytes()
+                began = time.monotonic()
+                r = call()
+                ended = time.monotonic()
+                grew.setdefault(label, []).append((srv.rss_bytes() - rss) / MiB)
+                time.sleep(0.5)  # the probe's wakes after the answer, /health after it
+                stop.set()
+                poller.join()
+                assert r.is_success, f"{label}: {r.status_code} {r.text[:300]}"
+                worst.setdefault(label, []).append(worst_lag(lags, began, ended))
+                health.setdefault(label, []).append(max(waits, default=0.0))
+                took.setdefault(label, []).append(1000 * (ended - began))
+    rows: Rows = []
+    for label in worst:
+        each = ", ".join(f"{v:.0f}" for v in worst[label])
+        print(f"loop lag of each domain, {label}: {each} ms", file=sys.stderr)
+        rows.append((f"loop lag max, {label}", max(worst[label]), "ms"))
+        rows.append((f"/health max, {label}", max(health[label]), "ms"))
+        rows.append((f"answered in (slowest), {label}", max(took[label]), "ms"))
+        if label.startswith(("PUT of a new", "first")):  # where a domain's tables are made
+            # the first domain's: later ones reuse what the ones before them freed
+            rows.append((f"RSS growth (the first domain), {label}", grew[label][0], "MiB"))
+    return rows
 
 
 # ---- combined ------------------------------------------------------------------------------------
@@ -869,9 +1034,12 @@ SECTIONS: dict[str, tuple[Callable[[Path, Path, float], Rows], float]] = {
     "hogs": (bench_hogs, 5.0),
     "throughput": (bench_throughput, 10.0),
     "memory": (bench_memory, 0.0),
+    "loop": (bench_loop, 0.0),
     "combined": (bench_combined, 150.0),
     "redis_pause": (bench_redis_pause, 70.0),
 }
+#: Domains the loop-lag section makes, each measured the same way (its rows: the worst of them)
+REPEATS = 3
 #: The combined load's first seconds, while caches fill and the allocator grows its arenas
 #: (measured: RSS rises for 60 to 80 s, then stays within a few MiB)
 WARM_UP = 90.0

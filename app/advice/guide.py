@@ -65,6 +65,7 @@ compiled, and the tests compare them bit for bit.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -86,6 +87,10 @@ MAX_TOUR = 10
 MAX_GUIDE_CELLS = 16_777_216
 
 
+#: (next_state (S, 4), cells (S, 2), destinations) -> (distances (G, S), detours (G, S))
+Searches = Callable[[IntArray, IntArray, tuple[int, ...]], tuple[IntArray, IntArray]]
+
+
 class GuideError(ValueError):
     """The domain cannot be guided (no destination, or too many destinations x states)."""
 
@@ -105,7 +110,15 @@ class GuideMap:
     goals: tuple[int, ...]
 
     @classmethod
-    def of(cls, domain: GridDomain, goal_priors: GoalPriors | None = None) -> GuideMap:
+    def of(
+        cls, domain: GridDomain, goal_priors: GoalPriors | None = None,
+        searches: Searches | None = None,
+    ) -> GuideMap:  # fmt: skip
+        """``domain``'s guide map (:class:`GuideError` first if it cannot have one), with the
+        experts' counts of ``goal_priors``. ``searches(next_state, cells, goals)``: the
+        distances and detours of every destination, (G, S) each, by another implementation
+        of the same searches (the service's compiled ones); by default
+        :attr:`GridDomain.goal_distances` and :func:`compass_detours_each`."""
         goals = tuple(int(g) for g in domain.goals)
         if not goals:
             raise GuideError("guide advice needs the map's destinations: this map has no goal")
@@ -118,12 +131,19 @@ class GuideMap:
         s = domain.n_states
         of_state = np.full(s, -1, dtype=np.int64)
         of_state[list(goals)] = np.arange(len(goals))
+        if searches is None:
+            dist = domain.goal_distances
+            detour = compass_detours_each(domain.next_state, domain.cells, goals)
+        else:
+            dist, detour = searches(domain.next_state, domain.cells, goals)
+            if dist.shape != (len(goals), s) or detour.shape != (len(goals), s):
+                raise ValueError("searches must give (destinations, states) arrays")
         plain = cls(
             np.ascontiguousarray(domain.next_state, dtype=np.int64),
             np.ascontiguousarray(domain.open_moves.sum(axis=1), dtype=np.int64),
             np.ascontiguousarray(domain.cells, dtype=np.int64),
-            np.ascontiguousarray(domain.goal_distances, dtype=np.int64),
-            compass_detours_each(domain.next_state, domain.cells, goals),
+            np.ascontiguousarray(dist, dtype=np.int64),
+            np.ascontiguousarray(detour, dtype=np.int64),
             of_state,
             np.zeros((len(goals), s * N_ACTIONS)),
             goals,

@@ -6,12 +6,14 @@ strictly positive (states x 4) table. :class:`AdviceTables` precomputes everythi
 needs for a fixed theta and model set, once: numpy arrays (the batch form, and flat views for the
 compiled kernels of :mod:`app.kernels`) and flat Python lists (the single form, where list
 indexing is several times faster than numpy scalar access). Every form holds the same numbers
-(the lists are the arrays' ``tolist()``), so every form of the advisor reads the same bits.
+(the sequences are the arrays' numbers in ``array.array``: ``grid.packed``), so every form of
+the advisor reads the same bits.
 """
 
 from __future__ import annotations
 
 import math
+from array import array
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -19,7 +21,7 @@ import numpy as np
 import numpy.typing as npt
 
 from app.arrays import FloatArray
-from app.domain.grid import N_ACTIONS
+from app.domain.grid import N_ACTIONS, packed
 
 
 @dataclass(frozen=True)
@@ -64,11 +66,12 @@ class AdviceTables:
     arrays: tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray] = field(
         init=False, repr=False
     )
-    # flat Python lists for the single-explorer form: index s * 4 + a
-    probs_flat: list[list[float]] = field(init=False, repr=False)
-    log_probs_flat: list[list[float]] = field(init=False, repr=False)
-    theta_flat: list[float] = field(init=False, repr=False)
-    neg_entropy_list: list[float] = field(init=False, repr=False)
+    # flat Python sequences (``array.array`` of doubles, ``grid.packed``) for the
+    # single-explorer form: index s * 4 + a
+    probs_flat: tuple[array[float], ...] = field(init=False, repr=False)
+    log_probs_flat: tuple[array[float], ...] = field(init=False, repr=False)
+    theta_flat: array[float] = field(init=False, repr=False)
+    neg_entropy_list: array[float] = field(init=False, repr=False)
     log_weight_list: list[float] = field(init=False, repr=False)
     n_states: int = field(init=False, repr=False)  # a plain attribute: read on every decision
 
@@ -102,10 +105,10 @@ class AdviceTables:
             "neg_entropy": neg_entropy,
             "probs_t": np.ascontiguousarray(probs.transpose(0, 2, 1)),
             "theta_t": np.ascontiguousarray(theta.T),
-            "probs_flat": [p.ravel().tolist() for p in probs],
-            "log_probs_flat": [lp.ravel().tolist() for lp in log_probs],
-            "theta_flat": theta.ravel().tolist(),
-            "neg_entropy_list": neg_entropy.tolist(),
+            "probs_flat": tuple(packed(p, "d") for p in probs),
+            "log_probs_flat": tuple(packed(lp, "d") for lp in log_probs),
+            "theta_flat": packed(theta, "d"),
+            "neg_entropy_list": packed(neg_entropy, "d"),
             "log_weight_list": log_weights.tolist(),
             "n_states": int(theta.shape[0]),
         }

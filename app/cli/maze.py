@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from enum import StrEnum
 from pathlib import Path
-from typing import Annotated, NoReturn
+from typing import TYPE_CHECKING, Annotated, NoReturn, cast
 
 import numpy as np
 import typer
@@ -12,6 +12,11 @@ import typer
 from app.domain.grid import Frame, GridDomain, MapError
 from app.domain.maps import DEFAULT_MAP
 from app.mapio.budget import DEFAULT_MAX_MEMORY_MIB
+
+if TYPE_CHECKING:
+    from app.arrays import BoolArray
+    from app.mapio import Format, Imported
+    from app.mapio.budget import MemoryBudget
 
 
 class Kind(StrEnum):
@@ -24,6 +29,7 @@ class ImportFormat(StrEnum):
     movingai = "movingai"
     ros = "ros"
     image = "image"
+    imdf = "imdf"
 
 
 maze_cli = typer.Typer(help="Show, check, generate and import ASCII maps.", no_args_is_help=True)
@@ -169,13 +175,14 @@ def maze_import(
     file: Annotated[
         Path,
         typer.Argument(
-            help="A Moving AI .map, a ROS map_server .yaml (with its image) or a floor-plan "
-            "image (.png, .pgm, ...)."
+            help="A Moving AI .map, a ROS map_server .yaml (with its image), a floor-plan "
+            "image (.png, .pgm, ...) or an IMDF archive (a .zip or a folder)."
         ),
     ],
     out: Annotated[Path | None, typer.Option(help="Write the map here (default: print).")] = None,
     fmt: Annotated[
-        ImportFormat, typer.Option("--format", help="The file's format (auto: by its name).")
+        ImportFormat,
+        typer.Option("--format", help="The file's format (auto: by its name; a folder is IMDF)."),
     ] = ImportFormat.auto,
     merge: Annotated[
         int,
@@ -196,6 +203,21 @@ def maze_import(
             "while finding the outside.",
         ),
     ] = 0,
+    resolution: Annotated[
+        float | None,
+        typer.Option(
+            min=0.01,
+            help="IMDF: metres per cell side [default: 0.5].",
+            show_default=False,
+        ),
+    ] = None,
+    level: Annotated[
+        int | None,
+        typer.Option(
+            help="IMDF: the ordinal of the level to import (0 the ground or entrance level); "
+            "required until maps of several floors exist.",
+        ),
+    ] = None,
     start: Annotated[
         str | None, typer.Option(help="Start cell ROW,COL of the imported grid (default: picked).")
     ] = None,
@@ -203,7 +225,12 @@ def maze_import(
         str | None, typer.Option(help='Goal cells "ROW,COL;ROW,COL" (default: --goals picked).')
     ] = None,
     goals: Annotated[
-        int, typer.Option(min=1, help="How many goals to pick (spread out; rooms, dead ends).")
+        int,
+        typer.Option(
+            min=1,
+            help="How many goals to pick (spread out; rooms, dead ends); IMDF: the level's "
+            "named destinations are the goals, picked only when it has none.",
+        ),
     ] = 8,
     seed: Annotated[int, typer.Option(help="Random seed for the picks' ties.")] = 0,
     max_memory: Annotated[
@@ -218,7 +245,8 @@ def maze_import(
     ] = DEFAULT_MAX_MEMORY_MIB,
 ) -> None:
     """Import a map: keep its largest connected region, place a start and goals, write it as
-    an ASCII map (with the resolution and origin when the format has them)."""
+    an ASCII map (with the resolution and origin when the format has them). An IMDF archive:
+    one level (--level), its named destinations the goals."""
     from app.domain.place import largest_region, parse_cells, place
     from app.mapio import read_map
     from app.mapio.budget import MemoryBudget
@@ -229,10 +257,36 @@ def maze_import(
             raise ValueError("--start takes one cell ROW,COL")
         goal_list = parse_cells(goal_cells, "--goal-cells") if goal_cells is not None else None
         budget = MemoryBudget.of_mib(max_memory, len(goal_list) if goal_list else goals)
-        imported = read_map(
-            file, fmt.value, merge=merge, threshold=threshold, seal=seal, budget=budget
-        )
+        imdf = fmt is ImportFormat.imdf or (fmt is ImportFormat.auto and _looks_imdf(file))
+        if imdf:
+            imported = _read_imdf(file, resolution, level, budget)
+        elif resolution is not None or level is not None:
+            raise ValueError(
+                "--resolution and --level are for IMDF archives (a ROS map has its own "
+                "resolution; --merge makes coarser cells of an image)"
+            )
+        else:
+            kind = cast("Format", fmt.value)  # not imdf here
+            imported = read_map(
+                file, kind, merge=merge, threshold=threshold, seal=seal, budget=budget
+            )
         kept, dropped = largest_region(imported.free)
+        named: dict[tuple[int, int], str] = {}
+        if goal_list is None and imported.goals:
+            named, outside = _named_goals(imported.goals, kept)
+            if outside:
+                shown = ", ".join(outside[:5]) + (
+                    f" and {len(outside) - 5} more" if len(outside) > 5 else ""
+                )
+                imported.notes.append(
+                    f"{len(outside)} destination(s) outside the kept region, left out: {shown}"
+                )
+        if named:
+            goal_list = sorted(named)
+        elif imdf and goal_list is None:
+            imported.notes.append(
+                f"no named destination in the kept region of this level: {goals} goal(s) picked"
+            )
         rows = place(
             kept, np.random.default_rng(seed), start=starts[0], goals=goal_list, n_goals=goals
         )
@@ -244,6 +298,8 @@ def maze_import(
             f"({dropped} dropped)",
             err=out is None,
         )
+        for i, cell in enumerate(sorted(named)):
+            typer.echo(f"G{i} [{cell[0]}, {cell[1]}]: {named[cell]}", err=out is None)
         _write(rows, out, imported.frame)
     except ValueError as exc:  # MapError is one
         _fail(str(exc))
@@ -255,3 +311,49 @@ def maze_import(
         )
     except OSError as exc:  # writing the map (the readers turn theirs into MapImportError)
         _fail(f"cannot write {out or 'the map'}: {exc.strerror or exc}")
+
+
+def _looks_imdf(path: Path) -> bool:
+    try:
+        return path.is_dir() or path.suffix.lower() == ".zip"
+    except OSError:
+        return False
+
+
+def _read_imdf(
+    path: Path, resolution: float | None, level: int | None, budget: MemoryBudget
+) -> Imported:
+    """One level of an IMDF archive, refused without --level (naming the levels)."""
+    from app.mapio import MapImportError
+    from app.mapio.budget import MemoryBudget
+    from app.mapio.imdf import DEFAULT_RESOLUTION, one_floor, open_imdf
+
+    source = open_imdf(path, budget)
+    listed = source.listed()
+    if level is None:
+        raise MapImportError(
+            f"{path}: an IMDF venue of {len(source.levels)} level(s), by ordinal: {listed}: give "
+            "--level ORDINAL to import one of them as a one-floor map (maps of several floors "
+            "come with the floors format)"
+        )
+    if level not in {o for o, _ in source.levels}:
+        raise MapImportError(f"{path}: no level of ordinal {level}: the levels are {listed}")
+    # every named place of the level may be a goal: the map's distances to each are budgeted
+    budget = MemoryBudget(budget.limit, max(budget.goals, source.places_on(level)))
+    venue = source.venue(resolution or DEFAULT_RESOLUTION, budget=budget)
+    return one_floor(venue, level)
+
+
+def _named_goals(
+    goals: list[tuple[tuple[int, int], str]], kept: BoolArray
+) -> tuple[dict[tuple[int, int], str], list[str]]:
+    """The named cells in the kept region (the names of one cell joined with " / "), and the
+    names of the others."""
+    named: dict[tuple[int, int], str] = {}
+    outside: list[str] = []
+    for cell, name in goals:
+        if not kept[cell]:
+            outside.append(repr(name))
+        else:
+            named[cell] = f"{named[cell]} / {name}" if cell in named else name
+    return named, outside

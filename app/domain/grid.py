@@ -28,15 +28,19 @@ cell has one. :attr:`GridDomain.goal_names` holds them in the order of ``goals``
 
 from __future__ import annotations
 
+import copy
 import math
 import re
+from array import array
 from collections import deque
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from app.arrays import BoolArray, IntArray
 
@@ -75,6 +79,27 @@ class MapError(ValueError):
         if self.line is None or not lines or self.header:
             return self
         return MapError(self.message, self.line + lines, self.column)
+
+
+#: Bytes :func:`packed` copies at a time (a 250,000-cell map's moves are 8 MB)
+PACK_SLICE = 1 << 20
+
+
+def packed(values: npt.NDArray[Any], code: str) -> array[Any]:
+    """The numbers of ``values`` (read flat, row-major) in an ``array.array`` of type ``code``
+    (``"d"``: float64, ``"q"``: int64, which ``values`` is converted to): for readers that
+    index them one at a time (an item of it is several times faster to read than a numpy
+    scalar), the same numbers. Not a list (``tolist``): a list of a million numbers takes
+    32 MB, ``tolist`` holds the GIL from its start to its end (50 ms to 1 s for a 250,000-cell
+    map's tables), freeing it takes as long again, and the garbage collector walks its items
+    at every collection; this is one block of 8 bytes a number, copied a slice at a time
+    (the GIL let go between slices) and freed at once."""
+    dtype = np.float64 if code == "d" else np.int64
+    raw = np.ascontiguousarray(values, dtype=dtype).reshape(-1).data.cast("B")
+    out = array(code)
+    for i in range(0, len(raw), PACK_SLICE):
+        out.frombytes(raw[i : i + PACK_SLICE])
+    return out
 
 
 def action_index(action: int | str) -> int:
@@ -449,6 +474,26 @@ class GridDomain:
             ) from None
         return cls.from_text(text, name=name or p.stem)
 
+    def with_frame(self, frame: Frame | None) -> GridDomain:
+        """This map in ``frame`` (itself when it is its own): its arrays and everything it
+        has computed (distances, lists) shared, nothing read or validated again."""
+        if frame == self.frame:
+            return self
+        other = copy.copy(self)  # the instance's dict: its fields and cached properties
+        object.__setattr__(other, "frame", frame)
+        return other
+
+    def with_names(self, goal_names: tuple[str | None, ...] | None) -> GridDomain:
+        """This map with its destinations named ``goal_names`` (checked: :func:`name_goals`),
+        shared as :meth:`with_frame` shares it (itself when they are its own)."""
+        if goal_names == self.goal_names:
+            return self
+        if goal_names is not None and len(goal_names) != len(self.goals):
+            raise ValueError(f"{len(goal_names)} goal names for {len(self.goals)} goals")
+        other = copy.copy(self)
+        object.__setattr__(other, "goal_names", goal_names)
+        return other
+
     def to_text(self) -> str:
         """The map file's text (header lines when the grid has a frame or named destinations);
         :meth:`from_text` reads it back."""
@@ -490,13 +535,14 @@ class GridDomain:
 
     def cell(self, state: int) -> tuple[int, int]:
         """(row, col) of ``state``."""
-        return self._cell_tuples[state]
+        cells = self._cells_packed
+        return cells[2 * state], cells[2 * state + 1]
 
     @cached_property
-    def _cell_tuples(self) -> list[tuple[int, int]]:
-        """Every state's cell as plain ints (a list lookup is a tenth of a numpy row's cost,
-        and the service answers every event with one)."""
-        return [(r, c) for r, c in self.cells.tolist()]
+    def _cells_packed(self) -> array[int]:
+        """Every state's row and column, :func:`packed` (reading two of them is a tenth of a
+        numpy row's cost, and the service answers every event with one)."""
+        return packed(self.cells, "q")
 
     def state_at(self, x: float, y: float) -> int:
         """The state holding the point (x, y) in metres; ``ValueError`` if the grid has no

@@ -6,7 +6,8 @@ explorer cannot walk between regions) and :func:`place` marks the start and the 
 where asked or picked:
 
 * the start, if not given: the cell farthest (by BFS) from the region's first cell in row-major
-  order, a cell at the region's edge, as a building's entrance usually is;
+  order (a given goal excepted), a cell at the region's edge, as a building's entrance usually
+  is;
 * goals, if not given: ``n_goals`` cells spread out by BFS distance (farthest-point sampling:
   each next goal is the candidate farthest from the start and the goals already placed), the
   candidates being dead ends and cells inside rooms (cells whose 3x3 neighbourhood is all
@@ -132,12 +133,6 @@ def place(
     index = np.full(free.shape, -1, dtype=np.int64)
     index[cells[:, 0], cells[:, 1]] = np.arange(len(cells))
     nbr = _neighbours(free)
-    if start is None:
-        far = _bfs(nbr, 0)
-        start_i = _pick(far, rng)
-    else:
-        _check_cell(free, start, "start")
-        start_i = int(index[start])
     chosen: list[int] = []
     if goals is not None:
         if not goals:
@@ -145,12 +140,23 @@ def place(
         for g in goals:
             _check_cell(free, g, "goal")
             gi = int(index[g])
-            if gi == start_i:
-                raise MapError(f"goal [{g[0]}, {g[1]}] is the start")
             if gi in chosen:
                 raise MapError(f"goal [{g[0]}, {g[1]}] given twice")
             chosen.append(gi)
+    if start is None:
+        if len(chosen) >= len(cells):
+            raise MapError(f"no cell is left for the start: {len(chosen)} goals fill the map")
+        far = _bfs(nbr, 0)
+        not_goal = np.ones(len(cells), dtype=bool)
+        not_goal[chosen] = False
+        start_i = _pick(far, rng, not_goal)  # a picked start is never a given goal
     else:
+        _check_cell(free, start, "start")
+        start_i = int(index[start])
+        for gi in chosen:
+            if gi == start_i:
+                raise MapError(f"goal [{start[0]}, {start[1]}] is the start")
+    if goals is None:
         if n_goals < 1:
             raise MapError(f"the number of goals must be at least 1, got {n_goals}")
         if n_goals > len(cells) - 1:

@@ -33,16 +33,13 @@ from __future__ import annotations
 
 import itertools
 import math
-import multiprocessing
-import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
 from matplotlib.figure import Figure
-from tqdm import tqdm
 
 from app import strategies
 from app.advice.advisor import DEFAULT_STRATEGY
@@ -54,10 +51,19 @@ from app.arrays import FloatArray
 from app.domain.generate import generate_building_domain
 from app.domain.grid import GridDomain, compass_detours_each
 from app.domain.maps import DEFAULT_MAP
-from app.experiments.common import CommonArgs, LearningArgs, rng_for, wilson
+from app.experiments.common import (
+    CommonArgs,
+    LearningArgs,
+    fill,
+    rng_for,
+    run_jobs,
+    timed,
+    wilson,
+)
 from app.experiments.curves import (
     Z95,
     Config,
+    SuiteRuns,
     base_params,
     check_strategies,
     paired,
@@ -256,12 +262,10 @@ def run_job(args: Args, spec: MapSpec, who: str) -> dict[str, dict[str, FloatArr
 
 
 @dataclass
-class Results:
+class Results(SuiteRuns[MapSpec]):
     """``fixed[explorer][config key][measure]`` and ``learning[curve][measure]``: one row per
     map, one column per task."""
 
-    maps: list[MapSpec]
-    configs: list[Config]
     fixed: dict[str, dict[str, dict[str, FloatArray]]]
     learning: dict[str, dict[str, FloatArray]] = field(default_factory=dict)
 
@@ -281,24 +285,11 @@ def run_all(args: Args) -> Results:
     if args.q_tasks:
         jobs += [(s, "q-learning") for s in suite]
 
-    def store(spec: MapSpec, who: str, got: dict[str, dict[str, FloatArray]]) -> None:
-        into = learning if who == "q-learning" else fixed[who]
-        for key, measures in got.items():
-            for name, values in measures.items():
-                into[key][name][spec.index] = values
+    def done(job: tuple[MapSpec, str], got: dict[str, dict[str, FloatArray]]) -> None:
+        spec, who = job
+        fill(learning if who == "q-learning" else fixed[who], got, spec.index)
 
-    with tqdm(total=len(jobs), desc="buildings", unit="job", disable=not args.progress) as bar:
-        if args.workers == 1:
-            for spec, who in jobs:
-                store(spec, who, run_job(args, spec, who))
-                bar.update()
-        else:
-            ctx = multiprocessing.get_context("spawn")  # no fork of a process with threads
-            with ProcessPoolExecutor(args.workers, mp_context=ctx) as pool:
-                futures = {pool.submit(run_job, args, s, w): (s, w) for s, w in jobs}
-                for fut in as_completed(futures):
-                    store(*futures[fut], fut.result())
-                    bar.update()
+    run_jobs(jobs, partial(run_job, args), done, args.workers, "buildings", args.progress)
     return Results(suite, todo, fixed, learning)
 
 
@@ -492,15 +483,22 @@ def plots(results: Results, table: list[dict[str, Any]], args: Args) -> Figure:
     return fig
 
 
+def protocol(args: Any, who: str, elapsed: float, more: str = "") -> str:
+    """The report's first line: tasks, moves, experts, window (``more``), seed and time."""
+    return (
+        f"{args.tasks} tasks per map and {who}, at most {args.steps} moves; experts "
+        f"{args.experts}, {args.per_goal} per destination; window {args.window}; {more}seed "
+        f"{args.seed}; {elapsed:.0f} s."
+    )
+
+
 def markdown(
     table: list[dict[str, Any]], q: list[dict[str, Any]], t: dict[str, Any],
     maps: list[dict[str, Any]], args: Args, elapsed: float,
 ) -> str:  # fmt: skip
     lines = [
         "# Advice in buildings", "",
-        f"{args.tasks} tasks per map and explorer, at most {args.steps} moves; experts "
-        f"{args.experts}, {args.per_goal} per destination; window {args.window}; seed "
-        f"{args.seed}; {elapsed:.0f} s.", "",
+        protocol(args, "explorer", elapsed), "",
         markdown_table(
             ["map", "rows x cols", "cells", "destinations", "cells with expert data",
              "farthest destination", "Q episode length", "bug's advice floor / 100"],
@@ -561,9 +559,7 @@ def markdown(
 def run(args: Args, out: RunDir) -> dict[str, Any]:
     """Run the suite and write JSON, CSV, markdown and PNG files."""
     args.check()
-    started = time.perf_counter()
-    results = run_all(args)
-    elapsed = time.perf_counter() - started
+    results, elapsed = timed(run_all, args)
     table, q = rows(results), learning_rows(results)
     t = targets(results, table, q, args)
     maps = [map_info(cached_world(args, s)) for s in results.maps]

@@ -8,13 +8,18 @@ task)``), so adding a run never shifts the randomness of another.
 from __future__ import annotations
 
 import math
+import multiprocessing
+import time
 import zlib
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal, TypeVar
 
 import numpy as np
 import numpy.typing as npt
+from tqdm import tqdm
 
 from app.advice.advisor import DEFAULT_KAPPA, DEFAULT_WINDOW
 from app.advice.models import AdviceTables
@@ -24,6 +29,52 @@ from app.agents.simulate import QParams, Simulator
 from app.arrays import FloatArray, IntArray
 from app.domain.grid import GridDomain
 from app.domain.maps import DEFAULT_MAP
+
+Job = TypeVar("Job", bound=tuple[Any, ...])
+Got = TypeVar("Got")
+Given = TypeVar("Given")
+
+
+def timed(work: Callable[[Given], Got], args: Given) -> tuple[Got, float]:
+    """``work(args)`` and the seconds it took (an experiment's runs, for its header)."""
+    started = time.perf_counter()
+    got = work(args)
+    return got, time.perf_counter() - started
+
+
+def run_jobs(
+    jobs: Sequence[Job],
+    work: Callable[..., Got],
+    done: Callable[[Job, Got], None],
+    workers: int,
+    desc: str,
+    progress: bool,
+) -> None:
+    """``work(*job)`` for every job, here (``workers`` 1) or in that many spawned processes
+    (``work`` and the jobs must pickle), ``done(job, result)`` as each finishes, under a
+    progress bar."""
+    with tqdm(total=len(jobs), desc=desc, unit="job", disable=not progress) as bar:
+        if workers == 1:
+            for job in jobs:
+                done(job, work(*job))
+                bar.update()
+            return
+        ctx = multiprocessing.get_context("spawn")  # no fork of a process with threads
+        with ProcessPoolExecutor(workers, mp_context=ctx) as pool:
+            futures = {pool.submit(work, *job): job for job in jobs}
+            for fut in as_completed(futures):
+                done(futures[fut], fut.result())
+                bar.update()
+
+
+def fill(
+    into: dict[str, dict[str, FloatArray]], got: dict[str, dict[str, FloatArray]], row: int
+) -> None:
+    """One map's measures (``got[config key][measure]``, a value per task) into row ``row`` of
+    ``into``'s arrays (one row per map, one column per task)."""
+    for key, measures in got.items():
+        for name, values in measures.items():
+            into[key][name][row] = values
 
 
 @dataclass

@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields, make_dataclass
-from typing import Any
+from typing import Any, Generic, TypeVar
 
 import numpy as np
 
@@ -104,6 +104,18 @@ class Config:
     @property
     def advised(self) -> bool:
         return self.curve != "none"
+
+
+Spec = TypeVar("Spec")
+
+
+@dataclass
+class SuiteRuns(Generic[Spec]):
+    """What the runs of a suite of maps share: its maps and the configurations run on each (an
+    experiment's results add its measures, one row per map, one column per task)."""
+
+    maps: list[Spec]
+    configs: list[Config]
 
 
 def configs(args: Any, variants: tuple[str, ...] = ()) -> list[Config]:

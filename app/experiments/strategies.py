@@ -34,7 +34,6 @@ from __future__ import annotations
 
 import itertools
 import math
-import time
 from dataclasses import asdict
 from typing import Any
 
@@ -44,7 +43,7 @@ from matplotlib.figure import Figure
 from app import strategies
 from app.agents.explorers import FIXED_EXPLORERS
 from app.arrays import FloatArray
-from app.experiments.common import wilson
+from app.experiments.common import timed, wilson
 from app.experiments.curves import Config, base_params, paired
 from app.experiments.output import RunDir, header, markdown_table
 from app.experiments.strategy_suite import (
@@ -587,9 +586,7 @@ def plot(rows: list[dict[str, Any]], scope: str, args: Args) -> Figure:
 def run(args: Args, out: RunDir) -> dict[str, Any]:
     """Run the comparison and write JSON, CSV, markdown and PNG files."""
     args.check()
-    started = time.perf_counter()
-    results = run_all(args)
-    elapsed = time.perf_counter() - started
+    results, elapsed = timed(run_all, args)
     summary = summarise(results, args)
     result = {
         **header("strategies", args, elapsed),

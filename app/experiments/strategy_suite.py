@@ -21,7 +21,7 @@ from app.arrays import FloatArray
 from app.domain.generate import generate_domain
 from app.domain.grid import GridDomain
 from app.experiments.common import CommonArgs, rng_for
-from app.experiments.curves import Config, check_strategies, strategy_args
+from app.experiments.curves import Config, SuiteRuns, check_strategies, strategy_args
 from app.experiments.curves import configs as curve_configs
 from app.experiments.traps import dead_end_masks, other_dead_end_share, trap_goal
 
@@ -193,11 +193,9 @@ def run_job(
 
 
 @dataclass
-class Results:
+class Results(SuiteRuns[MapSpec]):
     """Per-task measures: ``data[explorer][config key][measure]`` has shape (maps, tasks)."""
 
-    maps: list[MapSpec]
-    configs: list[Config]
     data: dict[str, dict[str, dict[str, FloatArray]]]
 
 

@@ -33,17 +33,14 @@ from __future__ import annotations
 
 import itertools
 import math
-import multiprocessing
-import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from matplotlib.figure import Figure
 from numpy.lib.stride_tricks import sliding_window_view
-from tqdm import tqdm
 
 from app.agents.explorers import Visitor
 from app.arrays import FloatArray, IntArray
@@ -51,8 +48,15 @@ from app.domain.grid import GridDomain
 from app.domain.maps import DEFAULT_MAP
 from app.experiments import buildings
 from app.experiments.buildings import MapSpec
-from app.experiments.common import CommonArgs, rng_for, wilson
-from app.experiments.curves import Z95, Config, check_strategies, paired, strategy_args
+from app.experiments.common import CommonArgs, fill, rng_for, run_jobs, timed, wilson
+from app.experiments.curves import (
+    Z95,
+    Config,
+    SuiteRuns,
+    check_strategies,
+    paired,
+    strategy_args,
+)
 from app.experiments.curves import configs as curve_configs
 from app.experiments.output import RunDir, header, markdown_table
 
@@ -235,11 +239,9 @@ def run_job(args: Args, spec: MapSpec, spec_text: str) -> dict[str, dict[str, Fl
 
 
 @dataclass
-class Results:
+class Results(SuiteRuns[MapSpec]):
     """``runs[visitor][config key][measure]``: one row per map, one column per task."""
 
-    maps: list[MapSpec]
-    configs: list[Config]
     visitors: list[Visitor]
     runs: dict[str, dict[str, dict[str, FloatArray]]]
 
@@ -252,23 +254,10 @@ def run_all(args: Args) -> Results:
     }
     jobs = [(s, v.name) for s in suite for v in models]
 
-    def store(spec: MapSpec, who: str, got: dict[str, dict[str, FloatArray]]) -> None:
-        for key, measures in got.items():
-            for name, values in measures.items():
-                runs[who][key][name][spec.index] = values
+    def done(job: tuple[MapSpec, str], got: dict[str, dict[str, FloatArray]]) -> None:
+        fill(runs[job[1]], got, job[0].index)
 
-    with tqdm(total=len(jobs), desc="visitors", unit="job", disable=not args.progress) as bar:
-        if args.workers == 1:
-            for spec, who in jobs:
-                store(spec, who, run_job(args, spec, who))
-                bar.update()
-        else:
-            ctx = multiprocessing.get_context("spawn")  # no fork of a process with threads
-            with ProcessPoolExecutor(args.workers, mp_context=ctx) as pool:
-                futures = {pool.submit(run_job, args, s, w): (s, w) for s, w in jobs}
-                for fut in as_completed(futures):
-                    store(*futures[fut], fut.result())
-                    bar.update()
+    run_jobs(jobs, partial(run_job, args), done, args.workers, "visitors", args.progress)
     return Results(suite, todo, models, runs)
 
 
@@ -420,9 +409,7 @@ def markdown(table: list[dict[str, Any]], maps: list[dict[str, Any]], results: R
              args: Args, elapsed: float) -> str:  # fmt: skip
     lines = [
         "# Visitors as they are", "",
-        f"{args.tasks} tasks per map and visitor, at most {args.steps} moves; experts "
-        f"{args.experts}, {args.per_goal} per destination; window {args.window}; kappa "
-        f"{args.kappa:g}; seed {args.seed}; {elapsed:.0f} s.", "",
+        buildings.protocol(args, "visitor", elapsed, f"kappa {args.kappa:g}; "), "",
         markdown_table(
             ["map", "rows x cols", "cells", "destinations", "farthest destination",
              "floor (mean arrival)", "floor on these tasks", "order of the floor"],
@@ -480,9 +467,7 @@ def markdown(table: list[dict[str, Any]], maps: list[dict[str, Any]], results: R
 def run(args: Args, out: RunDir) -> dict[str, Any]:
     """Run the suite and write JSON, CSV, markdown and PNG files."""
     args.check()
-    started = time.perf_counter()
-    results = run_all(args)
-    elapsed = time.perf_counter() - started
+    results, elapsed = timed(run_all, args)
     floor: dict[str, dict[str, Any]] = {}
     maps = []
     for s in results.maps:  # one map's world at a time, made once

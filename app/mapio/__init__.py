@@ -49,11 +49,13 @@ def brief(error: object, limit: int = 2 * QUOTE_CHARS) -> str:
 
 @dataclass
 class Imported:
-    """A passability grid (row 0 at the top) and what the reader noticed."""
+    """A passability grid (row 0 at the top) and what the reader noticed; ``goals``: named
+    cells the map itself gives as destinations (IMDF), each a free cell of ``free``."""
 
     free: BoolArray
     frame: Frame | None = None
     notes: list[str] = field(default_factory=list)
+    goals: list[tuple[tuple[int, int], str]] = field(default_factory=list)
 
 
 def detect(path: Path) -> Format:

@@ -189,6 +189,12 @@ class Settings(BaseSettings):
         description="goal_aware and guide keep per-goal tables of goals x cells: maps of more "
         "are refused (PUT: 422).",
     )  # fmt: skip
+    max_domain_memory: int = Field(
+        256 * MiB, ge=MiB,
+        description="Bytes what the strategies need of one domain may keep: its goal priors "
+        "(64 bytes a goal and free cell) and guide map (16), built when the domain is PUT. A "
+        "map that would need more is refused (PUT: 422).",
+    )  # fmt: skip
     max_goal_window: int = Field(
         1_048_576, ge=1,
         description="A goal_aware session with beta > 0 keeps a per-goal window of goals x "

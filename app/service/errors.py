@@ -17,6 +17,7 @@ from __future__ import annotations
 import logging
 import re
 import time
+from collections.abc import Callable
 from typing import Any
 
 from fastapi import FastAPI, Request, Response
@@ -102,7 +103,7 @@ async def _validation(_: Request, exc: Exception) -> JSONResponse:
 
 async def _bad_input(_: Request, exc: Exception) -> JSONResponse:
     assert isinstance(exc, BadInput)
-    return _json(exc.status, exc.detail)
+    return _json(exc.status, exc.detail, exc.headers)
 
 
 async def _auth(_: Request, exc: Exception) -> JSONResponse:
@@ -224,18 +225,22 @@ async def _gone(_: Request, exc: Exception) -> Response:
 
 
 def install_error_handlers(app: FastAPI) -> None:
-    app.add_exception_handler(StarletteHTTPException, _http_error)
-    app.add_exception_handler(RequestValidationError, _validation)
-    app.add_exception_handler(BadInput, _bad_input)
-    app.add_exception_handler(AuthError, _auth)
-    app.add_exception_handler(DomainNotFound, _no_domain)
-    app.add_exception_handler(DomainChanged, _domain_changed)
-    app.add_exception_handler(SessionNotFound, _no_session)
-    app.add_exception_handler(SessionUnreadable, _unreadable)
-    app.add_exception_handler(SessionLost, _lost)
-    app.add_exception_handler(RecursionError, _too_deep)
-    app.add_exception_handler(ClientDisconnect, _gone)
-    app.add_exception_handler(CountsFull, _counts_full)
+    handlers: dict[type[Exception], Callable[..., Any]] = {
+        StarletteHTTPException: _http_error,
+        RequestValidationError: _validation,
+        BadInput: _bad_input,
+        AuthError: _auth,
+        DomainNotFound: _no_domain,
+        DomainChanged: _domain_changed,
+        SessionNotFound: _no_session,
+        SessionUnreadable: _unreadable,
+        SessionLost: _lost,
+        RecursionError: _too_deep,
+        ClientDisconnect: _gone,
+        CountsFull: _counts_full,
+    }
+    for exc, handler in handlers.items():
+        app.add_exception_handler(exc, handler)
     for unavailable in STORE_DOWN:
         app.add_exception_handler(unavailable, _store_down)
     for unavailable in DATABASE_DOWN:

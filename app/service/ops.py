@@ -6,6 +6,7 @@ the others run on the event loop and never block.
 
 from __future__ import annotations
 
+import asyncio
 import json
 from typing import Any
 
@@ -22,7 +23,7 @@ from app.advice.priors import GoalPriors
 from app.arrays import IntArray
 from app.domain.grid import ACTIONS, GridDomain, MapError
 from app.domain.paths import expert_trajectories, path_within
-from app.service.data.domains import DomainNotFound, DomainState
+from app.service.data.domains import DomainNotFound, DomainState, compiled_searches, needed
 from app.service.data.ingest import parse_trajectories, to_trajectories
 from app.service.data.store import POOLED, Trajectory
 from app.service.live.registry import (
@@ -54,9 +55,10 @@ from app.service.schemas import (
     TrajectoriesAccepted,
 )
 from app.service.state import ServiceState
-from app.service.wire.encode import batch_binary, batch_json, decision_json, theta_text
-from app.service.wire.events import read_move, read_moves
-from app.strategies import DomainData
+from app.service.wire.encode import batch_binary, batch_json, decision_json
+from app.service.wire.events import read_move, read_moves, share_lists
+from app.service.wire.warm import warm
+from app.strategies import DomainData, Need
 
 #: an expert walk's longest (``expert_trajectory``'s default ``max_steps``)
 EXPERT_MAX_STEPS = 10_000
@@ -107,20 +109,53 @@ def session_settings(
     return SessionSettings(advisor, body.agent_type, start, budget)
 
 
+#: Seconds a client is told to wait for a domain being prepared (Retry-After)
+PREPARING_RETRY = 2
+
+
 async def open_session(
     state: ServiceState, domain: DomainState, body: SessionCreate, client: str | None = None
 ) -> tuple[LiveSession, Decision]:
-    """A session for ``body`` (checked first, :func:`session_settings`), the domain made ready
-    for its strategy off the event loop the first time (:meth:`DomainCatalog.prepare`: goal
-    priors, a guide map); ``client``: whom its quota counts against (None: no quota)."""
+    """A session for ``body`` (checked first, :func:`session_settings`) on a domain prepared
+    for its strategy (:func:`unprepared` otherwise: nothing is built on a session's request);
+    ``client``: whom its quota counts against (None: no quota)."""
     settings = session_settings(state, domain, body)
     entry = strategies.get(settings.advisor.strategy)
-    if entry.missing(domain.data(POOLED)):
-        try:
-            await run_in_threadpool(state.catalog.prepare, domain, entry.needs)
-        except ValueError as exc:  # a map that cannot have it (GuideError)
-            raise BadInput(f"strategy {settings.advisor.strategy}: {exc}") from None
+    lacking = entry.missing(domain.data(POOLED))
+    if lacking:
+        raise unprepared(state, domain, entry.name, lacking)
     return await create_session(state, domain, settings, client)
+
+
+#: background preparations started by :func:`unprepared`, kept until they end
+_preparing: set[asyncio.Future[None]] = set()
+
+
+def unprepared(
+    state: ServiceState, domain: DomainState, strategy: str, lacking: list[Need]
+) -> BadInput:
+    """Why a session of ``strategy`` cannot open on ``domain`` now: 422 with the reason when
+    the domain cannot have what it needs (``domain.refused``), else 503 with Retry-After while
+    it is being prepared. What the strategies need is built when the domain is PUT or read
+    after another worker changed it (:meth:`DomainCatalog.prepare_all`, the admin's request or
+    the refresh waits for it), not on a session's request; if nothing is building it (a
+    strategy registered after the domain was prepared), one preparation starts in a worker
+    thread, and this request does not wait for it."""
+    for need in lacking:
+        why = domain.refused.get(need)
+        if why is not None:
+            return BadInput(f"strategy {strategy}: {why}")
+    if not domain.preparing:
+        domain.preparing = True  # one at a time: the next request sees it running
+        task = asyncio.ensure_future(run_in_threadpool(state.catalog.prepare_all, domain))
+        _preparing.add(task)
+        task.add_done_callback(_preparing.discard)
+    return BadInput(
+        f"domain {domain.name!r} is being prepared for strategy {strategy} "
+        f"({lacking[0].value}): retry in a few seconds",
+        503,
+        {"Retry-After": str(PREPARING_RETRY)},
+    )
 
 
 async def create_session(
@@ -257,12 +292,18 @@ def position_moves(
 def put_domain(state: ServiceState, name: str, body: DomainPut) -> tuple[DomainState, bool, bool]:
     """*Worker thread.* Create or replace a domain: (state, created, kept_data). With
     ``experts``, a domain whose prior is empty after the put learns it from simulated experts
-    (made before the put, so a bad request changes nothing)."""
+    (made before the put, so a bad request changes nothing). What every strategy needs of it
+    is built before the answer (:meth:`DomainCatalog.prepare_all`: a map whose needs would
+    pass ``ADVISOR_MAX_DOMAIN_MEMORY`` is refused first), and what the event paths read of it
+    (:func:`app.service.wire.warm.warm`), so that no session or event builds them."""
     header, rows = map_of(body)  # rows, or a map file's text
+    old = state.catalog.find(name)
     try:
         grid = state.catalog.parse_map(rows, name, header.frame, header.names)
     except MapError as exc:
         raise BadInput(f"map: {exc.below(header.lines)}") from None
+    if old is not None and grid is not old.domain and grid.rows_text is old.domain.rows_text:
+        share_lists(old.domain, grid)  # the same map in another frame
     goals, most = len(grid.goals), state.settings.max_goal_cells
     if goals * grid.n_states > most:
         raise BadInput(
@@ -270,16 +311,21 @@ def put_domain(state: ServiceState, name: str, body: DomainPut) -> tuple[DomainS
             f"service keeps per-goal tables (goal_aware, guide) for at most {most} "
             "(ADVISOR_MAX_GOAL_CELLS): fewer goals or a smaller map"
         )
+    over = state.catalog.over_memory(grid, needed())
+    if over is not None:
+        raise BadInput(f"map: {over}: fewer goals or a smaller map")
     experts = None
     if body.experts is not None and not _keeps_data(state, name, grid):
         experts = simulated_experts(grid, body.experts, state.settings.max_expert_pairs)
-    domain, created, kept = state.catalog.put(name, grid, body.alpha0)
-    if body.experts is not None and domain.view.trajectories.get(POOLED, 0) == 0:
-        if experts is None:  # the data it would have kept went meanwhile
-            experts = simulated_experts(grid, body.experts, state.settings.max_expert_pairs)
-        state.catalog.add_trajectories(domain, experts)
-        ingested(name, len(experts), sum(len(t.pairs) for t in experts))
-    prepare_answers(domain)
+    domain, created, kept = state.catalog.put(name, grid, body.alpha0, preparing=True)
+    try:
+        if body.experts is not None and domain.view.trajectories.get(POOLED, 0) == 0:
+            if experts is None:  # the data it would have kept went meanwhile
+                experts = simulated_experts(grid, body.experts, state.settings.max_expert_pairs)
+            domain = state.catalog.add_trajectories(domain, experts)
+            ingested(name, len(experts), sum(len(t.pairs) for t in experts))
+    finally:  # published as being prepared: prepared whatever happened
+        state.catalog.prepare_all(domain)  # with the event paths' texts and lists (wire.warm)
     return domain, created, kept
 
 
@@ -323,6 +369,14 @@ async def after_put(state: ServiceState, domain: DomainState, created: bool, kep
     await state.sessions.domain_changed(domain.name, domain.version, created or not kept)
 
 
+async def let_go(held: list[Any]) -> None:
+    """Empty ``held`` in a worker thread: what was only held there any more (a replaced or
+    deleted domain's state, once its sessions have gone: a large map's tables, lists and
+    guide map, hundreds of MB) is freed there, not on the event loop. The caller keeps no
+    other reference to it."""
+    await run_in_threadpool(held.clear)
+
+
 async def after_delete(state: ServiceState, name: str, version: int) -> None:
     """A deleted domain's sessions end and its metric series go (``version``: its last data
     version: other workers see one above it, and that it is gone)."""
@@ -340,7 +394,7 @@ def ingest(
     body = parse_trajectories(raw)
     items = to_trajectories(domain.domain, body, state.settings.max_trajectory_steps)
     domain = state.catalog.add_trajectories(domain, items)  # the same map put again: its state
-    prepare_answers(domain)
+    warm(domain)  # its new tables' texts
     accepted = TrajectoriesAccepted(accepted=len(items), pairs=sum(len(t.pairs) for t in items))
     ingested(domain.name, accepted.accepted, accepted.pairs)
     return accepted, domain
@@ -379,14 +433,6 @@ async def viewer_snapshot(state: ServiceState) -> bytes:
     return orjson.dumps({"domains": domains, "sessions": sessions, "kappa_max": max(highest)})
 
 
-def prepare_answers(domain: DomainState) -> None:
-    """*Worker thread.* The text of theta that batch answers copy their advice from, for each
-    table of the domain's current prior, made here rather than at the first batch after the
-    prior changed (on the event loop)."""
-    for tables in domain.view.tables.values():
-        theta_text(tables)
-
-
 def warm_up() -> None:
     """Load (or compile, the first time) every compiled loop of the event paths (reader,
     checks, every strategy's service advisor, writers), so that no request waits for it."""
@@ -398,7 +444,7 @@ def warm_up() -> None:
     def goals() -> GoalPriors:
         return GoalPriors(grid.n_states, grid.goals).add([np.array([[0, 1]])], [0])
 
-    data = DomainData(tables, goals(), GuideMap.of(grid, goals()))
+    data = DomainData(tables, goals(), GuideMap.of(grid, goals(), searches=compiled_searches))
     for entry in strategies.STRATEGIES.values():
         # the per-goal window too where a strategy keeps one (goal_aware's beta > 0)
         half: list[dict[str, Any]] = [{p: 0.5} for p in entry.reads]

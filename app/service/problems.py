@@ -9,12 +9,14 @@ from app.service.schemas import ACTION_BRANCHES, ACTION_RULE
 
 
 class BadInput(ValueError):
-    """A client error: ``detail`` says what was wrong; ``status`` is the HTTP code."""
+    """A client error: ``detail`` says what was wrong; ``status`` is the HTTP code;
+    ``headers``: of the answer (``Retry-After``)."""
 
-    def __init__(self, detail: str, status: int = 422):
+    def __init__(self, detail: str, status: int = 422, headers: dict[str, str] | None = None):
         super().__init__(detail)
         self.detail = detail
         self.status = status
+        self.headers = headers
 
 
 def where(loc: Sequence[int | str]) -> str:

@@ -15,6 +15,7 @@ from app.service.data.store import Store
 from app.service.live.registry import Limits, SessionRegistry
 from app.service.live.sessions import LocalSessions, Sessions
 from app.service.security import load_admin_key, load_operator_key
+from app.service.wire.warm import warm
 
 
 @dataclass
@@ -48,7 +49,7 @@ def open_state(settings: Settings) -> tuple[ServiceState, list[str]]:
     client_keys = quota_keys(settings, admin_key, operator_key)  # before anything is opened
     store = Store(settings.db_url, timeout=settings.database_timeout)
     store.create_schema()
-    catalog = DomainCatalog(store, settings.max_map_cells)
+    catalog = DomainCatalog(store, settings.max_map_cells, settings.max_domain_memory, ready=warm)
     catalog.load()
     limits = Limits(
         settings.max_sessions,

@@ -130,6 +130,22 @@ def test_place_uses_given_cells_and_names_bad_ones() -> None:
         place(walled, np.random.default_rng(0), goals=[(1, 1)])
 
 
+@settings(max_examples=40, deadline=None)
+@given(st.integers(1, 5), st.integers(2, 5), st.integers(0, 2**31))
+def test_place_never_picks_a_given_goal_as_the_start(rows: int, cols: int, seed: int) -> None:
+    """The start is picked among the cells that are not given goals, however many there are
+    (the farthest cell from the first one is usually a goal here: a corner)."""
+    free = np.ones((rows, cols), dtype=bool)
+    rng = np.random.default_rng(seed)
+    cells = [(r, c) for r in range(rows) for c in range(cols)]
+    keep = int(rng.integers(len(cells)))  # the one cell left for the start
+    goals = [x for k, x in enumerate(cells) if k != keep]
+    grid = place(free, rng, goals=goals)
+    assert grid[cells[keep][0]][cells[keep][1]] == "S"
+    with pytest.raises(MapError, match="no cell is left for the start"):
+        place(free, rng, goals=cells)
+
+
 @pytest.mark.parametrize(("text", "cells"), [("3,7", [(3, 7)]), (" 1, 2 ; 3,4;", [(1, 2), (3, 4)])])
 def test_parse_cells_reads_row_col_lists(text: str, cells: list[tuple[int, int]]) -> None:
     assert parse_cells(text, "--goal-cells") == cells

@@ -9,6 +9,7 @@ from __future__ import annotations
 import threading
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -39,10 +40,10 @@ def test_ingestion_goes_on_while_a_guide_map_is_built(
     building, release = threading.Event(), threading.Event()
     plain_of = GuideMap.of
 
-    def slow_of(domain: GridDomain, goal_priors: object = None) -> GuideMap:
+    def slow_of(domain: GridDomain, goal_priors: object = None, searches: Any = None) -> GuideMap:
         building.set()
         assert release.wait(60), "the test never released the build"
-        return plain_of(domain)
+        return plain_of(domain, searches=searches)
 
     monkeypatch.setattr(GuideMap, "of", staticmethod(slow_of))
     built: list[GuideMap] = []

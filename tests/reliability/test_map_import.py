@@ -205,3 +205,76 @@ def test_an_import_takes_less_than_its_estimate(tmp_path: Path) -> None:
     ]:
         took = peak_bytes(*args, "--out", out) - base
         assert 0 < took < estimate, (args, took, estimate)
+
+
+def write_venue(path: Path, nx: int, ny: int, levels: int) -> Path:
+    """An IMDF archive of ``levels`` levels, each ``ny`` rows of ``nx`` rooms of 8 x 8 m along
+    corridors 2 m wide, a door each, a stairwell in the corner; four rooms named."""
+    from app.mapio.imdf.sample import _box, _collection, _feature, fid, to_lonlat, write_archive
+
+    width, depth = nx * 8.0, ny * 10.0
+    level_features, units, openings = [], [], []
+    for o in range(levels):
+        level_id = fid("level", o)
+        level_features.append(
+            _feature("level", o, _box((0, 0, width, depth)), ordinal=o, name={"en": f"L{o}"})
+        )
+        for j in range(ny):
+            y0 = j * 10.0
+            corridor = (0.0, y0 + 8, width, y0 + 10)
+            units.append(
+                _feature("unit", f"{o}/c{j}", _box(corridor), category="walkway", level_id=level_id)
+            )
+            for i in range(nx):
+                category = "stairs" if (i, j) == (0, 0) else "room"
+                name = {"en": f"Room {i}.{j}"} if i == j < 4 else None
+                box = (i * 8.0, y0, i * 8.0 + 8, y0 + 8)
+                units.append(
+                    _feature(
+                        "unit",
+                        f"{o}/{i}/{j}",
+                        _box(box),
+                        category=category,
+                        level_id=level_id,
+                        name=name,
+                    )
+                )
+                line = [to_lonlat(i * 8 + 3.5, y0 + 8), to_lonlat(i * 8 + 4.5, y0 + 8)]
+                geometry = {"type": "LineString", "coordinates": line}
+                openings.append(_feature("opening", f"{o}/{i}/{j}", geometry, level_id=level_id))
+    point = {"type": "Point", "coordinates": to_lonlat(20, 10)}
+    docs = {
+        "manifest.json": {"version": "1.0.0", "language": "en"},
+        "venue.geojson": _collection(
+            "venue", [_feature("venue", "v", _box((0, 0, width, depth)), display_point=point)]
+        ),
+        "level.geojson": _collection("level", level_features),
+        "unit.geojson": _collection("unit", units),
+        "opening.geojson": _collection("opening", openings),
+    }
+    return write_archive(docs, path)
+
+
+def test_an_imdf_import_takes_less_than_its_estimate(tmp_path: Path) -> None:
+    """Peak RSS over a tiny import's, for 3 levels of 800 x 500 cells (160 rooms a level, 4
+    named: the goals), under the budget's estimate of the GeoJSON parsed and the venue drawn."""
+    from app.mapio.budget import JSON_BYTE_COST, MemoryBudget, venue_cells
+
+    out = str(tmp_path / "out.txt")
+    tiny = write_venue(tmp_path / "tiny.zip", 2, 1, 1)
+    base = peak_bytes(str(tiny), "--level", "0", "--out", out)
+    big = write_venue(tmp_path / "big.zip", 20, 10, 3)
+    n_bytes = sum(i.file_size for i in __import__("zipfile").ZipFile(big).infolist())
+    budget = MemoryBudget()
+    rows, cols = venue_cells(160.0, 100.0, 0.2)
+    estimate = max(budget.venue_estimate(rows, cols, 3, n_bytes), n_bytes * JSON_BYTE_COST)
+    took = peak_bytes(str(big), "--level", "1", "--resolution", "0.2", "--out", out) - base
+    assert 0 < took < estimate, (took, estimate)
+
+
+def test_an_imdf_venue_past_the_budget_is_refused_within_1_gib(tmp_path: Path) -> None:
+    """A 160 x 100 m venue at 1 cm a cell (160 million cells a level) is refused from its
+    extent, before anything is drawn, in one line."""
+    big = write_venue(tmp_path / "big.zip", 20, 10, 3)
+    line = one_line_error(import_map(str(big), "--level", "0", "--resolution", "0.01"))
+    assert "would need about" in line and "give a coarser --resolution" in line

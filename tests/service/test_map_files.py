@@ -223,3 +223,20 @@ def test_a_bad_destination_line_is_refused_as_maze_check_says(
     both = {"text": NAMED, "destinations": [{"cell": [1, 1], "name": "Lobby"}]}
     r = client.put("/domains/named", json=both, headers=admin)
     assert r.status_code == 422 and "destination: ROW COL NAME" in r.json()["detail"]
+
+
+def test_names_of_the_same_map_are_checked_as_a_new_map_s(
+    client: TestClient, admin: dict[str, str]
+) -> None:
+    """The same rows put again are not read again (the grid is shared), but their names are
+    checked all the same; a refused put changes nothing."""
+    named = {"map": TINY, "destinations": [{"cell": [1, 5], "name": "Exit"}]}
+    assert client.put("/domains/same", json=named, headers=admin).status_code == 201
+    bad = {"map": TINY, "destinations": [{"cell": [5, 1], "name": "Start"}]}
+    r = client.put("/domains/same", json=bad, headers=admin)
+    assert r.status_code == 422 and "cell [5, 1] is the start" in r.json()["detail"]
+    assert client.get("/domains/same").json()["goal_names"] == [None, "Exit"]
+    renamed = {"map": TINY, "destinations": [{"cell": [1, 1], "name": "Lobby"}]}
+    assert client.put("/domains/same", json=renamed, headers=admin).json()["goal_names"] == [
+        "Lobby", None,
+    ]  # fmt: skip

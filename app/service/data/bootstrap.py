@@ -38,11 +38,12 @@ def bootstrap(catalog: DomainCatalog, settings: Settings) -> str | None:
         rng = np.random.default_rng(settings.bootstrap_seed)
         experts = expert_trajectories(state.domain, rng, settings.bootstrap_experts, per_goal)
         items = [Trajectory(None, e.pairs, e.goal) for e in experts]
-        catalog.add_trajectories(state, items)
+        state = catalog.add_trajectories(state, items)
         message = (
             f"Created domain '{DEFAULT_DOMAIN}' ({DEFAULT_MAP.name}) with a prior from "
             f"{len(items)} simulated expert trajectories ({per_goal} per goal, starting at "
             f"'{settings.bootstrap_experts}', seed {settings.bootstrap_seed})"
         )
+    catalog.prepare_all(state)  # what the strategies need of it, as a PUT would
     store.set_meta(BOOTSTRAPPED, datetime.now(UTC).isoformat())
     return message

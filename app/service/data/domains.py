@@ -4,23 +4,38 @@ The store is the source of truth; this catalog mirrors it. Writers (put, delete,
 trajectories) run in worker threads, hold the domain's lock, commit to the store first and only
 then change memory, so memory never holds data the database does not. Readers on the event loop
 take :attr:`DomainState.view`, an immutable snapshot replaced in one assignment.
+
+What the strategies need of a domain besides its prior (the goal priors, a guide map) is built
+when the domain is made or changed, not when a session asks for it
+(:meth:`DomainCatalog.prepare_all`): in the worker thread of an admin's PUT, when a worker reads
+another worker's change (:meth:`DomainCatalog.refresh`) and at start (:meth:`DomainCatalog.load`);
+what it keeps is bounded per domain (:func:`preparation_bytes`, ``ADVISOR_MAX_DOMAIN_MEMORY``).
+Its searches are compiled without the GIL (``kernels.guide_distances``,
+``kernels.guide_detours``), so the event loop runs while they do.
 """
 
 from __future__ import annotations
 
 import itertools
+import logging
 import threading
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from contextlib import nullcontext
 from dataclasses import dataclass, field
 from datetime import datetime
 
+import numpy as np
+
+from app import kernels, strategies
 from app.advice.guide import GuideMap
 from app.advice.models import AdviceTables
 from app.advice.priors import ActionPrior, GoalPriors
-from app.domain.grid import Frame, GridDomain, MapError, NamedCell
+from app.arrays import IntArray
+from app.domain.grid import Frame, GridDomain, MapError, NamedCell, name_goals
 from app.service.data.store import POOLED, DomainRecord, Store, TableCounts, Trajectory
 from app.strategies import DomainData, Need
+
+log = logging.getLogger("app.service")
 
 
 class DomainNotFound(KeyError):
@@ -80,12 +95,19 @@ class DomainState:
     guide_lock: threading.Lock = field(default_factory=threading.Lock)
     view: PriorView = field(init=False)
     # per-goal counts for goal-aware sessions: built from the stored trajectories when the
-    # first such session starts, then kept up to date (replaced whole, never changed)
+    # domain is prepared (DomainCatalog.prepare_all), then kept up to date (replaced whole,
+    # never changed)
     goal_priors: GoalPriors | None = None
     # guide sessions: distances to every destination, with the experts' counts of
-    # ``goal_priors``; built with them when the first guide session starts
+    # ``goal_priors``; built with them when the domain is prepared
     guide_map: GuideMap | None = None
     version: int = 0  # the store's data version this state holds (store.py)
+    # what cannot be built for this domain, and why (its map cannot have it, or it would pass
+    # the per-domain memory limit): sessions that need it are refused with the reason
+    refused: dict[Need, str] = field(default_factory=dict)
+    # :meth:`DomainCatalog.prepare_all` is building what the strategies need, or is about to
+    # (a state published by a PUT or a refresh, prepared next by the same thread)
+    preparing: bool = False
 
     def __post_init__(self) -> None:
         self.view = _view(self.prior, None, set())
@@ -100,23 +122,62 @@ class DomainState:
         return DomainData(self.view.tables[table_key], self.goal_priors, self.guide_map)
 
 
-class DomainCatalog:
-    """Every domain by name, kept equal to what the store holds."""
+def needed() -> frozenset[Need]:
+    """What the registered strategies need of a domain, together (a guide map is made with
+    the goal priors)."""
+    needs = frozenset(n for e in strategies.STRATEGIES.values() for n in e.needs)
+    return needs | {Need.GOAL_PRIORS} if Need.GUIDE_MAP in needs else needs
 
-    def __init__(self, store: Store, max_cells: int):
+
+def preparation_bytes(n_goals: int, n_states: int, needs: Iterable[Need]) -> int:
+    """Bytes what ``needs`` keep of a domain of ``n_goals`` destinations and ``n_states`` free
+    cells: the goal priors' counts and each goal's log theta (G x S x 4 float64 each), the
+    counts of unknown goal (S x 4) and the goal of each state (S); a guide map's distances and
+    detours (G x S int64 each), its open moves (S int64, S x 4 booleans) and the destination
+    of each state (S); its counts are the goal priors' own."""
+    gs, s = n_goals * n_states, n_states
+    sizes = {Need.GOAL_PRIORS: 64 * gs + 40 * s, Need.GUIDE_MAP: 16 * gs + 20 * s}
+    return sum(sizes[n] for n in set(needs))
+
+
+def compiled_searches(
+    next_state: IntArray, cells: IntArray, goals: tuple[int, ...]
+) -> tuple[IntArray, IntArray]:
+    """A guide map's searches (``GuideMap.of``'s ``searches``), compiled without the GIL:
+    the numbers of ``GridDomain.goal_distances`` and ``compass_detours_each``."""
+    targets = np.array(goals, dtype=np.int64)
+    dist = kernels.guide_distances(next_state, targets)
+    return dist, kernels.guide_detours(next_state, cells, targets)
+
+
+class DomainCatalog:
+    """Every domain by name, kept equal to what the store holds. ``max_memory``: the most
+    bytes what the strategies need of one domain may keep (:func:`preparation_bytes`; None:
+    no limit); ``ready``: what else to make of a domain once prepared, in the same thread
+    (the service's: what the event paths read of it, :func:`app.service.wire.warm.warm`)."""
+
+    def __init__(
+        self, store: Store, max_cells: int, max_memory: int | None = None,
+        ready: Callable[[DomainState], None] | None = None,
+    ):  # fmt: skip
         self.store = store
         self.max_cells = max_cells
+        self.max_memory = max_memory
+        self.ready = ready
         self._domains: dict[str, DomainState] = {}
         self._lock = threading.Lock()
 
     def load(self) -> None:
-        """Read every domain and its counts from the store (at start)."""
+        """Read every domain and its counts from the store, and prepare each
+        (:meth:`prepare_all`; at start, before any request)."""
         for rec in self.store.domains():
             domain = GridDomain.from_text(rec.map_text, name=rec.name)
             prior = restore_prior(rec.alpha0, domain.n_states, self.store.counts(rec.name))
             self._domains[rec.name] = DomainState(
                 rec.name, domain, prior, rec.created_at, rec.updated_at, version=rec.version
             )
+        for state in self.states():
+            self.prepare_all(state)
 
     def states(self) -> list[DomainState]:
         """Every domain, by name."""
@@ -140,19 +201,34 @@ class DomainCatalog:
         names: Sequence[NamedCell] = (),
     ) -> GridDomain:  # fmt: skip
         """A validated grid (with its destinations' ``names``); :class:`MapError` names the
-        problem (line and column)."""
+        problem (line and column). The map domain ``name`` holds (rows that read as its rows)
+        is that grid in ``frame`` with these names (:meth:`GridDomain.with_frame`,
+        :meth:`GridDomain.with_names`), not read again."""
         if len(rows) * max((len(r) for r in rows), default=0) > self.max_cells:
             raise MapError(f"the map is larger than {self.max_cells} cells")
+        old = self._domains.get(name)
+        if old is not None and not isinstance(rows, str):
+            cleaned = [str(r).rstrip() for r in rows]
+            while cleaned and not cleaned[-1]:
+                cleaned.pop()
+            if tuple(cleaned) == old.domain.rows_text:
+                goal_names = name_goals(old.domain.rows_text, names)
+                return old.domain.with_frame(frame).with_names(goal_names)
         return GridDomain.from_strings(rows, name=name, frame=frame, names=names)
 
-    def put(self, name: str, domain: GridDomain, alpha0: float) -> tuple[DomainState, bool, bool]:
+    def put(
+        self, name: str, domain: GridDomain, alpha0: float, preparing: bool = False
+    ) -> tuple[DomainState, bool, bool]:
         """Create or replace ``name`` (store first); returns (state, created, kept_data): the
-        same map keeps its trajectories and counts, a new map starts with none."""
+        same map keeps its trajectories and counts, a new map starts with none. ``preparing``:
+        the caller prepares the state next (:meth:`prepare_all`), so it is published as being
+        prepared."""
         with self._lock:
             old = self._domains.get(name)
             with old.lock if old else nullcontext():
                 rec, created, kept = self.store.put_domain(name, domain.to_text(), alpha0)
                 state = self._state(rec, domain, old if old and kept else None)
+                state.preparing = preparing
                 self._domains[name] = state
         return state, created, kept
 
@@ -192,10 +268,15 @@ class DomainCatalog:
 
     def guide_map(self, state: DomainState) -> GuideMap:
         """*Worker thread* the first time: the goal priors (:meth:`goal_priors`) and a BFS
-        from every destination. :class:`GuideError` says why a map cannot be guided."""
+        from every destination (compiled, without the GIL: :func:`compiled_searches`).
+        :class:`GuideError` says why a map cannot be guided."""
         self.goal_priors(state)
         with state.guide_lock:  # one build at a time; ingestion goes on meanwhile
-            plain = None if state.guide_map is not None else GuideMap.of(state.domain)
+            plain = (
+                None
+                if state.guide_map is not None
+                else GuideMap.of(state.domain, searches=compiled_searches)
+            )
             with state.lock:  # the counts as they are now (ingestion may have added)
                 if state.guide_map is None:
                     assert plain is not None and state.goal_priors is not None
@@ -204,13 +285,56 @@ class DomainCatalog:
 
     def prepare(self, state: DomainState, needs: Iterable[Need]) -> None:
         """*Worker thread* the first time: build what a strategy ``needs`` of ``state``
-        (ValueError, such as :class:`GuideError`, says why a map cannot have it)."""
+        (ValueError, such as :class:`GuideError`, says why a map cannot have it, or why
+        :meth:`prepare_all` did not build it: ``state.refused``, the memory limit included).
+        A domain is prepared when made or changed (:meth:`prepare_all`): this builds only
+        what is still missing, for callers that need it there and then."""
         for need in needs:
+            if need in state.refused:
+                raise ValueError(state.refused[need])
             self._builders[need](state)
 
     @property
     def _builders(self) -> dict[Need, Callable[[DomainState], object]]:
         return {Need.GOAL_PRIORS: self.goal_priors, Need.GUIDE_MAP: self.guide_map}
+
+    def over_memory(self, grid: GridDomain, needs: Iterable[Need]) -> str | None:
+        """Why what ``needs`` keep of ``grid`` is more than this catalog allows a domain
+        (None: it is not)."""
+        needs = set(needs)
+        size = preparation_bytes(len(grid.goals), grid.n_states, needs)
+        if not needs or self.max_memory is None or size <= self.max_memory:
+            return None
+        what = ", ".join(sorted(n.value for n in needs))
+        return (
+            f"{len(grid.goals)} goals x {grid.n_states} free cells: {what} would take "
+            f"{size} bytes, more than this service keeps for a domain ({self.max_memory}, "
+            "ADVISOR_MAX_DOMAIN_MEMORY)"
+        )
+
+    def prepare_all(self, state: DomainState) -> None:
+        """*Worker thread.* Build what every registered strategy needs of ``state``
+        (:func:`needed`), when a domain is made or changed (a PUT, another worker's change,
+        the start) and not when a session asks for it, then what :attr:`ready` makes; what
+        cannot be built (a map that cannot be guided, more than ``max_memory``) is kept in
+        ``state.refused`` with why."""
+        needs = needed()
+        state.preparing = True
+        try:
+            over = self.over_memory(state.domain, needs)
+            for need in sorted(needs, key=lambda n: n.name):
+                if over is not None:
+                    state.refused[need] = over
+                    continue
+                try:
+                    self._builders[need](state)
+                except (ValueError, MemoryError) as exc:  # GuideError: it cannot have it
+                    state.refused[need] = str(exc) or type(exc).__name__
+                    log.warning("domain %r: %s not built: %s", state.name, need.value, exc)
+            if self.ready is not None:
+                self.ready(state)
+        finally:
+            state.preparing = False
 
     def delete(self, name: str) -> None:
         with self._lock:
@@ -270,12 +394,16 @@ class DomainCatalog:
         shares the store with others (workers): the state held if its data version is the
         store's, else a new state read from the store (its counts as of one data version; the
         goal priors and guide map carried over, with the trajectories added since, when the
-        map is the same one); None, and dropped, when the domain is gone. The caller moves
+        map is the same one, else built: :meth:`prepare_all`); None, and dropped, when the
+        domain is gone. The caller moves
         the live sessions: to a new state of the same map (``retable``), or ends them."""
         with self._lock:
             old = self._domains.get(name)
             with old.lock if old is not None else nullcontext():
-                return self._reload(name, old)
+                new = self._reload(name, old)
+        if new is not None and new is not old:  # outside the catalog's lock: other domains
+            self.prepare_all(new)  # go on; its own sessions wait for this refresh
+        return new
 
     def _reload(self, name: str, old: DomainState | None) -> DomainState | None:
         snap = self.store.snapshot(name, None if old is None else old.version)
@@ -297,7 +425,7 @@ class DomainCatalog:
                 guide = old.guide_map.replace_counts(goals)
         state = DomainState(
             name, grid, prior, rec.created_at, rec.updated_at, goal_priors=goals,
-            guide_map=guide, version=rec.version,
+            guide_map=guide, version=rec.version, preparing=True,  # refresh prepares it next
         )  # fmt: skip
         self._domains[name] = state
         return state

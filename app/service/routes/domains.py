@@ -96,8 +96,10 @@ async def put_domain(
     else:
         body = json_body(raw, query)
     await state.sessions.sync_domain(name)
+    replaced = [state.catalog.find(name)]  # the state this PUT replaces: freed off the loop
     domain, created, kept = await run_in_threadpool(ops.put_domain, state, name, body)
     await ops.after_put(state, domain, created, kept)
+    await ops.let_go(replaced)
     return Response(await answers.domain(domain), 201 if created else 200, media_type=JSON)
 
 
@@ -162,6 +164,9 @@ async def delete_domain(name: DomainName, state: StateDep) -> None:
     domain = await state.sessions.domain(name)
     await run_in_threadpool(state.catalog.delete, name)
     await ops.after_delete(state, name, domain.version)
+    gone = [domain]
+    del domain
+    await ops.let_go(gone)
 
 
 @router.post(

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import re
 import weakref
+from array import array
 from dataclasses import dataclass
 from itertools import chain
 from typing import Any
@@ -32,7 +33,7 @@ import numpy as np
 from pydantic import TypeAdapter, ValidationError
 
 from app.arrays import IntArray, Moves
-from app.domain.grid import GridDomain
+from app.domain.grid import GridDomain, packed
 from app.service.problems import BadInput, describe_errors
 from app.service.schemas import ACTION_CODE, EventIn
 from app.service.wire import compiled
@@ -159,12 +160,12 @@ def read_move(domain: GridDomain, raw: bytes | str) -> tuple[int, int, int, int]
     r, c, letter, step = plain.groups()
     t = _tables(domain)
     row, col = int(r), int(c)
-    s = t.state_of[row][col] if row < t.rows and col < t.cols else -1
+    s = t.state_of[row * t.cols + col] if row < t.rows and col < t.cols else -1
     if s < 0:
         reason = compiled.STATE_OFF if row >= t.rows or col >= t.cols else compiled.STATE_WALL
         raise BadInput(f"event 0: {reason_text(domain, reason, [row, col], [-1, -1])}")
     a = _CODE[letter]
-    return s, a, t.next_state[s][a], int(step) if step else -1
+    return s, a, t.next_state[s * 4 + a], int(step) if step else -1
 
 
 # ``{"state": [r, c], "action": "E"}``, with an optional ``"step": n`` after the action, as
@@ -184,21 +185,30 @@ _CODE |= {x.encode(): ACTION_CODE[x] for x in "NESW"}
 
 @dataclass(frozen=True, slots=True)
 class _Lists:
-    """A domain's tables as nested lists (Python indexing is fast for one event)."""
+    """A domain's tables as flat ``array.array`` (Python indexing is fast for one event;
+    ``grid.packed``): ``state_of[row * cols + col]``, ``next_state[s * 4 + a]``."""
 
     rows: int
     cols: int
-    state_of: list[list[int]]
-    next_state: list[list[int]]
+    state_of: array[int]
+    next_state: array[int]
 
 
 _LISTS: weakref.WeakKeyDictionary[GridDomain, _Lists] = weakref.WeakKeyDictionary()
+
+
+def share_lists(old: GridDomain, new: GridDomain) -> None:
+    """``new`` is ``old``'s map (in another frame, :meth:`GridDomain.with_frame`): the lists
+    made of ``old`` serve it too."""
+    lists = _LISTS.get(old)
+    if lists is not None:
+        _LISTS[new] = lists
 
 
 def _tables(domain: GridDomain) -> _Lists:
     lists = _LISTS.get(domain)
     if lists is None:
         rows, cols = domain.shape
-        lists = _Lists(rows, cols, domain.state_of.tolist(), domain.next_state.tolist())
+        lists = _Lists(rows, cols, packed(domain.state_of, "q"), packed(domain.next_state, "q"))
         _LISTS[domain] = lists
     return lists
