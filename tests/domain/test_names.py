@@ -7,7 +7,15 @@ from __future__ import annotations
 import pytest
 
 from app.domain.generate import generate_building_domain
-from app.domain.grid import NAME_MAX, Frame, GridDomain, MapError, NamedCell
+from app.domain.grid import (
+    NAME_MAX,
+    Frame,
+    GridDomain,
+    MapError,
+    NamedCell,
+    check_name,
+    plain_names,
+)
 
 ROWS = ["#######", "#G..#G#", "#.#.#.#", "#S....#", "#######"]  # goals [1, 1] and [1, 5]
 
@@ -103,3 +111,20 @@ def test_every_destination_of_a_generated_building_can_be_named(seed: int) -> No
     named = GridDomain.from_strings(list(grid.rows_text), names=names)
     assert named.goal_names == tuple(f"Room {i}" for i in range(len(grid.goals)))
     assert GridDomain.from_text(named.to_text()).goal_names == named.goal_names
+
+
+def test_names_from_elsewhere_are_made_plain_and_each_its_own() -> None:
+    """An imported venue's names: characters a name may not hold become spaces, a name too
+    long is cut, one given twice is numbered, one left empty is no name; each change noted."""
+    given = [
+        ((1, 1), "Café: <Level 2>"), ((1, 2), "Restroom"), ((1, 3), "restroom"),
+        ((1, 4), "*** "), ((1, 5), "A" * 60), ((1, 6), "Exit"),
+    ]  # fmt: skip
+    named, notes = plain_names(given)
+    assert [(n.row, n.col, n.name) for n in named] == [
+        (1, 1, "Café Level 2"), (1, 2, "Restroom"), (1, 3, "restroom 2"), (1, 5, "A" * NAME_MAX),
+        (1, 6, "Exit"),
+    ]  # fmt: skip
+    assert all(check_name(n) == n.name for n in named)  # every one a name a map may hold
+    assert len(notes) == 4  # Exit and Restroom as they were
+    assert notes[2].startswith("destination [1, 4] '*** ' written without a name")
