@@ -150,9 +150,10 @@ class DomainBase(Strict):
     text: str | None = Field(
         None,
         description="The map file's text as `maze import` and `maze generate` write it: header "
-        "lines (`resolution: M`, `origin: X Y YAW`) if any, then one row a line. Its header "
-        "gives the resolution and origin (not the fields). Give it or map; errors name the "
-        "line and column of the text, as `maze check` does.",
+        "lines (`resolution: M`, `origin: X Y YAW`, `destination: ROW COL NAME`) if any, then "
+        "one row a line. Its header gives the resolution, origin and destinations' names (not "
+        "the fields). Give it or map; errors name the line and column of the text, as `maze "
+        "check` does.",
         examples=["resolution: 0.5\norigin: -12.0 4.5 0.0\n#####\n#S.G#\n#####"],
     )
     alpha0: float = Field(
