@@ -272,7 +272,7 @@ async def measure(args: argparse.Namespace) -> dict[str, Any]:
                 domain = state.catalog.get("default")
                 reqs = []
                 for _ in range(SESSIONS):
-                    session, _ = await ops.create_session(state, domain, SessionCreate())
+                    session, _ = await ops.open_session(state, domain, SessionCreate())
                     reqs.append((session.id, session.token))
                 requests = [request_bytes(*reqs[i % SESSIONS], b) for i, b in
                             enumerate(bodies)]  # fmt: skip
@@ -334,7 +334,7 @@ async def measure(args: argparse.Namespace) -> dict[str, Any]:
                 "token check": lambda: patch(routes, "session_for", no_token),
                 "reading the event": lambda: patch(ops, "read_move", lambda g, raw: moves[raw]),
                 "the decision": lambda: patch(state.sessions, "observe_one", fixed_observe),
-                "answer building": lambda: patch(ops, "decision_json", lambda d, g: made_json),
+                "answer building": lambda: patch(ops, "decision_json", lambda d, g, *_: made_json),
                 "route work (all of the above the endpoint does)": lambda: patch(
                     ops, "answer_events", stored_answer
                 ),

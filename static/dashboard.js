@@ -1,12 +1,16 @@
 // The dashboard: polls GET /overview about once a second and redraws two tables. Live sessions
 // (where explorers are and were) are listed for an operator's key only: the page asks for it
-// and keeps it in this tab's sessionStorage; without it, the figures per domain. The sessions
+// and keeps it in this tab's sessionStorage; without it, the figures per domain. Each session
+// shows what its advisor believes as its strategy says it (plain words first, the paper's
+// symbol second, coloured by the strategy's tone) and where its advice leads. The sessions
 // table sorts by any column (a click on its heading); with the admin key, a session can be
-// ended from its row (DELETE /sessions/{id}); a refusal is shown with the service's reason.
+// ended from its row (DELETE /sessions/{id}); with the read-only key (the overview's role)
+// the End buttons are disabled, saying why; a refusal is shown with the service's reason.
 "use strict";
 
 (() => {
-  const { ACTIONS, ARROWS, fetchJSON, watchViewerLink, fmt } = MazeUI;
+  const { ACTIONS, ARROWS, fetchJSON, watchViewerLink, fmt, barOf, figureText, beliefsText,
+          destinationText, refuse } = MazeUI;
   const POLL_MS = 1000;
   const KEY = "advisor-operator-key";
   const $ = (id) => document.getElementById(id);
@@ -31,24 +35,37 @@
     return tr;
   }
 
-  /** A bar as long as p (0..1): blue at 0.5 or more, red below. */
-  function barOf(p) {
-    const outer = document.createElement("span");
-    outer.className = p < 0.5 ? "bar lost" : "bar";
-    const inner = document.createElement("span");
-    inner.style.width = `${Math.round(100 * Math.min(1, Math.max(0, p)))}%`;
-    outer.append(inner);
-    return outer;
-  }
-
-  function bar(p) {
+  /** What the advisor believes, as its strategy says it: the figure that says most now (a
+   *  bar in the strategy's tone, plain words, the paper's symbol); every figure in the
+   *  tooltip. A service without beliefs: the paper's P(M1|H). */
+  function believes(s) {
     const td = document.createElement("td");
-    td.className = "left";
-    td.append(barOf(p), document.createTextNode(fmt(p)));
+    td.className = "left believes";
+    const b = s.beliefs;
+    if (!b) {
+      td.append(barOf(s.p_normal, s.p_normal < 0.5 ? "bad" : "good"),
+                document.createTextNode(`P(M1|H) ${fmt(s.p_normal)}`));
+      return td;
+    }
+    const f = b.figures[b.headline];
+    td.dataset.tone = f.tone;
+    const text = document.createElement("span");
+    text.className = `tone-${f.tone}`;
+    text.textContent = figureText(f);
+    td.append(barOf(f.p, f.tone), text);
+    td.title = beliefsText(b);
     return td;
   }
 
-  /** A small line of recent P(M1|H) values on a fixed 0..1 scale, a dotted line at 0.5. */
+  function leadsTo(s) {
+    const to = s.beliefs && s.beliefs.leads_to;
+    const td = cell(to ? destinationText(to) : "–", "left");
+    if (to) td.title = `Its advice leads to [${to.cell.join(", ")}]`;
+    return td;
+  }
+
+  /** A small line of recent P(M1|H) values (knows the way) on a fixed 0..1 scale, a dotted
+   *  line at 0.5. */
   function sparklineOf(values) {
     const w = 90, h = 22;
     const ns = "http://www.w3.org/2000/svg";
@@ -127,6 +144,7 @@
 
   // One button per session, kept across redraws: a click is not lost to the next poll's rows.
   const buttons = new Map();
+  const READ_ONLY = "This key can only read: ending a session needs the admin key";
 
   function endButton(s) {
     const td = document.createElement("td");
@@ -136,12 +154,17 @@
       button = document.createElement("button");
       button.type = "button";
       button.className = "end";
-      button.title = "End this session (DELETE /sessions/{id}, the admin key)";
       button.addEventListener("click", () => endSession(s.session_id));
       buttons.set(s.session_id, button);
     }
     button.textContent = ending.has(s.session_id) ? "Ending…" : "End";
-    button.disabled = ending.has(s.session_id);
+    if (last && last.role === "operator") {
+      refuse(button, READ_ONLY);
+    } else {
+      button.disabled = ending.has(s.session_id);
+      button.title = "End this session (DELETE /sessions/{id}, the admin key)";
+      button.removeAttribute("aria-disabled");
+    }
     td.append(button);
     return td;
   }
@@ -156,7 +179,7 @@
     { label: "Live sessions", unit: "sessions", draw: (d) => cell(d.sessions) },
     { label: "Steps", unit: "moves, all sessions", draw: (d) => cell(d.steps) },
     { label: "Advice per 100", unit: "decisions", draw: (d) => cell(fmt(d.advice_per_100, 1)) },
-    { label: "Looking lost", unit: "sessions, P(M1|H) < 0.5", draw: (d) => cell(d.looking_lost) },
+    { label: "Looking lost", unit: "sessions (P(M1|H) < 0.5)", draw: (d) => cell(d.looking_lost) },
     { label: "", left: true, draw: walkLink },
   ];
   const SESSION_COLUMNS = [
@@ -164,13 +187,14 @@
     { key: "domain", label: "Domain", left: true, draw: (s) => cell(s.domain, "left"), value: (s) => s.domain },
     { key: "type", label: "Type", left: true, draw: (s) => cell(s.agent_type || "–", "left"), value: (s) => s.agent_type || "" },
     { key: "strategy", label: "Strategy", left: true, draw: strategy, value: (s) => s.strategy },
-    { key: "kappa", label: "κ", unit: "nats", draw: (s) => cell(s.kappa), value: (s) => s.kappa },
+    { key: "kappa", label: "Price of advice", unit: "κ, nats", draw: (s) => cell(s.kappa), value: (s) => s.kappa },
     { key: "steps", label: "Steps", unit: "moves", draw: (s) => cell(s.steps), value: (s) => s.steps },
     { key: "position", label: "Position", unit: "[row, col]", draw: (s) => cell(`[${s.position.join(", ")}]`), value: (s) => s.position[0] * 1e6 + s.position[1] },
-    { key: "p", label: "P(M1|H)", unit: "0 to 1", left: true, draw: (s) => bar(s.p_normal), value: (s) => s.p_normal },
-    { key: "recent", label: "Recent P(M1|H)", unit: "recent decisions", left: true, draw: (s) => sparkline(s.p_normal_history || []) },
+    { key: "p", label: "Advisor believes", unit: "plain words (the paper's symbol)", left: true, draw: believes, value: (s) => s.p_normal },
+    { key: "leads", label: "Advice leads to", unit: "destination", left: true, draw: leadsTo, value: (s) => (s.beliefs && s.beliefs.leads_to ? s.beliefs.leads_to.goal : -1) },
+    { key: "recent", label: "Knows the way, lately", unit: "P(M1|H), recent decisions", left: true, draw: (s) => sparkline(s.p_normal_history || []) },
     { key: "advice", label: "Advice", unit: "given", draw: (s) => cell(s.advice_count), value: (s) => s.advice_count },
-    { key: "cost", label: "Cost", unit: "nats", draw: (s) => cell(fmt(s.total_cost, 2)), value: (s) => s.total_cost },
+    { key: "cost", label: "Cost", unit: "κ × advice, nats", draw: (s) => cell(fmt(s.total_cost, 2)), value: (s) => s.total_cost },
     { key: "per100", label: "Per 100", unit: "decisions", draw: (s) => cell(fmt(s.advice_per_100, 1)), value: (s) => s.advice_per_100 },
     { key: "left", label: "Advice left", unit: "budget", left: true, draw: adviceLeftCell, value: adviceLeft },
     { key: "last", label: "Last advice", unit: "step, cell", left: true, draw: (s) => lastAdvice(s.last_advice), value: (s) => (s.last_advice ? s.last_advice.step : -1) },
@@ -248,7 +272,16 @@
     }));
   }
 
+  /** What the key may do, said once above the table (each End button's tooltip says it too). */
+  function showRole(role) {
+    const note = $("role-note");
+    note.hidden = role !== "operator";
+    note.textContent = role === "operator"
+      ? "This key can only read: you see the live sessions; ending one needs the admin key." : "";
+  }
+
   function renderSessions(sessions, total, detail) {
+    showRole(last ? last.role : null);
     const body = $("sessions").tBodies[0];
     const columns = SESSION_COLUMNS.length;
     $("session-total").textContent = total > sessions.length
@@ -268,7 +301,11 @@
     body.replaceChildren(...sorted(sessions).map((s) => {
       const tr = document.createElement("tr");
       tr.dataset.sessionId = s.session_id;
-      tr.append(...SESSION_COLUMNS.map((c) => c.draw(s)));
+      tr.append(...SESSION_COLUMNS.map((c) => {
+        const td = c.draw(s);
+        td.dataset.column = c.key;
+        return td;
+      }));
       return tr;
     }));
   }
@@ -338,8 +375,9 @@
   showKeyForm();
 
   // the legend's samples, drawn by the same functions as the table's cells
-  document.querySelector('[data-sample="bar-normal"]').append(barOf(0.8));
-  document.querySelector('[data-sample="bar-lost"]').append(barOf(0.2));
+  for (const tone of ["good", "neutral", "bad"]) {
+    document.querySelector(`[data-sample="bar-${tone}"]`).append(barOf(0.8, tone));
+  }
   document.querySelector('[data-sample="sparkline"]')
     .append(sparklineOf([0.9, 0.85, 0.6, 0.3, 0.1, 0.15, 0.45, 0.7, 0.9]));
   renderHeadings();

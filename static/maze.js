@@ -1,5 +1,7 @@
-// Helpers shared by the dashboard and the walk page: JSON fetches, the viewer link, and
-// drawing a maze with arrows on a 2D canvas. Plain browser JavaScript, no dependencies.
+// Helpers shared by the dashboard and the walk page: JSON fetches, the viewer link, drawing a
+// maze with arrows on a 2D canvas, and how both pages word what the advisor believes (plain
+// words first, the paper's symbol second, the strategy's tone). Plain browser JavaScript, no
+// dependencies.
 "use strict";
 
 const MazeUI = (() => {
@@ -48,9 +50,14 @@ const MazeUI = (() => {
     setInterval(check, everyMs);
   }
 
-  /** Cell size in CSS pixels so that a rows x cols map fits in maxSize. */
-  function fitCanvas(canvas, rows, cols, maxSize) {
-    const cell = Math.max(6, Math.floor(Math.min(maxSize / cols, maxSize / rows)));
+  /** The largest cell size (CSS pixels, within [least, most]) at which a rows x cols map fits
+   *  a width x height box. */
+  function fitCell(rows, cols, width, height, least = 6, most = 32) {
+    return Math.min(most, Math.max(least, Math.floor(Math.min(width / cols, height / rows))));
+  }
+
+  /** Size a canvas for a rows x cols map of the given cell size (CSS pixels). */
+  function sizeCanvas(canvas, rows, cols, cell) {
     const ratio = window.devicePixelRatio || 1;
     canvas.style.width = `${cols * cell}px`;
     canvas.style.height = `${rows * cell}px`;
@@ -61,15 +68,19 @@ const MazeUI = (() => {
     return cell;
   }
 
-  /** Walls, floor, start and goals (labelled G0, G1, ... in row-major order). */
-  function drawMaze(ctx, map, cell) {
+  /** The smallest font of a label on the map (CSS pixels), however small its cells. */
+  const LABEL_MIN_PX = 11;
+
+  /** Walls, floor, start and goals; then the labels, S and each goal's name (G0, G1, ... in
+   *  row-major order where the map names it not: ``names``, in that order), drawn over the
+   *  cells at a readable size however small they are. Returns the smallest label's font size
+   *  (CSS pixels). */
+  function drawMaze(ctx, map, cell, names = null) {
     const rows = map.length, cols = map[0].length;
     ctx.fillStyle = COLOURS.floor;
     ctx.fillRect(0, 0, cols * cell, rows * cell);
+    const labels = [];
     let goal = 0;
-    ctx.font = `${Math.max(8, Math.floor(cell * 0.45))}px system-ui, sans-serif`;
-    ctx.textAlign = "center";
-    ctx.textBaseline = "middle";
     for (let r = 0; r < rows; r++) {
       for (let c = 0; c < cols; c++) {
         const ch = map[r][c];
@@ -78,12 +89,73 @@ const MazeUI = (() => {
           ctx.fillRect(c * cell, r * cell, cell, cell);
         } else if (ch === "S" || ch === "G") {
           ctx.fillStyle = ch === "S" ? COLOURS.start : COLOURS.goal;
-          ctx.fillRect(c * cell + 1, r * cell + 1, cell - 2, cell - 2);
-          ctx.fillStyle = COLOURS.text;
-          ctx.fillText(ch === "S" ? "S" : `G${goal++}`, (c + 0.5) * cell, (r + 0.5) * cell);
+          const inset = cell > 4 ? 1 : 0;
+          ctx.fillRect(c * cell + inset, r * cell + inset, cell - 2 * inset, cell - 2 * inset);
+          labels.push({ text: ch === "S" ? "S" : goalLabel(goal++, names), r, c });
         }
       }
     }
+    let smallest = Infinity;
+    for (const label of labels) smallest = Math.min(smallest, drawLabel(ctx, label.text, label.r, label.c, cell));
+    return smallest; // the smallest label's font, CSS pixels
+  }
+
+  /** A label centred on a cell: in the cell where it fits, else on a pale tag of at least
+   *  LABEL_MIN_PX pixels. */
+  function drawLabel(ctx, text, r, c, cell) {
+    const size = Math.max(LABEL_MIN_PX, Math.floor(cell * 0.45));
+    ctx.font = `${size}px system-ui, sans-serif`;
+    ctx.textAlign = "center";
+    ctx.textBaseline = "middle";
+    const x = (c + 0.5) * cell, y = (r + 0.5) * cell;
+    const w = ctx.measureText(text).width;
+    if (w > cell - 2 || size > cell - 2) {
+      ctx.fillStyle = "rgba(255, 255, 255, 0.85)";
+      ctx.fillRect(x - w / 2 - 3, y - size / 2 - 2, w + 6, size + 4);
+    }
+    ctx.fillStyle = COLOURS.text;
+    ctx.fillText(text, x, y);
+    return size;
+  }
+
+  /** How a goal is named on the pages: its name (GET /domains' goal_names), else G<index>. */
+  function goalLabel(index, names) {
+    const name = names && names[index];
+    return name || `G${index}`;
+  }
+
+  /** A destination of an answer ({goal, cell, name}) in words: "Exit (G1)", or "G1". */
+  function destinationText(d) {
+    return d.name ? `${d.name} (G${d.goal})` : `G${d.goal}`;
+  }
+
+  /** A figure of the advisor's beliefs, plain words first: "looks lost: 97% (P(M2|H))". */
+  function figureText(f) {
+    return `${f.name}: ${Math.round(100 * f.p)}% (${f.symbol})`;
+  }
+
+  /** A bar as long as p (0..1), coloured by the strategy's tone (good, neutral, bad). */
+  function barOf(p, tone) {
+    const outer = document.createElement("span");
+    outer.className = `bar tone-${tone}`;
+    const inner = document.createElement("span");
+    inner.style.width = `${Math.round(100 * Math.min(1, Math.max(0, p)))}%`;
+    outer.append(inner);
+    return outer;
+  }
+
+  /** Every figure and where the advice leads, one line each (a tooltip). */
+  function beliefsText(b) {
+    const lines = b.figures.map(figureText);
+    if (b.leads_to) lines.push(`advice leads to ${destinationText(b.leads_to)}`);
+    return lines.join("\n");
+  }
+
+  /** A control this key may not use: disabled, saying why (in its tooltip). */
+  function refuse(control, why) {
+    control.disabled = true;
+    control.title = why;
+    control.setAttribute("aria-disabled", "true");
   }
 
   function centre(cellRC, cell) {
@@ -130,7 +202,8 @@ const MazeUI = (() => {
   }
 
   return {
-    ACTIONS, MOVES, ARROWS, COLOURS, fetchJSON, showViewerLink, watchViewerLink, fitCanvas,
-    drawMaze, centre, drawArrow, goalIndex, fmt,
+    ACTIONS, MOVES, ARROWS, COLOURS, LABEL_MIN_PX, fetchJSON, showViewerLink, watchViewerLink,
+    fitCell, sizeCanvas, drawMaze, centre, drawArrow, goalIndex, goalLabel, destinationText,
+    figureText, barOf, beliefsText, refuse, fmt,
   };
 })();

@@ -1,11 +1,14 @@
 // The walk page: a person walks a maze with the arrow keys; every move goes to the advisor over
 // the session's websocket, and each decision that advises is drawn as arrows with probabilities.
-// Beside the maze: a legend of what it shows, the KL against κ, and P(M1|H) after each move.
+// Beside the maze, always in view (the map scrolls and zooms in its own box): what the advisor
+// believes of the walker as its strategy says it (GET /sessions/{id} with the session's token,
+// read again after each decision), where its advice leads, the advice's worth against its price
+// κ, P(M1|H) after each move, the map's destinations by name, and a legend.
 "use strict";
 
 (() => {
-  const { ACTIONS, MOVES, ARROWS, COLOURS, fetchJSON, fitCanvas, drawMaze, centre, drawArrow,
-          goalIndex, fmt } = MazeUI;
+  const { ACTIONS, MOVES, ARROWS, COLOURS, fetchJSON, fitCell, sizeCanvas, drawMaze, centre,
+          drawArrow, goalIndex, goalLabel, destinationText, figureText, fmt } = MazeUI;
   const KEYS = {
     ArrowUp: "N", ArrowRight: "E", ArrowDown: "S", ArrowLeft: "W",
     w: "N", d: "E", s: "S", a: "W", W: "N", D: "E", S: "S", A: "W",
@@ -18,9 +21,11 @@
 
   const walk = {
     map: null, cell: 20, pos: null, path: [], session: null, socket: null, pending: 0,
-    decision: null, advice: null, advisedCells: [], background: null,
+    decision: null, advice: null, advisedCells: [], background: null, domain: null,
     history: [], // {step, p, advised} of every decision of this walk, oldest first
+    beliefs: null, leadsTo: null, asking: false, askAgain: false,
   };
+  const ZOOM = [2, 3, 4, 6, 8, 10, 12, 16, 20, 24, 32]; // cell sizes, CSS pixels
   // What each strategy's advice is, in plain words (GET /strategies: its entry says it).
   const NOTES = {};
 
@@ -32,7 +37,7 @@
       off.height = canvas.height;
       const octx = off.getContext("2d");
       octx.setTransform(ctx.getTransform());
-      drawMaze(octx, walk.map, walk.cell);
+      canvas.dataset.labelPx = drawMaze(octx, walk.map, walk.cell, walk.domain.goal_names);
       walk.background = off;
     }
     return walk.background;
@@ -85,10 +90,50 @@
       const [x, y] = centre(walk.pos, cell);
       ctx.fillStyle = COLOURS.walker;
       ctx.beginPath();
-      ctx.arc(x, y, cell * 0.32, 0, 2 * Math.PI);
+      ctx.arc(x, y, Math.max(4, cell * 0.32), 0, 2 * Math.PI); // seen on a small cell too
       ctx.fill();
       if (walk.advice && walk.pending === 0) drawAdvice(x, y, walk.advice);
     }
+  }
+
+  /** Scroll the map's box so that the walker and a few cells around it are in view. */
+  function keepInView() {
+    if (!walk.pos) return;
+    const board = $("board");
+    const [x, y] = centre(walk.pos, walk.cell);
+    const left = x + canvas.offsetLeft, top = y + canvas.offsetTop; // the box is positioned
+    const margin = Math.min(4 * walk.cell + 24, board.clientWidth / 3, board.clientHeight / 3);
+    if (left - margin < board.scrollLeft) board.scrollLeft = left - margin;
+    else if (left + margin > board.scrollLeft + board.clientWidth) board.scrollLeft = left + margin - board.clientWidth;
+    if (top - margin < board.scrollTop) board.scrollTop = top - margin;
+    else if (top + margin > board.scrollTop + board.clientHeight) board.scrollTop = top + margin - board.clientHeight;
+  }
+
+  /** Draw the map at cell size ``cell`` (CSS pixels), the walker kept in view. */
+  function zoomTo(cell) {
+    if (!walk.map) return;
+    walk.cell = cell;
+    sizeCanvas(canvas, walk.map.length, walk.map[0].length, cell);
+    walk.background = null;
+    canvas.dataset.cell = cell;
+    draw();
+    keepInView();
+  }
+
+  /** The largest cell at which the map fits its box (``least``: the smallest allowed). */
+  function fitted(least) {
+    const board = $("board");
+    const pad = 2 * 10; // the box's padding
+    return fitCell(walk.map.length, walk.map[0].length, board.clientWidth - pad,
+                   board.clientHeight - pad, least, 32);
+  }
+
+  /** One zoom step larger (+1) or smaller (-1) than the cell size now. */
+  function zoomBy(step) {
+    if (!walk.map) return;
+    const next = step > 0 ? ZOOM.find((c) => c > walk.cell)
+      : [...ZOOM].reverse().find((c) => c < walk.cell);
+    zoomTo(next === undefined ? walk.cell : next);
   }
 
   function drawAdvice(x, y, advice) {
@@ -176,18 +221,19 @@
     walk.decision = d;
     $("steps").textContent = d.step;
     $("position").textContent = `[${d.state[0]}, ${d.state[1]}]`;
-    $("p-normal").textContent = fmt(d.p_normal);
     const kappa = walk.session ? walk.session.kappa : NaN;
     $("kl").textContent = `${fmt(d.kl)} nats`;
-    $("kl-rule").textContent = `KL ${fmt(d.kl)} ${d.advise ? "≥" : "<"} κ ${kappa} → ` +
-      (d.advise ? "advised" : "not advised");
+    $("kl").title = "KL[θ‖P(A|s,H)]";
+    $("kl-rule").textContent = `worth ${fmt(d.kl)} ${d.advise ? "≥" : "<"} price ${kappa} → ` +
+      `${d.advise ? "advised" : "not advised"} (KL ${d.advise ? "≥" : "<"} κ)`;
     $("kl-rule").classList.toggle("advised", Boolean(d.advise));
     remember(d);
     drawChart();
     $("advice-count").textContent = d.cost.advice_count;
     $("cost").textContent = fmt(d.cost.total, 2);
     const g = goalIndex(walk.map, d.state);
-    $("goal-note").textContent = g >= 0 ? `You are on goal G${g}.` : "";
+    $("goal-note").textContent = g >= 0 ? `You are at ${goalLabel(g, walk.domain.goal_names)}.` : "";
+    if (d.advise && d.leads_to) showLeadsTo(d.leads_to);
     document.body.dataset.goal = g >= 0 ? `G${g}` : "";
     document.body.dataset.position = JSON.stringify(d.state);
     document.body.dataset.step = d.step;
@@ -215,6 +261,83 @@
     document.body.dataset.advice = walk.advice ? JSON.stringify(walk.advice) : "";
   }
 
+  /** Where the advice leads, named: in the figures and on the destinations' list. */
+  function showLeadsTo(to) {
+    walk.leadsTo = to;
+    const p = $("leads-to");
+    p.hidden = !to;
+    p.textContent = to ? `Advice leads to ${destinationText(to)} [${to.cell.join(", ")}]` : "";
+    document.body.dataset.leadsTo = to ? String(to.goal) : "";
+    for (const li of $("destinations").children) {
+      li.classList.toggle("target", Boolean(to) && Number(li.dataset.goal) === to.goal);
+    }
+  }
+
+  /** What the advisor believes, as the session's strategy says it: each figure in plain words
+   *  with its symbol, coloured by the strategy's tone, the one that says most in bold. */
+  function showBeliefs(b, step) {
+    walk.beliefs = b;
+    const list = $("beliefs");
+    list.replaceChildren(...b.figures.flatMap((f, i) => {
+      const dt = document.createElement("dt");
+      dt.textContent = f.name;
+      const dd = document.createElement("dd");
+      dd.textContent = `${Math.round(100 * f.p)}% (${f.symbol})`;
+      dd.title = figureText(f);
+      for (const el of [dt, dd]) {
+        el.classList.add(`tone-${f.tone}`);
+        el.classList.toggle("headline", i === b.headline);
+        el.dataset.tone = f.tone;
+      }
+      return [dt, dd];
+    }));
+    const normal = b.figures.find((f) => f.symbol === "P(M1|H)");
+    $("p-chart-name").textContent = normal ? capitalised(normal.name) : "Knows the way";
+    showLeadsTo(b.leads_to);
+    document.body.dataset.beliefsStep = step;
+  }
+
+  function capitalised(text) {
+    return text.charAt(0).toUpperCase() + text.slice(1);
+  }
+
+  /** Ask the session what its advisor believes now (one request at a time; asked again once
+   *  it answers if a decision came meanwhile). */
+  async function askBeliefs() {
+    if (walk.asking) {
+      walk.askAgain = true;
+      return;
+    }
+    const session = walk.session;
+    if (!session) return;
+    walk.asking = true;
+    try {
+      const seen = await fetchJSON(`/sessions/${encodeURIComponent(session.session_id)}`, {
+        headers: { Authorization: `Bearer ${session.token}` },
+      });
+      if (walk.session === session && seen.beliefs) showBeliefs(seen.beliefs, seen.steps);
+    } catch (err) {
+      if (walk.session === session) setStatus(`Could not read the advisor's beliefs: ${err.message}`, true);
+    } finally {
+      walk.asking = false;
+      if (walk.askAgain) {
+        walk.askAgain = false;
+        askBeliefs();
+      }
+    }
+  }
+
+  /** The map's destinations, named where the map names them, with their cells. */
+  function listDestinations(domain) {
+    $("destinations").replaceChildren(...domain.goals.map((cell, i) => {
+      const li = document.createElement("li");
+      li.dataset.goal = i;
+      const name = domain.goal_names ? domain.goal_names[i] : null;
+      li.textContent = `${name ? `${name} · ` : ""}G${i} [${cell.join(", ")}]`;
+      return li;
+    }));
+  }
+
   function onMessage(event) {
     let data;
     try {
@@ -240,6 +363,8 @@
       }
     }
     draw();
+    keepInView();
+    askBeliefs();
   }
 
   function move(a) {
@@ -252,6 +377,7 @@
     document.body.dataset.pending = walk.pending;
     socket.send(JSON.stringify({ state: from, action: a }));
     draw();
+    keepInView();
   }
 
   function openSocket(created) {
@@ -293,9 +419,12 @@
       Object.assign(walk, {
         map: domain.map, pos: created.decision.state, path: [created.decision.state],
         session: created, pending: 0, advice: null, advisedCells: [], background: null,
-        history: [],
+        history: [], domain, beliefs: null, leadsTo: null,
       });
-      walk.cell = fitCanvas(canvas, domain.rows, domain.cols, 640);
+      $("beliefs").replaceChildren();
+      listDestinations(domain);
+      showLeadsTo(null);
+      zoomTo(fitted(6));
       $("advice-note").textContent = NOTES[created.strategy] || "";
       $("session").textContent = `Session ${created.session_id} · ${created.strategy} · ` +
         `κ = ${created.kappa} · window ${created.window}`;
@@ -303,6 +432,7 @@
       document.body.dataset.sessionId = created.session_id;
       showDecision(created.decision);
       draw();
+      askBeliefs();
       openSocket(created);
       canvas.focus();
     } catch (err) {
@@ -392,6 +522,9 @@
   drawLegend();
   drawChart();
   $("restart").addEventListener("click", newWalk);
+  $("zoom-in").addEventListener("click", () => zoomBy(1));
+  $("zoom-out").addEventListener("click", () => zoomBy(-1));
+  $("zoom-fit").addEventListener("click", () => walk.map && zoomTo(fitted(2)));
   $("domain").addEventListener("change", newWalk);
   $("strategy").addEventListener("change", newWalk);
 

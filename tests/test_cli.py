@@ -41,6 +41,20 @@ def test_cli_maze_check_accepts_valid_and_rejects_bad_map(tmp_path: Path) -> Non
     assert "line 2: ragged row" in result.output
 
 
+def test_cli_maze_check_and_show_name_the_destinations(tmp_path: Path) -> None:
+    named = tmp_path / "named.txt"
+    named.write_text("destination: 0 2 Lecture hall B\nS.G\n..G\n")
+    result = runner.invoke(cli, ["maze", "check", str(named)])
+    assert result.exit_code == 0, result.output
+    assert "G0[0, 2] 'Lecture hall B' at 2, G1[1, 2] at 3" in result.output
+    shown = runner.invoke(cli, ["maze", "show", str(named)])
+    assert shown.output.startswith("S.G\n..G\n") and "'Lecture hall B'" in shown.output
+    named.write_text("destination: 0 2 Lecture hall B\ndestination: 1 0 Hall\nS.G\n..G\n")
+    result = runner.invoke(cli, ["maze", "check", str(named)])
+    assert result.exit_code == 2
+    assert "line 2, column 14: cell [1, 0] is a free cell, not a destination" in result.output
+
+
 def test_cli_maze_generate_writes_a_valid_reproducible_map(tmp_path: Path) -> None:
     out = tmp_path / "gen.txt"
     args = ["maze", "generate", "--rows", "15", "--cols", "21", "--seed", "4", "--braid", "0.5"]

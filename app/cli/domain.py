@@ -36,7 +36,7 @@ def domain_put(
         Path,
         typer.Argument(
             help="A map file as `maze import` or `maze generate` writes it (header lines "
-            "resolution: and origin:, if any, then the rows).",
+            "resolution:, origin: and destination:, if any, then the rows).",
             show_default=False,
         ),
     ],

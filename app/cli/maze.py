@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from enum import StrEnum
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, NoReturn, cast
@@ -9,7 +10,7 @@ from typing import TYPE_CHECKING, Annotated, NoReturn, cast
 import numpy as np
 import typer
 
-from app.domain.grid import Frame, GridDomain, MapError
+from app.domain.grid import Frame, GridDomain, MapError, NamedCell, plain_names
 from app.domain.maps import DEFAULT_MAP
 from app.mapio.budget import DEFAULT_MAX_MEMORY_MIB
 
@@ -75,9 +76,10 @@ def describe(domain: GridDomain) -> str:
         frame = f", cells of {domain.frame.resolution:g} m, origin ({ox:g}, {oy:g}) m" + (
             f" yaw {yaw:g} rad" if yaw else ""
         )
+    names = domain.goal_names or (None,) * len(domain.goals)
     goals = ", ".join(
-        f"G{i}{list(domain.cell(g))} at {int(d)}"
-        for i, (g, d) in enumerate(zip(domain.goals, dist, strict=True))
+        f"G{i}{list(domain.cell(g))}" + (f" {name!r}" if name else "") + f" at {int(d)}"
+        for i, (g, name, d) in enumerate(zip(domain.goals, names, dist, strict=True))
     )
     return (
         f"{domain.name}: {rows}x{cols}, {domain.n_states} free cells, "
@@ -105,9 +107,12 @@ def maze_check(maze: Annotated[Path, typer.Argument(help="Map file to validate."
     typer.echo(f"ok: {describe(domain)}")
 
 
-def _write(rows: list[str], out: Path | None, frame: Frame | None = None) -> None:
+def _write(
+    rows: list[str], out: Path | None, frame: Frame | None = None,
+    names: Sequence[NamedCell] = (),
+) -> None:  # fmt: skip
     name = out.stem if out is not None else "maze"
-    domain = GridDomain.from_strings(rows, name=name, frame=frame)
+    domain = GridDomain.from_strings(rows, name=name, frame=frame, names=names)
     body = domain.to_text() + "\n"
     if out is None:
         typer.echo(body, nl=False)
@@ -299,7 +304,12 @@ def maze_import(
         )
         for i, cell in enumerate(sorted(named)):
             typer.echo(f"G{i} [{cell[0]}, {cell[1]}]: {named[cell]}", err=out is None)
-        _write(rows, out, imported.frame)
+        # the destinations' names go into the map as destination lines, made plain
+        placed = [(r, c) for r, c in sorted(named) if rows[r][c] == "G"]
+        written, changed = plain_names([(cell, named[cell]) for cell in placed])
+        for note in changed:
+            typer.echo(note, err=out is None)
+        _write(rows, out, imported.frame, written)
     except ValueError as exc:  # MapError is one
         _fail(str(exc))
     except MemoryError:

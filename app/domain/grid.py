@@ -15,16 +15,26 @@ lower-left corner of the lower-left cell)::
 
     resolution: 0.5          metres per cell side
     origin: -12.0 4.5 0.0    x and y of that corner in metres, and the grid's yaw in radians
+
+and name its destinations, one line each (optional, for any of them; row and column from 0,
+row 0 the top row, as the API's cells)::
+
+    destination: 3 12 Lecture hall B
+
+A name is 1 to 40 characters: letters, digits, spaces and ``- _ . , ' & ( ) / + #``, starting
+with a letter or digit; each cell and each name (ignoring case) at most once; only a ``G``
+cell has one. :attr:`GridDomain.goal_names` holds them in the order of ``goals``.
 """
 
 from __future__ import annotations
 
 import copy
 import math
+import re
 from array import array
 from collections import deque
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 from pathlib import Path
 from typing import Any
@@ -47,9 +57,13 @@ UNREACHABLE = -1
 
 
 class MapError(ValueError):
-    """A map that cannot be a domain; ``line``/``column`` are 1-based when known."""
+    """A map that cannot be a domain; ``line``/``column`` are 1-based when known; ``header``:
+    the problem is in the header, whose lines count from the text's first (not the rows')."""
 
-    def __init__(self, message: str, line: int | None = None, column: int | None = None):
+    def __init__(
+        self, message: str, line: int | None = None, column: int | None = None,
+        header: bool = False,
+    ):  # fmt: skip
         where = ""
         if line is not None:
             where = f"line {line}" + (f", column {column}" if column is not None else "") + ": "
@@ -57,11 +71,12 @@ class MapError(ValueError):
         self.message = message
         self.line = line
         self.column = column
+        self.header = header
 
     def below(self, lines: int) -> MapError:
         """The same problem in a text whose first ``lines`` lines (a header) came before the
         rows this error counted from."""
-        if self.line is None or not lines:
+        if self.line is None or not lines or self.header:
             return self
         return MapError(self.message, self.line + lines, self.column)
 
@@ -179,58 +194,228 @@ class Frame:
         return [f"resolution: {self.resolution!r}", "origin: " + " ".join(map(repr, self.origin))]
 
 
-def parse_header(lines: Sequence[str]) -> tuple[Frame | None, int]:
-    """The frame that a map text's leading ``key: value`` lines give, and how many there are."""
+#: the longest name of a destination
+NAME_MAX = 40
+NAME_RULE = (
+    f"1 to {NAME_MAX} characters: letters, digits, spaces and - _ . , ' & ( ) / + # "
+    "(starting with a letter or digit)"
+)
+_NAME = re.compile(r"[^\W_][\w .,'&()/+#-]*")
+HEADER_KEYS = ("resolution", "origin", "destination")
+
+
+@dataclass(frozen=True)
+class NamedCell:
+    """A destination's name as a map file's header (``destination: ROW COL NAME``) or a PUT
+    body gives it, with where it was written, for errors: a header's ``line`` and the columns
+    of its cell and of its name, or a body's ``label`` (``destinations[2]``)."""
+
+    row: int
+    col: int
+    name: str
+    line: int | None = None
+    column: int | None = None
+    name_column: int | None = None
+    label: str | None = None
+
+    def error(self, message: str, at_name: bool = False) -> MapError:
+        if self.label is not None:
+            message = f"{self.label}: {message}"
+        column = self.name_column if at_name else self.column
+        return MapError(message, self.line, column if self.line is not None else None, True)
+
+
+def check_name(named: NamedCell) -> str:
+    """The name, stripped; :class:`MapError` when it breaks :data:`NAME_RULE`."""
+    name = named.name.strip()
+    if not name:
+        raise named.error("a destination's name is missing", at_name=True)
+    if len(name) > NAME_MAX:
+        raise named.error(
+            f"the name {name[:NAME_MAX]!r}... is {len(name)} characters long: a name is "
+            + NAME_RULE, at_name=True,
+        )  # fmt: skip
+    if not _NAME.fullmatch(name):
+        bad = next((c for c in name if not _NAME.fullmatch("a" + c)), None)
+        what = f"holds {bad!r}" if bad is not None else f"starts with {name[0]!r}"
+        raise named.error(f"the name {name!r} {what}: a name is {NAME_RULE}", at_name=True)
+    return name
+
+
+@dataclass(frozen=True)
+class Header:
+    """What a map text's leading ``key: value`` lines give: the frame, the destinations'
+    names, and how many lines they are."""
+
+    frame: Frame | None = None
+    names: tuple[NamedCell, ...] = ()
+    lines: int = 0
+
+
+def _destination(line: str, n: int) -> NamedCell:
+    """A ``destination: ROW COL NAME`` line (``n``: its number, 1-based)."""
+    value_at = line.index(":") + 1
+    fields = [(m.start() + 1, m.group()) for m in re.finditer(r"\S+", line[value_at:])]
+    fields = [(value_at + at, text) for at, text in fields]
+    usage = "write destination: ROW COL NAME (row and column from 0, as the API's cells)"
+    if len(fields) < 3:
+        where = fields[-1][0] + len(fields[-1][1]) if fields else len(line) + 1
+        raise MapError(f"a destination needs a row, a column and a name: {usage}", n, where, True)
+    cell = []
+    for at, text in fields[:2]:
+        if not (text.isascii() and text.isdigit()) or len(text) > 9:
+            raise MapError(f"{text!r} is not a row or column number: {usage}", n, at, True)
+        cell.append(int(text))
+    name_at = fields[2][0]
+    named = NamedCell(cell[0], cell[1], line[name_at - 1 :], n, fields[0][0], name_at)
+    return replace(named, name=check_name(named))
+
+
+def parse_header(lines: Sequence[str]) -> Header:
+    """The frame and the destinations' names that a map text's leading ``key: value`` lines
+    give, and how many there are."""
     values: dict[str, tuple[int, str]] = {}
+    names: list[NamedCell] = []
     n = 0
     for n, line in enumerate(lines):
         if ":" not in line:
             break
         key, _, value = line.partition(":")
         key = key.strip().lower()
-        if key not in ("resolution", "origin"):
-            raise MapError(f"unknown header {key!r}: a map header has resolution and origin", n + 1)
+        if key not in HEADER_KEYS:
+            raise MapError(
+                f"unknown header {key!r}: a map header has resolution, origin and destination "
+                "lines", n + 1, None, True,
+            )  # fmt: skip
+        if key == "destination":
+            names.append(_destination(line, n + 1))
+            continue
         if key in values:
-            raise MapError(f"{key} given twice", n + 1)
+            raise MapError(f"{key} given twice", n + 1, None, True)
         values[key] = (n + 1, value.strip())
     else:
         n = len(lines)
     if not values:
-        return None, 0
+        return Header(None, tuple(names), n)
+    return Header(_frame(values), tuple(names), n)
+
+
+def _frame(values: dict[str, tuple[int, str]]) -> Frame:
+    """The frame of a header's ``resolution`` and ``origin`` lines (line, text)."""
     if "resolution" not in values:
         raise MapError(
-            "origin without resolution: give the cell side in metres", values["origin"][0]
-        )
+            "origin without resolution: give the cell side in metres", values["origin"][0],
+            None, True,
+        )  # fmt: skip
     res_line, res_text = values["resolution"]
     try:
         resolution = float(res_text)
     except ValueError:
-        raise MapError(f"resolution {res_text!r} is not a number of metres", res_line) from None
+        raise MapError(
+            f"resolution {res_text!r} is not a number of metres", res_line, None, True
+        ) from None
     if not (math.isfinite(resolution) and resolution > 0):
-        raise MapError(f"resolution must be a positive number of metres, got {res_text}", res_line)
+        raise MapError(
+            f"resolution must be a positive number of metres, got {res_text}", res_line, None,
+            True,
+        )  # fmt: skip
     origin: tuple[float, ...] = (0.0, 0.0, 0.0)
     if "origin" in values:
         o_line, o_text = values["origin"]
+        bad = MapError(f"origin {o_text!r}: give x y (and yaw) in metres", o_line, None, True)
         try:
             origin = tuple(float(v) for v in o_text.replace(",", " ").split())
         except ValueError:
-            raise MapError(f"origin {o_text!r}: give x y (and yaw) in metres", o_line) from None
+            raise bad from None
         if len(origin) == 2:
             origin = (*origin, 0.0)
         if len(origin) != 3:
-            raise MapError(f"origin {o_text!r}: give x y (and yaw) in metres", o_line)
+            raise bad
     try:
-        return Frame(resolution, (origin[0], origin[1], origin[2])), n
+        return Frame(resolution, (origin[0], origin[1], origin[2]))
     except MapError as exc:
-        raise MapError(exc.message, values["origin"][0]) from None
+        raise MapError(exc.message, values["origin"][0], None, True) from None
 
 
-def split_text(text: str) -> tuple[Frame | None, list[str], int]:
-    """A map file's text as (the frame its header gives, its rows, the header's line count);
-    :class:`MapError` names a bad header line."""
+def split_text(text: str) -> tuple[Header, list[str]]:
+    """A map file's text as (what its header gives, its rows); :class:`MapError` names a bad
+    header line."""
     lines = text.splitlines()
-    frame, skip = parse_header(lines)
-    return frame, lines[skip:], skip
+    header = parse_header(lines)
+    return header, lines[header.lines :]
+
+
+def name_goals(rows: Sequence[str], names: Sequence[NamedCell]) -> tuple[str | None, ...] | None:
+    """The name of each goal of checked ``rows`` (row-major order; None: unnamed) from
+    ``names``, or None when there are none; :class:`MapError` for a name of a cell that is
+    not a goal, a cell or a name given twice."""
+    if not names:
+        return None
+    height, width = len(rows), len(rows[0])
+    goals = [(r, c) for r, row in enumerate(rows) for c, ch in enumerate(row) if ch == GOAL]
+    index = {cell: i for i, cell in enumerate(goals)}
+    out: list[str | None] = [None] * len(goals)
+    by_cell: dict[tuple[int, int], NamedCell] = {}
+    by_name: dict[str, NamedCell] = {}
+    for named in names:
+        cell, name = (named.row, named.col), check_name(named)
+        where = f"[{named.row}, {named.col}]"
+        if not (named.row < height and named.col < width):
+            raise named.error(f"cell {where} is off the {height}x{width} map")
+        if cell not in index:
+            what = {WALL: "a wall", FREE: "a free cell", START: "the start"}[rows[cell[0]][cell[1]]]
+            raise named.error(
+                f"cell {where} is {what}, not a destination: only a 'G' cell has a name"
+            )
+        if cell in by_cell:
+            raise named.error(f"cell {where} is named twice{_first(by_cell[cell])}")
+        if name.casefold() in by_name:
+            first = by_name[name.casefold()]
+            raise named.error(
+                f"the name {name!r} is given twice{_first(first)}: each destination's name "
+                "must be its own", at_name=True,
+            )  # fmt: skip
+        by_cell[cell], by_name[name.casefold()] = named, named
+        out[index[cell]] = name
+    return tuple(out)
+
+
+def plain_names(
+    given: Sequence[tuple[tuple[int, int], str]],
+) -> tuple[list[NamedCell], list[str]]:
+    """Names from elsewhere (an imported venue's) made into names a map may hold: every
+    character :data:`NAME_RULE` does not allow a space, spaces collapsed, what precedes the
+    first letter or digit dropped, cut to :data:`NAME_MAX`, a name already given (ignoring
+    case) numbered (``Restroom 2``); a name left empty is no name. Returns the names and a
+    note for each one changed."""
+    out: list[NamedCell] = []
+    notes: list[str] = []
+    taken: set[str] = set()
+    for (row, col), text in given:
+        words = "".join(c if _NAME.fullmatch("a" + c) else " " for c in text).split()
+        name = " ".join(words)
+        name = name[next((i for i, c in enumerate(name) if c.isalnum()), len(name)) :]
+        name = name[:NAME_MAX].rstrip()
+        base, n = name, 1
+        while name and name.casefold() in taken:
+            n += 1
+            name = f"{base[: NAME_MAX - len(str(n)) - 1].rstrip()} {n}"
+        if name != text:
+            notes.append(
+                f"destination [{row}, {col}] {text!r} written "
+                + (f"as {name!r}" if name else "without a name")
+                + f" (a name is {NAME_RULE})"
+            )
+        if name:
+            taken.add(name.casefold())
+            out.append(NamedCell(row, col, name))
+    return out, notes
+
+
+def _first(named: NamedCell) -> str:
+    if named.line is not None:
+        return f" (line {named.line} names it first)"
+    return f" ({named.label} names it first)" if named.label else ""
 
 
 @dataclass(frozen=True, eq=False)
@@ -243,6 +428,8 @@ class GridDomain:
     rows_text: tuple[str, ...]
     name: str = "maze"
     frame: Frame | None = None
+    #: each goal's name (in the order of ``goals``; None: unnamed), None when none has one
+    goal_names: tuple[str | None, ...] | None = None
     walls: BoolArray = field(init=False, repr=False)
     state_of: IntArray = field(init=False, repr=False)
     cells: IntArray = field(init=False, repr=False)
@@ -281,26 +468,30 @@ class GridDomain:
         object.__setattr__(self, "start", int(state_of[grid == START][0]))
         goal_cells = np.argwhere(grid == GOAL)
         object.__setattr__(self, "goals", tuple(int(state_of[r, c]) for r, c in goal_cells))
+        if self.goal_names is not None and len(self.goal_names) != len(self.goals):
+            raise ValueError(f"{len(self.goal_names)} goal names for {len(self.goals)} goals")
 
     # ---- construction -------------------------------------------------------------------
     @classmethod
     def from_strings(
-        cls, rows: Sequence[str], name: str = "maze", frame: Frame | None = None
-    ) -> GridDomain:
-        """Validate ``rows`` (see :func:`validate_map`) and build the domain."""
+        cls, rows: Sequence[str], name: str = "maze", frame: Frame | None = None,
+        names: Sequence[NamedCell] = (),
+    ) -> GridDomain:  # fmt: skip
+        """Validate ``rows`` (see :func:`validate_map`) and the destinations' ``names`` (see
+        :func:`name_goals`) and build the domain."""
         cleaned = validate_map(rows)
-        return cls(tuple(cleaned), name=name, frame=frame)
+        goal_names = name_goals(cleaned, names)
+        return cls(tuple(cleaned), name=name, frame=frame, goal_names=goal_names)
 
     @classmethod
     def from_text(cls, text: str, name: str = "maze") -> GridDomain:
-        """A map file's text: optional header lines (the frame), then the rows."""
-        frame, rows, skip = split_text(text)
+        """A map file's text: optional header lines (the frame, the destinations' names), then
+        the rows."""
+        header, rows = split_text(text)
         try:
-            return cls.from_strings(rows, name=name, frame=frame)
+            return cls.from_strings(rows, name=name, frame=header.frame, names=header.names)
         except MapError as exc:
-            if exc.line is None or not skip:
-                raise
-            raise exc.below(skip) from None
+            raise exc.below(header.lines) from None
 
     @classmethod
     def from_file(cls, path: str | Path, name: str | None = None) -> GridDomain:
@@ -324,11 +515,36 @@ class GridDomain:
         object.__setattr__(other, "frame", frame)
         return other
 
+    def with_names(self, goal_names: tuple[str | None, ...] | None) -> GridDomain:
+        """This map with its destinations named ``goal_names`` (checked: :func:`name_goals`),
+        shared as :meth:`with_frame` shares it (itself when they are its own)."""
+        if goal_names == self.goal_names:
+            return self
+        if goal_names is not None and len(goal_names) != len(self.goals):
+            raise ValueError(f"{len(goal_names)} goal names for {len(self.goals)} goals")
+        other = copy.copy(self)
+        object.__setattr__(other, "goal_names", goal_names)
+        return other
+
     def to_text(self) -> str:
-        """The map file's text (header lines when the grid has a frame); :meth:`from_text`
-        reads it back."""
+        """The map file's text (header lines when the grid has a frame or named destinations);
+        :meth:`from_text` reads it back."""
         head = self.frame.header() if self.frame is not None else []
+        for (row, col), goal_name in zip(self.goal_cells, self.goal_names or (), strict=False):
+            if goal_name is not None:
+                head.append(f"destination: {row} {col} {goal_name}")
         return "\n".join([*head, *self.rows_text])
+
+    @property
+    def goal_cells(self) -> list[tuple[int, int]]:
+        """Each goal's (row, col), in the order of ``goals``."""
+        return [self.cell(g) for g in self.goals]
+
+    def goal_label(self, index: int) -> str:
+        """How the pages name goal ``index``: its name, else ``G<index>`` (as the maps draw
+        it); the data keeps no invented name."""
+        named = self.goal_names[index] if self.goal_names is not None else None
+        return named if named is not None else f"G{index}"
 
     # ---- shape --------------------------------------------------------------------------
     @property

@@ -6,7 +6,7 @@ its threadpool, and the thread hops cost more than the lookups."""
 from __future__ import annotations
 
 from collections.abc import Awaitable, Callable
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 from fastapi import Depends, Path
 from fastapi.security import APIKeyHeader, HTTPAuthorizationCredentials, HTTPBearer
@@ -21,11 +21,13 @@ from app.service.security import (
     check_admin,
     check_session_token,
     is_operator,
+    key_role,
     same_secret,
 )
 from app.service.state import ServiceState
 
 SESSION_ID_PATTERN = r"^[A-Za-z0-9_-]{1,64}$"
+Role = Literal["admin", "operator"]
 #: ``openapi_extra`` for routes that check the bearer token through :func:`get_session`.
 BEARER: dict[str, Any] = {"security": [{"HTTPBearer": []}]}
 
@@ -58,10 +60,10 @@ async def require_admin(
 
 async def operator_view(
     state: StateDep, key: Annotated[str | None, Depends(api_key_header)] = None
-) -> bool:
-    """Whether the caller may see live positions and paths: the admin key or the read-only
-    operator key (403 for a key that is neither; False without one)."""
-    return is_operator(key, state.admin_key, state.operator_key)
+) -> Role | None:
+    """Which key the caller sent: ``admin`` or ``operator`` (the read-only key: both may see
+    live positions and paths), None without one (403 for a key that is neither)."""
+    return key_role(key, state.admin_key, state.operator_key)
 
 
 async def require_operator(
@@ -162,7 +164,8 @@ def client_of(conn: HTTPConnection, state: ServiceState) -> str | None:
 
 AdminDep = Depends(require_admin)
 OperatorDep = Depends(require_operator)
-OperatorView = Annotated[bool, Depends(operator_view)]
+#: which key a request sent (None: none), for a route that shows more to an operator
+OperatorView = Annotated[Role | None, Depends(operator_view)]
 DomainDep = Annotated[DomainState, Depends(get_domain)]
 SessionDep = Annotated[LiveSession, Depends(get_session)]
 SessionOrAdminDep = Annotated[LiveSession, Depends(get_session_or_admin)]

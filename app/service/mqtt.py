@@ -117,6 +117,7 @@ from app.service.live.faults import RETRY_AFTER
 from app.service.live.registry import LiveSession, SessionNotFound
 from app.service.metrics import MQTT_MESSAGES
 from app.service.problems import BadInput, describe_errors
+from app.service.public import decision_leads_to
 from app.service.schemas import NAME_PATTERN, SessionCreate
 from app.service.state import ServiceState
 from app.service.wire.encode import decision_json
@@ -573,7 +574,8 @@ class Bridge:
         self.sessions[who] = session
         while len(self.sessions) > self.max_explorers:
             await self._end(next(iter(self.sessions)))
-        return session, decision_json(decision, domain.domain)
+        leads = decision_leads_to(session, decision)
+        return session, decision_json(decision, domain.domain, leads)
 
     async def _first_answer(self, who: Explorer, session: LiveSession, payload: bytes) -> bytes:
         """The events of the message that opened ``session``: refused, or failing, they end

@@ -40,7 +40,12 @@ from app.service.live.replay import StepConflict
 from app.service.mapbody import map_of
 from app.service.metrics import METRICS, ingested
 from app.service.problems import BadInput
-from app.service.public import overview_domain, overview_session, viewer_session
+from app.service.public import (
+    decision_leads_to,
+    overview_domain,
+    overview_session,
+    viewer_session,
+)
 from app.service.schemas import (
     Cell,
     DomainPut,
@@ -215,7 +220,8 @@ async def answer_events(
             if move is not None:
                 d = await sessions.observe_one(session, *move)
                 _count(state, session, 1, int(d.advise))
-                return decision_json(d, grid)
+                leads = decision_leads_to(sessions.current(session), d) if d.advise else None
+                return decision_json(d, grid, leads)
         moves, _, first = read_moves(grid, raw, state.settings.max_batch_events)
         out = await sessions.observe(session, moves, first)
     except StepConflict as exc:
@@ -290,12 +296,12 @@ def put_domain(state: ServiceState, name: str, body: DomainPut) -> tuple[DomainS
     is built before the answer (:meth:`DomainCatalog.prepare_all`: a map whose needs would
     pass ``ADVISOR_MAX_DOMAIN_MEMORY`` is refused first), and what the event paths read of it
     (:func:`app.service.wire.warm.warm`), so that no session or event builds them."""
-    frame, rows, header_lines = map_of(body)  # rows, or a map file's text
+    header, rows = map_of(body)  # rows, or a map file's text
     old = state.catalog.find(name)
     try:
-        grid = state.catalog.parse_map(rows, name, frame)
+        grid = state.catalog.parse_map(rows, name, header.frame, header.names)
     except MapError as exc:
-        raise BadInput(f"map: {exc.below(header_lines)}") from None
+        raise BadInput(f"map: {exc.below(header.lines)}") from None
     if old is not None and grid is not old.domain and grid.rows_text is old.domain.rows_text:
         share_lists(old.domain, grid)  # the same map in another frame
     goals, most = len(grid.goals), state.settings.max_goal_cells
@@ -395,14 +401,16 @@ def ingest(
 
 
 def overview(
-    state: ServiceState, detail: bool, aggregates: dict[str, Aggregate],
+    state: ServiceState, role: str | None, aggregates: dict[str, Aggregate],
     sessions: list[SessionSnapshot],
 ) -> bytes:  # fmt: skip
     """*Worker thread.* ``GET /overview``: per domain its figures over its live sessions; with
-    ``detail`` (an operator's key) also the most recently active sessions, where each is and
-    was (``sessions``, read by the route)."""
+    a ``role`` (the admin or the operator key) also the most recently active sessions, where
+    each is and was (``sessions``, read by the route), and the role, which the dashboard reads
+    to know what the key may do."""
     return orjson.dumps({
-        "detail": detail,
+        "detail": role is not None,
+        "role": role,
         "domains": [overview_domain(d, aggregates.get(d.name)) for d in state.catalog.states()],
         "total_sessions": sum(a.sessions for a in aggregates.values()),
         "sessions": [overview_session(s) for s in sessions],

@@ -6,6 +6,7 @@ from typing import Any
 
 import numpy as np
 
+from app import strategies
 from app.advice.advisor import Decision
 from app.domain.grid import ACTIONS, GridDomain
 from app.service.data.domains import DomainState
@@ -33,7 +34,8 @@ def domain_public(d: DomainState) -> DomainPublic:
         name=d.name, rows=rows, cols=cols, map=list(g.rows_text),
         resolution=g.frame.resolution if g.frame else None,
         origin=list(g.frame.origin) if g.frame else None, start=_cell(g, g.start),
-        goals=[_cell(g, s) for s in g.goals], actions=list(ACTIONS),
+        goals=[_cell(g, s) for s in g.goals],
+        goal_names=list(g.goal_names or (None,) * len(g.goals)), actions=list(ACTIONS),
         alpha0=d.view.alpha0, n_states=g.n_states,
         trajectories=d.view.trajectories.get(POOLED, 0),
         agent_types=sorted(k for k in d.view.tables if k != POOLED),
@@ -55,8 +57,27 @@ def prior_public(d: DomainState, agent_type: str | None) -> PriorPublic:
     )  # fmt: skip
 
 
-def decision_public(d: Decision, domain: GridDomain) -> DecisionPublic:
-    return DecisionPublic.model_validate(decision_dict(d, domain))
+def decision_public(
+    d: Decision, domain: GridDomain, leads_to: dict[str, Any] | None = None
+) -> DecisionPublic:
+    out = decision_dict(d, domain)
+    if leads_to is not None:
+        out["leads_to"] = leads_to
+    return DecisionPublic.model_validate(out)
+
+
+def decision_leads_to(s: LiveSession, d: Decision) -> dict[str, Any] | None:
+    """The destination a decision of ``s`` leads to, as its strategy's entry says (None: the
+    decision does not advise, or the strategy's advice leads to no destination)."""
+    entry = strategies.STRATEGIES.get(s.advisor.strategy)
+    if not d.advise or entry is None or entry.leads_to is None:
+        return None
+    goal = entry.leads_to(s.advisor)
+    grid = s.domain.domain
+    if goal is None or not 0 <= goal < len(grid.goals):
+        return None
+    name = grid.goal_names[goal] if grid.goal_names is not None else None
+    return destination_dict(goal, grid.cell(grid.goals[goal]), name)
 
 
 def session_created(s: LiveSession, decision: Decision) -> SessionCreated:
@@ -64,7 +85,7 @@ def session_created(s: LiveSession, decision: Decision) -> SessionCreated:
         session_id=s.id, token=s.token, domain=s.domain.name, agent_type=s.agent_type,
         prior_table=s.table_key, kappa=s.advisor.kappa, window=s.advisor.window,
         strategy=s.advisor.strategy, params=s.advisor.params(),
-        decision=decision_public(decision, s.domain.domain),
+        decision=decision_public(decision, s.domain.domain, decision_leads_to(s, decision)),
     )  # fmt: skip
 
 
@@ -76,7 +97,7 @@ def session_public(s: SessionSnapshot) -> SessionPublic:
         position=s.position, p_normal=s.p_normal,
         advice_count=s.advice_count, total_cost=s.total_cost, benefit=s.benefit,
         advice_per_100=s.advice_per_100, idle_seconds=s.idle_seconds, created_at=s.created_at,
-        muted=s.muted, budget=_budget(s),
+        muted=s.muted, budget=_budget(s), beliefs=beliefs_dict(s),
     )  # fmt: skip
 
 
@@ -89,6 +110,7 @@ def _session_figures(s: SessionSnapshot) -> dict[str, Any]:
         "position": s.position, "p_normal": s.p_normal, "advice_count": s.advice_count,
         "total_cost": s.total_cost, "advice_per_100": s.advice_per_100, "path": s.path,
         "p_normal_history": s.p_history, "muted": s.muted, "budget": _budget(s),
+        "beliefs": beliefs_dict(s),
     }  # fmt: skip
 
 
@@ -104,6 +126,21 @@ def overview_session(s: SessionSnapshot) -> dict[str, Any]:
 def viewer_session(s: SessionSnapshot) -> dict[str, Any]:
     """A live session as the viewer's feed gives it (``ViewerSession``)."""
     return _session_figures(s) | {"advice": s.advice}
+
+
+def beliefs_dict(s: SessionSnapshot) -> dict[str, Any] | None:
+    """What the session's advisor believes (``BeliefsPublic``)."""
+    b = s.beliefs
+    if b is None:
+        return None
+    figures = [{"name": f.name, "symbol": f.symbol, "p": f.p, "tone": f.tone} for f in b.figures]
+    leads = None if s.leads_to is None else destination_dict(*s.leads_to)
+    return {"figures": figures, "headline": b.headline, "leads_to": leads}
+
+
+def destination_dict(goal: int, cell: tuple[int, int], name: str | None) -> dict[str, Any]:
+    """A destination (``DestinationPublic``)."""
+    return {"goal": goal, "cell": cell, "name": name}
 
 
 def _budget(s: SessionSnapshot) -> dict[str, int | None] | None:

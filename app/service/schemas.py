@@ -27,6 +27,8 @@ from typing_extensions import TypedDict
 from app import strategies
 from app.advice.advisor import DEFAULT_KAPPA, DEFAULT_STRATEGY, DEFAULT_WINDOW
 from app.advice.params import StrategyParams as CoreStrategyParams
+from app.domain.grid import NAME_MAX
+from app.domain.grid import NAME_RULE as NAME_RULE_DESTINATION
 
 NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$"
 NAME_RULE = "1-64 characters: letters, digits, '_', '.', '-' (starting with a letter or digit)"
@@ -75,6 +77,8 @@ RESOLUTION_MAX = 1e4
 #: alpha0 bounds: beyond them theta over- or underflows (4 alpha0 is inf, alpha0 / count is 0)
 #: and a prior's tables cannot be built; the store must never hold such a domain.
 ALPHA0_MIN, ALPHA0_MAX = 1e-6, 1e6
+#: names a PUT body may give at most (a map with more goals names them in its text)
+MAX_DESTINATION_NAMES = 100_000
 
 
 class Strict(BaseModel):
@@ -124,6 +128,17 @@ class NotReadyPublic(BaseModel):
 
 
 # ---- domains ---------------------------------------------------------------------------------
+class DestinationIn(Strict):
+    """A destination's name: its cell (a 'G' of the map) and what people call it."""
+
+    cell: Cell
+    name: str = Field(
+        max_length=4 * NAME_MAX,  # checked against the rule with the map, naming its index
+        description=f"{NAME_RULE_DESTINATION}.",
+        examples=["Lecture hall B"],
+    )
+
+
 class DomainBase(Strict):
     map: list[str] | None = Field(
         None,
@@ -135,9 +150,10 @@ class DomainBase(Strict):
     text: str | None = Field(
         None,
         description="The map file's text as `maze import` and `maze generate` write it: header "
-        "lines (`resolution: M`, `origin: X Y YAW`) if any, then one row a line. Its header "
-        "gives the resolution and origin (not the fields). Give it or map; errors name the "
-        "line and column of the text, as `maze check` does.",
+        "lines (`resolution: M`, `origin: X Y YAW`, `destination: ROW COL NAME`) if any, then "
+        "one row a line. Its header gives the resolution, origin and destinations' names (not "
+        "the fields). Give it or map; errors name the line and column of the text, as `maze "
+        "check` does.",
         examples=["resolution: 0.5\norigin: -12.0 4.5 0.0\n#####\n#S.G#\n#####"],
     )
     alpha0: float = Field(
@@ -169,11 +185,25 @@ class DomainBase(Strict):
         examples=[[-12.0, 4.5, 0.0]],
     )
 
+    destinations: list[DestinationIn] | None = Field(
+        None,
+        max_length=MAX_DESTINATION_NAMES,
+        description="Names of the map's destinations ('G' cells), any of them (optional): "
+        f"each name is {NAME_RULE_DESTINATION}, each cell and name (ignoring case) once. "
+        "With text, the names are its header's `destination: ROW COL NAME` lines.",
+        examples=[[{"cell": [1, 3], "name": "Lecture hall B"}]],
+    )
+
     @model_validator(mode="after")
     def _origin_needs_resolution(self) -> DomainBase:
         if (self.map is None) == (self.text is None):
             raise ValueError(
                 "give the map as map (a list of rows) or as text (the map file's text), one of them"
+            )
+        if self.text is not None and self.destinations is not None:
+            raise ValueError(
+                "with text, the destinations' names are the text's header lines "
+                "(destination: ROW COL NAME), not a field"
             )
         if self.text is not None and (self.resolution, self.origin) != (None, None):
             raise ValueError(
@@ -218,6 +248,9 @@ class DomainPublic(BaseModel):
     )
     start: Cell
     goals: list[Cell]
+    goal_names: list[str | None] = Field(
+        description="Each goal's name, in the order of goals (null: the map names it not)."
+    )
     actions: list[ActionName]
     alpha0: float
     n_states: int
@@ -376,6 +409,41 @@ class GoalBelief(BaseModel):
     ruled_out: bool = Field(description="The explorer stood on this goal and went on.")
 
 
+class DestinationPublic(BaseModel):
+    """A destination of the map (one of its goals)."""
+
+    goal: int = Field(description="Its index in the domain's goals (G0, G1, ... on the maps).")
+    cell: Cell
+    name: str | None = Field(description="Its name, if the map names it.")
+
+
+class FigurePublic(BaseModel):
+    """One thing the advisor believes of the explorer."""
+
+    name: str = Field(
+        description="In plain words: 'moves like someone who knows the building', 'looks "
+        "lost', 'on its way'.",
+    )
+    symbol: str = Field(description="The same in the paper's notation: 'P(M1|H)', 'P(M2|H)'.")
+    p: float = Field(description="How likely, 0 to 1.")
+    tone: Literal["good", "neutral", "bad"] = Field(
+        description="How it reads, as the strategy decides: good (nothing to do), neutral "
+        "(the advisor is handling it: guide leading a lost explorer), bad (it looks lost and "
+        "the advisor cannot help now)."
+    )
+
+
+class BeliefsPublic(BaseModel):
+    """What the advisor believes of the explorer, as its strategy reads it: the pages show
+    these rather than reading P(M1|H) themselves."""
+
+    figures: list[FigurePublic] = Field(description="In an order fixed per strategy.")
+    headline: int = Field(description="The index of the figure that says most now.")
+    leads_to: DestinationPublic | None = Field(
+        description="The destination its advice leads to now (guide), else null."
+    )
+
+
 class CostPublic(BaseModel):
     advice_count: int
     total: float = Field(description="kappa x advice_count.")
@@ -399,6 +467,13 @@ class DecisionPublic(BaseModel):
     kl: float = Field(description="KL[theta_s || P(A | s, H)] in nats.")
     p_normal: float = Field(description="P(M1 | H), the posterior of the normal model.")
     cost: CostPublic
+    leads_to: DestinationPublic | None = Field(
+        None,
+        exclude_if=lambda v: v is None,  # absent, not null: the answers before it stay as they were
+        description="The destination the advice leads to (guide), in the answer to one event "
+        "that advises and in a new session's first decision; absent otherwise (a batch's "
+        "decisions: the session's beliefs.leads_to says it).",
+    )
 
 
 EventStep = Annotated[
@@ -464,6 +539,9 @@ class SessionBase(BaseModel):
     advice_per_100: float
     muted: bool = Field(False, description="The visitor asked for no more advice.")
     budget: BudgetPublic | None = Field(None, description="Its advice budget (null: none).")
+    beliefs: BeliefsPublic | None = Field(
+        None, description="What the advisor believes of the explorer, in plain words."
+    )
 
 
 class SessionPublic(SessionBase):
@@ -514,6 +592,11 @@ class Overview(BaseModel):
     detail: bool = Field(
         description="Whether live sessions are listed: for the admin key or the read-only "
         "operator key (X-API-Key) only; anyone else sees the figures per domain."
+    )
+    role: Literal["admin", "operator"] | None = Field(
+        None,
+        description="Which key asked: admin (reads live sessions, and ends them), operator "
+        "(reads only), null (no key). The dashboard offers what the key may do.",
     )
     domains: list[OverviewDomain]
     total_sessions: int

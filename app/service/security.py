@@ -17,6 +17,7 @@ import re
 import secrets
 import stat
 from pathlib import Path
+from typing import Literal
 
 from pydantic import SecretStr
 
@@ -98,6 +99,19 @@ def is_operator(given: str | None, admin: str, operator: str) -> bool:
         return False
     if same_secret(given, admin) | same_secret(given, operator):  # both compared, always
         return True
+    raise AuthError(403, "the X-API-Key is neither the admin key nor the operator key")
+
+
+def key_role(given: str | None, admin: str, operator: str) -> Literal["admin", "operator"] | None:
+    """Which key ``given`` is: ``admin``, ``operator`` (the read-only key) or None (no key); a
+    key that is neither is refused (403), as :func:`is_operator` refuses it."""
+    if not given:
+        return None
+    is_admin, is_op = same_secret(given, admin), same_secret(given, operator)  # both compared
+    if is_admin:
+        return "admin"
+    if is_op:
+        return "operator"
     raise AuthError(403, "the X-API-Key is neither the admin key nor the operator key")
 
 

@@ -5,7 +5,9 @@ defaults, bounds and meaning are :class:`~app.advice.params.StrategyParams`'); w
 a domain besides the prior (:class:`Need`); its readable advisor; the form a service runs
 (windows of pair keys, batches compiled; none: the readable advisor, one call an event); the
 code of its compiled form in :mod:`app.kernels` (none: the experiments run the readable loop);
-the cost level the experiments sweep; and the largest kappa at which it still advises.
+the cost level the experiments sweep; the largest kappa at which it still advises; and what its
+advisor believes of the explorer in plain words, with the destination its advice leads to
+(:mod:`app.strategies.beliefs`), which the pages show.
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ from app.advice.guide import GuideMap
 from app.advice.models import AdviceTables
 from app.advice.params import StrategyParams
 from app.advice.priors import GoalPriors
+from app.strategies.beliefs import Beliefs, paper_beliefs
 
 
 class Need(enum.Enum):
@@ -99,6 +102,14 @@ class Strategy:
         "The experts' action prior θ for this cell: how often people who know the building "
         "moved each way here."
     )
+    #: what its advisor believes of the explorer (figures in plain words, each with its
+    #: symbol and a tone; the destination its advice leads to), from the advisor and the
+    #: P(M1|H) of its last decision: the session answers carry it to the pages
+    beliefs: Callable[[Advisor, float], Beliefs] = paper_beliefs
+    #: the destination (an index into the domain's goals) its advice leads to now, if its
+    #: advice leads to destinations (None: it does not): a one-event answer that advises
+    #: says it
+    leads_to: Callable[[Advisor], int | None] | None = None
 
     def __post_init__(self) -> None:
         known = {f.name for f in fields(StrategyParams)}

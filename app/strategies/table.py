@@ -31,6 +31,7 @@ from app.advice.rules import (
     RandomAdvisor,
     RuleAdvisor,
 )
+from app.strategies.beliefs import guide_beliefs, guide_target
 from app.strategies.entry import AdvisorSettings, DomainData, Level, Need, Strategy
 from app.strategies.stream import StreamAdvisor, StreamGoalAware, StreamGuide, keyed
 
@@ -165,4 +166,5 @@ register(Strategy(
     level=Level("kappa", (0.1, 0.25, 0.5, 0.75, 1.0, 1.25, 1.4, 1.6)), kappa_max=GUIDE_KAPPA_MAX,
     advice="The way to the destination you most likely want (or the nearest one left): the "
     "moves along a shortest path there.",
+    beliefs=guide_beliefs, leads_to=guide_target,
 ))  # fmt: skip

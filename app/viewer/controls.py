@@ -32,17 +32,18 @@ from app.viewer.sessions import ADVICE_MIN_P, FLOOR_COLOUR, PALETTE
 from app.viewer.state import SessionView
 
 NONE = "(none)"
-#: What "lost" means for the kappa shading.
-LOST_CERTAIN = "P(M1|H) = 0: certainly lost"
-LOST_PICKED = "P(M1|H) of the picked session"
+#: What "lost" means for the kappa shading (plain words first, the paper's symbol second).
+LOST_CERTAIN = "certainly lost (P(M1|H) = 0)"
+LOST_PICKED = "as the picked session (its P(M1|H))"
 #: the kappa slider's range until the service says its strategies' (``Snapshot.kappa_max``):
 #: just above log 4, the largest KL[theta_s || uniform], the paper's rule's range
 SLIDER_KAPPA_HIGH = 1.4
-#: The picked session's plot; P(M1|H) is this quantity's one name on every page.
-PLOT_TITLE = "P(M1|H) over time"
+#: The picked session's plot: plain words first, P(M1|H) (this quantity's one symbol on every
+#: page) second.
+PLOT_TITLE = "Knows the way (P(M1|H)) over time"
 LAYER_LABELS = {
-    "prior": "Prior arrows",
-    "shading": "Kappa shading",
+    "prior": "Experts' ways (prior arrows)",
+    "shading": "Would be advised (kappa shading)",
     "paths": "Session paths",
     "markers": "Session markers",
     "advice": "Advice given",
@@ -64,11 +65,11 @@ class Controls:
         self.fit = gui.add_button("Fit the maze to the window", hint="Look at it from above")
         self._fit_asked = False
         self.fit.on_click(lambda _event: self._ask_fit())
-        with gui.add_folder("Advice threshold"):
+        with gui.add_folder("Where advice would be given"):
             self.kappa_high = SLIDER_KAPPA_HIGH
             self.kappa = gui.add_slider(
-                "kappa", 0.0, self.kappa_high, 0.01, DEFAULT_KAPPA,
-                hint="Cost of one piece of advice",
+                "Price (kappa)", 0.0, self.kappa_high, 0.01, DEFAULT_KAPPA,
+                hint="The price of one piece of advice, kappa, in nats",
             )  # fmt: skip
             self.lost = gui.add_dropdown("Lost means", (LOST_CERTAIN, LOST_PICKED))
             self.shading_text = gui.add_markdown("")
@@ -82,7 +83,7 @@ class Controls:
                 (np.zeros(1), np.full(1, 0.5)),
                 (
                     viser.uplot.Series(label="step"),
-                    viser.uplot.Series(label="P(M1|H)", stroke="#326edc", width=2),
+                    viser.uplot.Series(label="knows the way (P(M1|H))", stroke="#326edc", width=2),
                 ),
                 title=PLOT_TITLE,
                 scales={"x": viser.uplot.Scale(time=False), "y": viser.uplot.Scale(range=(0, 1))},
@@ -172,13 +173,13 @@ class Controls:
 
     def show_shading(self, cells: int, total: int, kappa: float, p_normal: float) -> None:
         self.shading_text.content = (
-            f"Shaded: **{cells}** of {total} cells would be advised at kappa = {kappa:.2f} "
-            f"for an explorer with P(M1|H) = {p_normal:.3f} "
-            "(advise iff KL[theta_s || P(A|s,H)] >= kappa)."
+            f"Shaded: **{cells}** of {total} cells, where an explorer who looks lost "
+            f"{1.0 - p_normal:.0%} (P(M1|H) = {p_normal:.3f}) would be advised at the price "
+            f"of advice kappa = {kappa:.2f} (where KL[theta_s || P(A|s,H)] >= kappa)."
         )
 
     def show_session(self, s: SessionView | None) -> None:
-        key = None if s is None else (s.session_id, s.version, s.p_normal)
+        key = None if s is None else (s.session_id, s.version, s.p_normal, s.figures, s.leads_to)
         if key == self._shown:
             return
         self._shown = key
@@ -189,10 +190,11 @@ class Controls:
         per_100 = 100.0 * s.advice_count / (s.steps + 1)
         self.stats.content = (
             f"**{s.session_id}**" + (f" ({s.agent_type})" if s.agent_type else "") + "\n\n"
-            f"steps **{s.steps}**, at {list(s.position)}, P(M1|H) **{s.p_normal:.3f}**\n\n"
-            f"advice **{s.advice_count}** ({per_100:.1f} per 100 decisions), "
-            f"cost **{s.total_cost:.2f}** at kappa {s.kappa:g}, strategy `{s.strategy}`"
-            + goal_lines(s)
+            f"steps **{s.steps}**, at {list(s.position)}\n\n"
+            + belief_lines(s)
+            + f"advice **{s.advice_count}** ({per_100:.1f} per 100 decisions), "
+            f"cost **{s.total_cost:.2f}** at the price {s.kappa:g} (kappa), "
+            f"strategy `{s.strategy}`" + goal_lines(s)
         )
         history = np.asarray(s.p_normal_history, dtype=np.float64)
         if history.size == 0:
@@ -216,13 +218,15 @@ def legend_markdown() -> str:
     return "\n\n".join(
         [
             f"{swatch(WALL_COLOUR)} walls, {swatch(START_COLOUR)} start, "
-            f"{swatch(GOAL_COLOUR)} goals G0, G1, ... (the explorer's hidden goal is one of them)",
-            f"{swatch(PRIOR_COLOUR, '➤')} **Prior arrows**: the experts' action prior "
-            "theta_s, four flat arrows a cell; the longer and more solid, the more often "
-            "experts moved that way there",
-            f"{swatch(shade)} **Kappa shading**: cells where an explorer with the "
-            "P(M1|H) of *Lost means* would be advised at the slider's kappa "
-            "(KL[theta_s || P(A|s,H)] >= kappa)",
+            f"{swatch(GOAL_COLOUR)} destinations, by name or G0, G1, ... (the explorer's "
+            "hidden goal is one of them)",
+            f"{swatch(PRIOR_COLOUR, '➤')} **{LAYER_LABELS['prior']}**: what people who know "
+            "the building did in each cell (the experts' action prior theta_s), four flat "
+            "arrows a cell; the longer and more solid, the more often experts moved that way "
+            "there",
+            f"{swatch(shade)} **{LAYER_LABELS['shading']}**: cells where an explorer who "
+            "looks as lost as *Lost means* says would be advised at the slider's price "
+            "(kappa): where KL[theta_s || P(A|s,H)] >= kappa",
             f"{sessions} **Session markers**: where each live explorer is now, one colour "
             "each; ▶ labels the picked one",
             f"{swatch(PALETTE[0], '━')} **Session paths**: each explorer's recent cells as a "
@@ -243,7 +247,37 @@ def goal_lines(s: SessionView) -> str:
         f"G{i} {list(cell)}: " + ("~~ruled out~~" if out else f"**{p:.2f}**")
         for i, (cell, p, out) in enumerate(s.goals)
     ]
-    return "\n\nGoal posterior: " + ", ".join(rows)
+    return "\n\nWhere it may be going (P(goal|H)): " + ", ".join(rows)
+
+
+#: how each tone reads in the panel (the strategy decides the tone, not the viewer)
+TONE_MARK = {"good": "", "neutral": " (being handled)", "bad": " ⚠"}
+
+
+def belief_lines(s: SessionView) -> str:
+    """What its advisor believes, plain words first and the paper's symbol second, the one
+    that says most in bold; where its advice leads. A feed without beliefs: P(M1|H)."""
+    if not s.figures:
+        return f"knows the way **{s.p_normal:.0%}** (P(M1|H) {s.p_normal:.3f})\n\n"
+    lines = []
+    for i, f in enumerate(s.figures):
+        value = f"**{f.p:.0%}**" if i == s.headline else f"{f.p:.0%}"
+        mark = TONE_MARK.get(f.tone, "") if i == s.headline else ""
+        lines.append(f"{markdown_text(f.name)} {value} ({markdown_text(f.symbol)}){mark}")
+    out = "; ".join(lines) + "\n\n"
+    if s.leads_to is not None:
+        to = s.leads_to
+        out += f"advice leads to **{markdown_text(to.label)}** {list(to.cell)}\n\n"
+    return out
+
+
+def markdown_text(text: str) -> str:
+    """``text`` shown as it is in viser's markdown (which takes inline HTML): every character
+    that markdown or HTML reads escaped."""
+    return "".join(f"\\{c}" if c in MARKDOWN_SPECIAL else c for c in text).replace("<", "&lt;")
+
+
+MARKDOWN_SPECIAL = set("\\`*_{}[]()#+-.!|~>")
 
 
 def picked(dropdown: viser.GuiDropdownHandle[str]) -> str:

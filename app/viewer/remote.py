@@ -15,8 +15,8 @@ import httpx
 import numpy as np
 import orjson
 
-from app.domain.grid import GridDomain
-from app.viewer.state import DomainView, SessionView, Snapshot
+from app.domain.grid import GridDomain, NamedCell
+from app.viewer.state import Destination, DomainView, Figure, SessionView, Snapshot
 
 
 class RemoteFeed:
@@ -48,8 +48,13 @@ class RemoteFeed:
         known = self._grids.get(name)
         if known is not None and known[0] == updated_at:
             return known[1]
-        rows = self._get(f"/domains/{name}")["map"]
-        grid = GridDomain.from_strings(rows, name=name)
+        info = self._get(f"/domains/{name}")
+        names = [
+            NamedCell(int(cell[0]), int(cell[1]), given)
+            for cell, given in zip(info["goals"], info.get("goal_names") or (), strict=False)
+            if given is not None
+        ]
+        grid = GridDomain.from_strings(info["map"], name=name, names=names)
         self._grids[name] = (updated_at, grid)
         return grid
 
@@ -92,6 +97,8 @@ def session_view(s: dict[str, Any]) -> SessionView:
     goals = None
     if s["goals"] is not None:
         goals = [(_cell(g["goal"]), g["p"], g["ruled_out"]) for g in s["goals"]]
+    beliefs = s.get("beliefs") or {"figures": [], "headline": 0, "leads_to": None}
+    to = beliefs["leads_to"]
     return SessionView(
         session_id=s["session_id"],
         domain=s["domain"],
@@ -107,4 +114,7 @@ def session_view(s: dict[str, Any]) -> SessionView:
         agent_type=s["agent_type"],
         strategy=s["strategy"],
         goals=goals,
+        figures=[Figure(f["name"], f["symbol"], f["p"], f["tone"]) for f in beliefs["figures"]],
+        headline=beliefs["headline"],
+        leads_to=None if to is None else Destination(to["goal"], _cell(to["cell"]), to["name"]),
     )

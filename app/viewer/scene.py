@@ -121,7 +121,7 @@ class MazeScene:
             lod="off",
         )
         for i, pos in enumerate(goals + np.array([0.0, 0.0, 0.2])):
-            scene.add_label(f"/maze/goal_labels/G{i}", f"G{i}", position=tuple(pos))
+            scene.add_label(f"/maze/goal_labels/G{i}", d.goal_label(i), position=tuple(pos))
 
     def _draw_map_image(self) -> None:
         """A big map as one image on the floor: walls dark, start and goals in their colours

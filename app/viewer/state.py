@@ -21,6 +21,29 @@ Cell = tuple[int, int]
 Probabilities = tuple[float, float, float, float]
 
 
+class Figure(NamedTuple):
+    """One thing the advisor believes of the explorer, as its strategy says it: a plain
+    ``name``, the paper's ``symbol``, how likely (``p``), and how it reads (``tone``: good,
+    neutral, bad)."""
+
+    name: str
+    symbol: str
+    p: float
+    tone: str
+
+
+class Destination(NamedTuple):
+    """A destination of the map: its index among the goals, its cell, its name (if any)."""
+
+    goal: int
+    cell: Cell
+    name: str | None
+
+    @property
+    def label(self) -> str:
+        return f"{self.name} (G{self.goal})" if self.name else f"G{self.goal}"
+
+
 @dataclass(frozen=True, eq=False)
 class DomainView:
     """A domain and its current prior ``theta`` (states x 4); ``prior_version`` changes with it."""
@@ -68,6 +91,11 @@ class SessionView:
     strategy: str = DEFAULT_STRATEGY
     # goal_aware: (goal cell, P(goal | H), ruled out) for each goal of the map
     goals: Sequence[tuple[Cell, float, bool]] | None = None
+    #: what its advisor believes, in a fixed order, and the index of the one that says most
+    figures: Sequence[Figure] = ()
+    headline: int = 0
+    #: the destination its advice leads to (guide)
+    leads_to: Destination | None = None
 
     @property
     def version(self) -> tuple[int, int]:

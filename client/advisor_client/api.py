@@ -124,12 +124,18 @@ def put_domain(
     resolution: float | None = None,
     origin: Sequence[float] | None = None,
     experts: Mapping[str, Any] | None = None,
+    destinations: Mapping[tuple[int, int], str] | None = None,
 ) -> Call:
+    """``destinations``: the names of destinations, ``{(row, col): name}`` (cells of goals)."""
     body: dict[str, Any] = {"map": list(rows), "alpha0": alpha0}
     if resolution is not None:
         body["resolution"] = resolution
     if origin is not None:
         body["origin"] = [float(v) for v in origin]
+    if destinations is not None:
+        body["destinations"] = [
+            {"cell": [int(r), int(c)], "name": name} for (r, c), name in destinations.items()
+        ]
     if experts is not None:
         body["experts"] = dict(experts)
     return Call("PUT", f"/domains/{_name(name)}", body, admin=True)
@@ -143,9 +149,9 @@ def put_domain_file(
     experts: str | Mapping[str, Any] | None = None,
 ) -> Call:
     """PUT a map file as it is (``text/plain``): its header lines (``resolution:``,
-    ``origin:``) and rows as ``maze import`` or ``maze generate`` wrote them. ``experts``:
-    ``"start"`` or ``"anywhere"``, or ``{"source", "per_goal", "seed"}`` as the JSON body has
-    it; the service refuses a bad file naming its line and column."""
+    ``origin:``, ``destination:``) and rows as ``maze import`` or ``maze generate`` wrote
+    them. ``experts``: ``"start"`` or ``"anywhere"``, or ``{"source", "per_goal", "seed"}`` as
+    the JSON body has it; the service refuses a bad file naming its line and column."""
     params: dict[str, Any] = {}
     if alpha0 is not None:
         params["alpha0"] = alpha0

@@ -314,7 +314,8 @@ class AdvisorClient(_Base):
         self, name: str, rows: Sequence[str], alpha0: float = 1.0, **frame_and_experts: Any
     ) -> DomainInfo:
         """Create or replace a domain; keywords ``resolution``, ``origin`` (metres) and
-        ``experts`` (``{"source", "per_goal", "seed"}``) as the PUT body has them."""
+        ``experts`` (``{"source", "per_goal", "seed"}``) as the PUT body has them, and
+        ``destinations``, the names of destinations as ``{(row, col): name}``."""
         call = api.put_domain(name, rows, alpha0, **frame_and_experts)
         return cast(DomainInfo, self.call(call))
 

@@ -22,6 +22,14 @@ class Cost(TypedDict):
     benefit: float
 
 
+class Destination(TypedDict):
+    """A destination of the map: its index in the domain's goals, its cell, its name."""
+
+    goal: int
+    cell: list[int]
+    name: str | None
+
+
 class Decision(TypedDict):
     step: int
     state: list[int]
@@ -30,6 +38,26 @@ class Decision(TypedDict):
     kl: float
     p_normal: float
     cost: Cost
+    #: guide, answering one event (or opening a session) with advice: where it leads
+    leads_to: NotRequired[Destination]
+
+
+class Figure(TypedDict):
+    """One thing the advisor believes: a plain name, the paper's symbol, how likely, and how
+    it reads (``good``, ``neutral``: the advisor is handling it, ``bad``)."""
+
+    name: str
+    symbol: str
+    p: float
+    tone: Literal["good", "neutral", "bad"]
+
+
+class Beliefs(TypedDict):
+    """What the advisor believes of the explorer, as its strategy reads it."""
+
+    figures: list[Figure]
+    headline: int  # the index of the figure that says most now
+    leads_to: Destination | None
 
 
 #: An event or a trajectory step as the client accepts it: any mapping with the fields of
@@ -73,6 +101,7 @@ class DomainInfo(TypedDict):
     origin: list[float] | None
     start: list[int]
     goals: list[list[int]]
+    goal_names: NotRequired[list[str | None]]  # each goal's name (None: unnamed)
     actions: list[ActionName]
     alpha0: float
     n_states: int
@@ -131,6 +160,7 @@ class SessionInfo(TypedDict):
     created_at: str
     muted: bool
     budget: BudgetInfo | None
+    beliefs: NotRequired[Beliefs | None]
 
 
 class SessionList(TypedDict):
@@ -139,6 +169,7 @@ class SessionList(TypedDict):
 
 
 class Overview(TypedDict):
+    role: NotRequired[Literal["admin", "operator"] | None]  # which key asked
     domains: list[dict[str, Any]]
     total_sessions: int
     sessions: list[dict[str, Any]]

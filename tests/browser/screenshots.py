@@ -25,14 +25,22 @@ TARGET = ROOT / "docs" / "screenshots"
 PAGES: dict[str, str] = {
     "dashboard": "The dashboard (/) with the operator key: figures per domain and live "
     "sessions, a legend of the bars and lines, a unit under each heading",
-    "dashboard-refused": "The dashboard's End button with the operator key: the service's "
-    "refusal (403) shown as it says it; with the admin key the session ends",
-    "walk-advised": "/walk after a lost-looking walk: the advice at the walker's cell, the KL "
-    "against kappa, P(M1|H) after each move, what the maze shows",
+    "dashboard-beliefs": "The dashboard's sessions as their strategies read them, plain words "
+    "first: a paper session that looks lost in red (P(M2|H)), a guide session leading a lost "
+    "visitor in amber (P(lost|H)), the destination its advice leads to by name",
+    "dashboard-read-only": "The dashboard with the read-only operator key: End disabled, its "
+    "tooltip saying why (with the admin key the session ends)",
+    "walk-advised": "/walk after a lost-looking walk: what the advisor believes in plain words "
+    "(the paper's symbols beside them), the advice at the walker's cell, its worth against "
+    "its price kappa, P(M1|H) after each move, what the maze shows",
     "walk-guide-128": "/walk on a generated 128 x 128 building, the guide strategy leading a "
     "walker who follows its advice to a destination",
+    "walk-big-map": "/walk on a generated 141 x 162 building with named destinations: the map "
+    "scrolls and zooms in its own box, the panel stays in view, labels stay readable, the "
+    "destination the advice leads to named",
     "viewer": "The 3D viewer: the prior's arrows, the kappa shading, live sessions' paths, "
-    "markers and advice, the picked session's P(M1|H) over time",
+    "markers and advice, what the picked session's advisor believes in plain words, and its "
+    "P(M1|H) over time",
     "viewer-legend": "The viewer's legend, at the foot of its panel",
     "docs": "/docs, the API's Swagger UI, served offline",
     "redoc": "/redoc, the same API in ReDoc, served offline",

@@ -1,5 +1,7 @@
 """The dashboard at / lists live sessions and keeps their figures up to date; its figures have
-a legend and units, its sessions sort by any column and end with the admin key."""
+a legend and units, plain words first and the paper's symbol second, coloured as each
+strategy reads them; its sessions sort by any column and end with the admin key (the
+read-only key's End buttons are disabled, saying why)."""
 
 from __future__ import annotations
 
@@ -8,7 +10,7 @@ import re
 import pytest
 from playwright.sync_api import Page, Route, expect
 
-from tests.browser.conftest import ADMIN, Problems, Service, screenshot
+from tests.browser.conftest import ADMIN, Service, screenshot
 
 pytestmark = pytest.mark.browser
 
@@ -38,13 +40,13 @@ def test_dashboard_lists_a_session_and_refreshes_its_figures(service: Service, p
     page.click("#key-form button[type=submit]")
     row = page.locator(f'tr[data-session-id="{sid}"]')
     expect(row).to_be_visible()
-    expect(row.locator("td").nth(3)).to_have_text("paper")  # strategy
-    expect(row.locator("td").nth(5)).to_have_text("3")  # steps
+    expect(row.locator('td[data-column="strategy"]')).to_have_text("paper")
+    expect(row.locator('td[data-column="steps"]')).to_have_text("3")
     expect(page.locator('tr[data-domain="default"]')).to_contain_text("30×30")
     # the page polls: more moves show up without a reload
     service.move(sid, auth, [28, 3], "WW")
-    expect(row.locator("td").nth(5)).to_have_text("5")
-    expect(row.locator("td").nth(6)).to_have_text("[28, 1]")
+    expect(row.locator('td[data-column="steps"]')).to_have_text("5")
+    expect(row.locator('td[data-column="position"]')).to_have_text("[28, 1]")
     link = page.locator("#viewer-link")
     expect(link).to_be_visible()
     expect(link).to_have_attribute("href", re.compile(rf":{service.viewer.port}/$"))
@@ -79,18 +81,19 @@ def test_dashboard_figures_have_a_legend_and_units(service: Service, page: Page)
     expect(row).to_be_visible()
     legend = page.locator("#legend")
     expect(legend).to_be_visible()
-    # the legend's samples are drawn as the table's cells are: a bar of each colour, a line
-    expect(legend.locator(".bar:not(.lost)")).to_have_count(1)
-    expect(legend.locator(".bar.lost")).to_have_count(1)
+    # the legend's samples are drawn as the table's cells are: a bar of each tone, a line
+    for tone in ("good", "neutral", "bad"):
+        expect(legend.locator(f".bar.tone-{tone}")).to_have_count(1)
     expect(legend.locator("svg.spark polyline")).to_have_count(1)
-    expect(legend).to_contain_text("blue at 0.5 or more")
+    expect(legend).to_contain_text("blue, nothing to do; amber, the advisor is handling it")
     expect(legend).to_contain_text("cost = κ × advice given")
     # the row draws the same things, with the 0.5 line of the sparkline
     expect(row.locator(".bar")).to_have_count(1)
     expect(row.locator("svg.spark line.half")).to_have_count(1)
     units = {
-        "kappa": "nats", "steps": "moves", "position": "[row, col]", "p": "0 to 1",
-        "cost": "nats", "per100": "decisions",
+        "kappa": "κ, nats", "steps": "moves", "position": "[row, col]",
+        "p": "plain words (the paper's symbol)", "leads": "destination",
+        "cost": "κ × advice, nats", "per100": "decisions",
     }  # fmt: skip
     for column, unit in units.items():
         expect(page.locator(f'#sessions th[data-column="{column}"] .unit')).to_have_text(unit)
@@ -138,25 +141,41 @@ def test_dashboard_ends_a_session_with_the_admin_key(service: Service, page: Pag
     assert answer.status_code == 404, answer.text
 
 
-def test_dashboard_shows_why_the_operator_key_cannot_end_a_session(
-    service: Service, page: Page, problems: Problems
+def test_dashboard_disables_end_for_the_read_only_key_saying_why(
+    service: Service, page: Page
 ) -> None:
-    problems.expect(r"the server responded with a status of 403")  # the browser's own line
+    """The service refuses the operator key's DELETE (403); the page, told the key's role by
+    GET /overview, offers no button it would refuse: End is disabled, its tooltip says why,
+    and a click sends nothing."""
     sid, _ = service.new_session("EE")
     refusal = service.http.delete(f"/sessions/{sid}", headers={"X-API-Key": service.operator_key})
     assert refusal.status_code == 403
-    detail = refusal.json()["detail"]
+    deletes: list[str] = []
+    page.on("request", lambda r: deletes.append(r.url) if r.method == "DELETE" else None)
     show_sessions(service, page, service.operator_key)
     row = page.locator(f'tr[data-session-id="{sid}"]')
-    row.get_by_role("button", name="End").click()
-    message = page.locator("#session-message")
-    expect(message).to_contain_text(f"Could not end session {sid}: 403: {detail}")
-    expect(message).to_have_class(re.compile("error"))
-    expect(row).to_be_visible()  # still live
+    end = row.get_by_role("button", name="End")
+    expect(end).to_be_disabled()
+    expect(end).to_have_attribute("title", re.compile(r"^This key can only read: .*admin key"))
+    expect(page.locator("#role-note")).to_have_text(re.compile(r"^This key can only read: .*"))
+    end.click(force=True)  # a disabled button: nothing happens
+    page.evaluate("document.querySelector('#sessions tbody tr').dataset.stale = 'yes'")
+    page.wait_for_function("!document.querySelector('#sessions tbody tr[data-stale]')")
+    expect(page.locator("#session-message")).to_be_hidden()
+    assert deletes == []
+    expect(row).to_be_visible()
     answer = service.http.get(f"/sessions/{sid}", headers={"X-API-Key": ADMIN})
     assert answer.status_code == 200, answer.text
-    assert problems.seen_expected  # the refusal really was the service's 403
-    screenshot(page, "dashboard-refused")
+    # the admin key's End is live again
+    page.click("#forget-key")
+    show_sessions(service, page, ADMIN)
+    expect(row.get_by_role("button", name="End")).to_be_enabled()
+    expect(page.locator("#role-note")).to_be_hidden()
+    page.click("#forget-key")
+    show_sessions(service, page, service.operator_key)
+    expect(end).to_be_disabled()
+    end.hover()
+    screenshot(page, "dashboard-read-only")
 
 
 def test_dashboard_shows_each_session_s_advice_left(service: Service, page: Page) -> None:
@@ -169,9 +188,11 @@ def test_dashboard_shows_each_session_s_advice_left(service: Service, page: Page
     assert service.http.post(f"/sessions/{muted}/mute", headers=auth).status_code == 200
     show_sessions(service, page, service.operator_key)
     expect(page.locator('#sessions th[data-column="left"] .unit')).to_have_text("budget")
-    left = page.locator(f'tr[data-session-id="{budgeted}"] td').nth(12)
+    left = page.locator(f'tr[data-session-id="{budgeted}"] td[data-column="left"]')
     expect(left).to_have_text("4 of 5, 3/min of 4")  # the start decision took one
-    expect(page.locator(f'tr[data-session-id="{muted}"] td').nth(12)).to_have_text("muted")
+    expect(page.locator(f'tr[data-session-id="{muted}"] td[data-column="left"]')).to_have_text(
+        "muted"
+    )
 
 
 def test_dashboard_shows_what_the_service_relies_on(service: Service, page: Page) -> None:
@@ -186,3 +207,52 @@ def test_dashboard_shows_what_the_service_relies_on(service: Service, page: Page
     viewer = strip.locator('[data-dependency="viewer"]')
     expect(viewer).to_have_text(f"3D viewer: {health['viewer']['state']}")
     expect(strip.locator(".dependency.down.required")).to_have_count(0)
+
+
+#: a small building with its two destinations named
+NAMED = "destination: 1 1 Lobby\ndestination: 1 5 Café (east)\n" + "\n".join(
+    ["#######", "#G..#G#", "#.#.#.#", "#...#.#", "###...#", "#S....#", "#######"]
+)
+
+
+def test_dashboard_says_what_each_strategy_believes_plain_words_first(
+    service: Service, page: Page
+) -> None:
+    """A paper session that looks lost reads red, "looks lost" (P(M2|H)); a guide session
+    whose walker looks lost and follows the advice reads amber (guide is leading it, not red),
+    with the destination its advice leads to, by name."""
+    put = service.http.put("/domains/named-dash?experts=start&per_goal=3", content=NAMED,
+                           headers={"X-API-Key": ADMIN, "Content-Type": "text/plain"})  # fmt: skip
+    assert put.status_code in (200, 201), put.text
+    lost, _ = service.new_session("SSWWSSWWSSWW")  # into the walls of the start's corner
+    made = service.http.post("/domains/named-dash/sessions", json={"strategy": "guide", "kappa": 0})
+    led, auth = made.json()["session_id"], {"Authorization": f"Bearer {made.json()['token']}"}
+    decision = made.json()["decision"]
+    for i in range(8):  # bumps into the walls, then follows the advice
+        a = "SW"[i % 2] if i < 6 or not decision["advise"] else max(
+            "NESW", key=lambda k: decision["advice"][k])  # fmt: skip
+        r = service.http.post(f"/sessions/{led}/events", headers=auth,
+                              json={"state": decision["state"], "action": a})  # fmt: skip
+        decision = r.json()
+    seen = service.http.get(f"/sessions/{led}", headers=auth).json()["beliefs"]
+    assert seen["figures"][seen["headline"]]["tone"] == "neutral", seen
+    to = seen["leads_to"]
+    show_sessions(service, page, service.operator_key)
+
+    paper = page.locator(f'tr[data-session-id="{lost}"] td[data-column="p"]')
+    expect(paper).to_have_text(re.compile(r"^looks lost: \d+% \(P\(M2\|H\)\)$"))
+    expect(paper).to_have_attribute("data-tone", "bad")
+    expect(paper.locator(".bar")).to_have_class(re.compile("tone-bad"))
+    expect(paper).to_have_attribute("title", re.compile(r"moves like someone who knows"))
+    guided = page.locator(f'tr[data-session-id="{led}"] td[data-column="p"]')
+    expect(guided).to_have_text(re.compile(r"^looks lost: \d+% \(P\(lost\|H\)\)$"))
+    expect(guided).to_have_attribute("data-tone", "neutral")
+    expect(guided.locator(".bar")).to_have_class(re.compile("tone-neutral"))
+    assert "rgb(214, 69, 69)" not in guided.locator("span.tone-neutral:not(.bar)").evaluate(
+        "e => getComputedStyle(e).color"
+    )  # not the red of "bad"
+    leads = page.locator(f'tr[data-session-id="{led}"] td[data-column="leads"]')
+    expect(leads).to_have_text(f"{to['name']} (G{to['goal']})")
+    assert to["name"] in ("Lobby", "Café (east)")
+    expect(page.locator('#sessions th[data-column="p"]')).to_contain_text("Advisor believes")
+    screenshot(page, "dashboard-beliefs")

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from playwright.sync_api import Page, expect
 
+from app.viewer.controls import LAYER_LABELS, PLOT_TITLE
 from app.viewer.scene import top_down_camera
 from app.viewer.viewer import ClientView
 from tests.browser.conftest import Service, screenshot, wait_until
@@ -80,11 +81,15 @@ def test_viewer_page_connects_and_shows_maze_prior_and_sessions(
         lambda: controls.plot.visible and f"**{sessions[2]}**" in controls.stats.content,
         what="the pump to show the picked session",
     )
-    expect(page.get_by_text("P(M1|H) over time")).to_be_visible()
+    expect(page.get_by_text(PLOT_TITLE)).to_be_visible()
     expect(page.get_by_text("p_normal")).to_have_count(0)  # one name for P(M1|H)
     expect(page.get_by_text("steps 9", exact=False)).to_be_visible()
-    # the legend says what each thing drawn is
-    for entry in ("Prior arrows", "Kappa shading", "Session markers", "Advice given"):
+    # what the advisor believes: plain words first, the paper's symbol second
+    believes = page.get_by_text("moves like someone who knows the building", exact=False)
+    expect(believes.first).to_be_visible()
+    expect(believes.first).to_contain_text("(P(M1|H))")
+    # the legend says what each thing drawn is, by the layers' names
+    for entry in (*LAYER_LABELS.values(), "destinations"):
         expect(page.get_by_text(entry, exact=False).first).to_be_attached()
     # the picker lists the sessions most recently active first (the feed's order)
     with viewer._lock:

@@ -1,4 +1,7 @@
-"""/walk: a person walks with the arrow keys; moves reach the service; advice shows when given."""
+"""/walk: a person walks with the arrow keys; moves reach the service; advice shows when given;
+what the advisor believes shows in plain words (the paper's symbol second, the strategy's
+tone), with the destination its advice leads to, by name; the panel stays in view on any map
+(the map scrolls and zooms in its own box) and the destinations' labels stay readable."""
 
 from __future__ import annotations
 
@@ -10,6 +13,7 @@ import pytest
 from playwright.sync_api import Page, expect
 
 from app.domain.generate import generate_building_domain
+from app.domain.grid import GridDomain, NamedCell
 from tests.browser.conftest import ADMIN, Service, screenshot
 
 KEY = {"N": "ArrowUp", "E": "ArrowRight", "S": "ArrowDown", "W": "ArrowLeft"}
@@ -43,18 +47,30 @@ def test_walk_keys_move_the_explorer_and_advice_appears_when_lost(
     expect(page.locator("#position")).to_have_text("[28, 3]")
     seen = summary(service, sid)
     assert seen["steps"] == 3 and seen["position"] == [28, 3]
-    assert float(page.locator("#p-normal").inner_text()) > 0.5
+    # what the advisor believes, as the paper's rule says it: plain words, then the symbol
+    expect(page.locator("body")).to_have_attribute("data-beliefs-step", "3")
+    names = page.locator("#beliefs dt")
+    expect(names).to_have_text(["moves like someone who knows the building", "looks lost"])
+    p = seen["p_normal"]
+    assert isinstance(p, float) and p > 0.5
+    values = page.locator("#beliefs dd")
+    expect(values).to_have_text(
+        [f"{round(100 * p)}% (P(M1|H))", f"{round(100 * (1 - p))}% (P(M2|H))"]
+    )
+    expect(page.locator("#beliefs dt.headline")).to_have_text(
+        "moves like someone who knows the building"
+    )
+    expect(page.locator("#beliefs dd.headline")).to_have_class(re.compile("tone-good"))
+    expect(page.locator("#p-chart-name")).to_have_text("Moves like someone who knows the building")
     expect(page.locator("#advice")).to_be_hidden()
-    # the KL beside kappa, and why no advice; P(M1|H) after each decision (the start's too)
+    # the advice's worth beside its price, and why no advice; P(M1|H) after each decision
     kl = page.locator("#kl").inner_text()
     assert re.fullmatch(r"\d+\.\d{3} nats", kl)
     rule = page.locator("#kl-rule")
-    expect(rule).to_have_text(f"KL {kl.split()[0]} < κ 0.5 → not advised")
+    expect(rule).to_have_text(f"worth {kl.split()[0]} < price 0.5 → not advised (KL < κ)")
     chart = page.locator("#p-chart")
     expect(chart).to_have_attribute("data-points", "4")
-    assert float(chart.get_attribute("data-last") or "nan") == pytest.approx(
-        float(page.locator("#p-normal").inner_text()), abs=6e-4
-    )
+    assert float(chart.get_attribute("data-last") or "nan") == pytest.approx(p, abs=6e-4)
     # the legend names what the maze shows, each with a swatch drawn as the maze draws it
     legend = page.locator("#maze-legend li")
     expect(legend).to_have_count(7)
@@ -67,7 +83,7 @@ def test_walk_keys_move_the_explorer_and_advice_appears_when_lost(
         page.keyboard.press(key)
     expect(page.locator("#steps")).to_have_text("9")
     expect(page.locator("#advice")).to_be_visible()
-    expect(rule).to_have_text(re.compile(r"^KL \d+\.\d{3} ≥ κ 0\.5 → advised$"))
+    expect(rule).to_have_text(re.compile(r"^worth \d+\.\d{3} ≥ price 0\.5 → advised \(KL ≥ κ\)$"))
     expect(rule).to_have_class(re.compile("advised"))
     expect(chart).to_have_attribute("data-points", "10")
     items = page.locator("#advice-list li")
@@ -78,8 +94,14 @@ def test_walk_keys_move_the_explorer_and_advice_appears_when_lost(
     advice_count = seen["advice_count"]
     assert isinstance(advice_count, int) and advice_count >= 1
     expect(page.locator("#advice-count")).to_have_text(str(advice_count))
-    shown_p = float(page.locator("#p-normal").inner_text())
-    assert shown_p == pytest.approx(seen["p_normal"], abs=6e-4)
+    # it looks lost now: the paper's rule reads that red, "looks lost" (P(M2|H)) in bold
+    expect(page.locator("body")).to_have_attribute("data-beliefs-step", "9")
+    lost = 1 - seen["p_normal"]  # type: ignore[operator]
+    assert lost > 0.5
+    expect(page.locator("#beliefs dt.headline")).to_have_text("looks lost")
+    expect(page.locator("#beliefs dd.headline")).to_have_text(f"{round(100 * lost)}% (P(M2|H))")
+    expect(page.locator("#beliefs dd.headline")).to_have_class(re.compile("tone-bad"))
+    expect(page.locator("#leads-to")).to_be_hidden()  # the paper's advice leads nowhere
     # the most likely direction, as advised on the page, is the prior's at that cell
     prior = service.http.get("/domains/default/prior").json()["theta"][28][3]
     best = "NESW"[max(range(4), key=lambda a: prior[a])]
@@ -102,8 +124,8 @@ def test_a_walker_in_a_128_building_is_led_to_a_destination_by_guide(
     expect(page.locator("#status")).to_contain_text("Connected")
     expect(page.locator("#session")).to_contain_text("guide")
     rng = random.Random(5)
-    advised = 0
-    for _ in range(3000):
+    advised, checked = 0, 0
+    for i in range(3000):
         page.wait_for_function("document.body.dataset.pending === '0'")
         seen = page.evaluate("() => ({...document.body.dataset})")
         if seen["goal"]:
@@ -113,12 +135,19 @@ def test_a_walker_in_a_128_building_is_led_to_a_destination_by_guide(
             advice = json.loads(seen["advice"])
             heading = max("NESW", key=lambda a: advice[a])
             advised += 1
+            if i % 25 == 0:  # a walker that follows the advice is led, never shown red
+                page.wait_for_function(f"document.body.dataset.beliefsStep === '{seen['step']}'")
+                assert page.locator("#beliefs .tone-bad").count() == 0
+                expect(page.locator("#beliefs dt").first).to_have_text("looks lost")
+                expect(page.locator("#leads-to")).to_contain_text("Advice leads to G")
+                expect(page.locator("#destinations li.target")).to_have_count(1)
+                checked += 1
         else:
             heading = rng.choice([a for i, a in enumerate("NESW") if grid.open_moves[state, i]])
         page.keyboard.press(KEY[heading])
     else:
         pytest.fail("the walker did not reach a destination in 3,000 moves")
-    assert advised > 0
+    assert advised > 0 and checked > 0
     # P(M1|H) of every decision of the walk is on the chart, the start's included
     expect(page.locator("#p-chart")).to_have_attribute("data-points", str(int(seen["step"]) + 1))
     cell = json.loads(seen["position"])
@@ -142,6 +171,7 @@ def test_walk_draws_a_256_map_and_answers_moves(service: Service, page: Page) ->
     size = page.evaluate("() => [document.getElementById('maze').clientWidth, "
                          "document.getElementById('maze').clientHeight]")  # fmt: skip
     assert size == [256 * 6, 256 * 6]  # six pixels a cell, in a scrolling board
+    expect(page.locator("#panel")).to_be_in_viewport()
     start = json.loads(page.evaluate("document.body.dataset.position"))
     open_way = next(i for i in range(4) if grid.open_moves[grid.state(*start), i])
     page.keyboard.press(KEY["NESW"[open_way]])
@@ -167,3 +197,104 @@ def test_walk_lists_the_service_s_strategies_and_says_what_their_advice_is(
         "title", picked["summary"]
     )
     expect(page.locator("#advice-note")).to_have_text(picked["advice"])
+
+
+def board_scrolls(page: Page) -> list[bool]:
+    """Whether the map's box scrolls across and down (the map is larger than the box)."""
+    out: list[bool] = page.evaluate(
+        "(() => { const b = document.getElementById('board'); return "
+        "[b.scrollWidth > b.clientWidth, b.scrollHeight > b.clientHeight]; })()"
+    )
+    return out
+
+
+def in_view(page: Page, selector: str) -> bool:
+    """Whether the element's whole box lies inside the window."""
+    box = page.locator(selector).bounding_box()
+    view = page.viewport_size
+    assert box is not None and view is not None
+    return (
+        box["x"] >= 0 and box["y"] >= 0 and box["x"] + box["width"] <= view["width"]
+        and box["y"] + box["height"] <= view["height"]
+    )  # fmt: skip
+
+
+def test_walk_keeps_its_panel_in_view_and_names_readable_on_a_141_by_162_map(
+    service: Service, page: Page
+) -> None:
+    """A generated 141 x 162 building whose destinations have names: the page does not grow
+    past the window (the map scrolls in its own box), the panel's figures and advice stay in
+    view as the walker goes, the destinations are listed by name and labelled on the map at a
+    readable size, the walker is kept in the map's view, and the map zooms."""
+    grid = generate_building_domain(141, 162, 3)
+    names = [NamedCell(r, c, f"Room {i} ({r},{c})") for i, (r, c) in enumerate(grid.goal_cells)]
+    named = GridDomain.from_strings(list(grid.rows_text), names=names)
+    put = service.http.put("/domains/big141?experts=start&per_goal=2", content=named.to_text(),
+                           headers={"X-API-Key": ADMIN, "Content-Type": "text/plain"})  # fmt: skip
+    assert put.status_code in (200, 201), put.text
+    page.goto(service.base + "/walk?domain=big141&strategy=guide")
+    expect(page.locator("#status")).to_contain_text("Connected")
+    # the window does not scroll: the page is its height, the map's box scrolls
+    assert page.evaluate("document.scrollingElement.scrollHeight <= window.innerHeight + 1")
+    assert board_scrolls(page) == [True, True]
+    assert in_view(page, "#panel")
+    # the destinations by name, in a font as large as the page's own text
+    listed = page.locator("#destinations li")
+    expect(listed).to_have_count(len(grid.goals))
+    expect(listed.first).to_contain_text("Room 0")
+    px = float(listed.first.evaluate("e => parseFloat(getComputedStyle(e).fontSize)"))
+    assert px >= 12
+    # on the map, labels at no less than 11 pixels although a cell is 6
+    canvas = page.locator("#maze")
+    expect(canvas).to_have_attribute("data-cell", "6")
+    assert float(canvas.get_attribute("data-label-px") or "0") >= 11
+    # a walk at a low price of advice: into walls, then on, following the advice when given;
+    # the panel stays in view, the advice with it
+    page.fill("#kappa", "0.1")
+    page.click("#restart")
+    expect(page.locator("#steps")).to_have_text("0")
+    expect(page.locator("#status")).to_contain_text("Connected")
+    advised = 0
+    for i in range(40):
+        seen = page.evaluate("() => ({...document.body.dataset})")
+        if seen["advice"]:
+            assert in_view(page, "#advice")
+            advised += 1
+        if seen["advice"] and i > 4:
+            advice = json.loads(seen["advice"])
+            heading = max("NESW", key=lambda a: advice[a])
+        else:
+            s = grid.state(*json.loads(seen["position"]))
+            shut = [a for k, a in enumerate("NESW") if not grid.open_moves[s, k]]
+            heading = shut[0] if shut else "N"
+        page.keyboard.press(KEY[heading])
+        page.wait_for_function("document.body.dataset.pending === '0'")
+    expect(page.locator("#steps")).to_have_text("40")
+    assert advised > 0
+    step = page.evaluate("document.body.dataset.step")
+    page.wait_for_function(f"document.body.dataset.beliefsStep === '{step}'")
+    for part in ("#panel", "#beliefs", "#kl-rule"):
+        assert in_view(page, part), part
+    expect(page.locator("#beliefs dt")).to_have_text(["looks lost", "on its way"])
+    expect(page.locator("#leads-to")).to_contain_text("Advice leads to Room ")
+    assert in_view(page, "#leads-to")
+    target = page.locator("#destinations li.target")  # the panel's list marks it too
+    expect(target).to_have_count(1)
+    expect(target).to_contain_text("Room ")
+    # the walker is within the map's visible part
+    shown = page.evaluate("""(() => {
+        const b = document.getElementById('board'), c = document.getElementById('maze');
+        const [r, col] = JSON.parse(document.body.dataset.position), cell = Number(c.dataset.cell);
+        const x = c.offsetLeft + (col + 0.5) * cell - b.scrollLeft;
+        const y = c.offsetTop + (r + 0.5) * cell - b.scrollTop;
+        return x >= 0 && y >= 0 && x <= b.clientWidth && y <= b.clientHeight;
+    })()""")
+    assert shown
+    screenshot(page, "walk-big-map")
+    # zoom: larger cells, then the whole map in its box
+    page.click("#zoom-in")
+    expect(canvas).to_have_attribute("data-cell", "8")
+    page.click("#zoom-fit")
+    assert board_scrolls(page) == [False, False]
+    assert float(canvas.get_attribute("data-label-px") or "0") >= 11
+    assert in_view(page, "#panel")

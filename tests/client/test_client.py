@@ -37,6 +37,23 @@ def run_async(coro: Coroutine[Any, Any, T]) -> T:
         return pool.submit(asyncio.run, coro).result()
 
 
+def test_client_names_destinations_and_reads_what_guide_believes(server: Server) -> None:
+    with AdvisorClient(server.url, admin_key=server.admin_key) as client:
+        info = client.put_domain("tiny-named", TINY, destinations={(1, 5): "Exit"})
+        assert info["goals"] == [[1, 1], [1, 5]] and info.get("goal_names") == [None, "Exit"]
+        session = client.create_session("tiny-named", strategy="guide", kappa=0.0)
+        decision = client.step(session, {"state": [5, 1], "action": "S"})  # into a wall
+        assert decision["advise"]
+        leads = decision.get("leads_to")
+        assert leads is not None and leads["cell"] in info["goals"]
+        assert leads["name"] == ("Exit" if leads["cell"] == [1, 5] else None)
+        beliefs = client.session(session).get("beliefs")
+        assert beliefs is not None and beliefs["leads_to"] == leads
+        assert [f["name"] for f in beliefs["figures"]] == ["looks lost", "on its way"]
+        with pytest.raises(AdvisorError, match="cell \\[2, 1\\] is a free cell"):
+            client.put_domain("tiny-named", TINY, destinations={(2, 1): "Hall"})
+
+
 def test_client_rest_calls(server: Server) -> None:
     with AdvisorClient(server.url, admin_key=server.admin_key) as client:
         assert client.health()["status"] == "ok"

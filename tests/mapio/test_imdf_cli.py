@@ -52,6 +52,9 @@ def test_cli_import_imdf_level_writes_its_destinations_as_named_goals(
     assert len(d.goals) == 5
     for i, g in enumerate(d.goals):  # listed in the written map's order, G0 first
         assert listed[i].startswith(f"G{i} [{d.cell(g)[0]}, {d.cell(g)[1]}]: ")
+    # the map keeps their names: destination lines of its header
+    assert d.goal_names == tuple(names)
+    assert text.count("\ndestination: ") == 5
     assert "1 destination(s) outside the kept region, left out: 'Store'" in result.output
     assert "elevator 'Lift 1' to level(s) 1, 2" in result.output
     assert d.start not in d.goals

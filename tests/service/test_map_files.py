@@ -9,6 +9,8 @@ import pytest
 from fastapi.testclient import TestClient
 
 from app.domain.grid import Frame, GridDomain, MapError
+from app.service.config import Settings
+from app.service.main import create_app
 from tests.service.conftest import TINY
 
 #: TINY as `maze import` writes a ROS map's: the resolution and origin first
@@ -145,3 +147,96 @@ def test_a_form_is_refused_saying_what_curl_d_sent_and_how_to_send_it(
     # text/plain elsewhere: still JSON only
     r = client.post("/domains/default/sessions", content=b"{}", headers=TEXT)
     assert r.status_code == 415 and "text/plain" not in r.json()["detail"]
+
+
+NAMED = "destination: 1 5 Café (east)\n" + "\n".join(TINY) + "\n"
+
+
+def test_a_map_file_s_destination_lines_name_its_goals(
+    client: TestClient, admin: dict[str, str]
+) -> None:
+    r = client.put("/domains/named", content=NAMED.encode(), headers=admin | TEXT)
+    assert r.status_code == 201, r.text
+    body = r.json()
+    assert body["goals"] == [[1, 1], [1, 5]] and body["goal_names"] == [None, "Café (east)"]
+    assert client.get("/domains/named").json()["goal_names"] == [None, "Café (east)"]
+    listed = {d["name"]: d for d in client.get("/domains").json()}
+    assert listed["named"]["goal_names"] == [None, "Café (east)"]
+    # a map without names: one null per goal, nothing invented
+    plain = client.put("/domains/plain", json={"map": TINY}, headers=admin).json()
+    assert plain["goal_names"] == [None, None]
+
+
+def test_names_change_with_the_same_map_and_its_data_stays(
+    client: TestClient, admin: dict[str, str]
+) -> None:
+    first = {"map": TINY, "experts": {"per_goal": 2}}
+    assert client.put("/domains/named", json=first, headers=admin).status_code == 201
+    body = {"map": TINY, "destinations": [{"cell": [1, 1], "name": "Lobby"},
+                                          {"cell": [1, 5], "name": "Exit"}]}  # fmt: skip
+    again = client.put("/domains/named", json=body, headers=admin)
+    assert again.status_code == 200, again.text
+    assert again.json()["goal_names"] == ["Lobby", "Exit"]
+    assert again.json()["trajectories"] == 4  # the same map keeps its trajectories
+
+
+def test_names_are_kept_over_a_restart(settings: Settings) -> None:
+    with TestClient(create_app(settings)) as c:
+        admin = {"X-API-Key": c.app.state.service.admin_key}  # type: ignore[attr-defined]
+        assert c.put("/domains/named", content=NAMED, headers=admin | TEXT).status_code == 201
+    with TestClient(create_app(settings)) as c:
+        assert c.get("/domains/named").json()["goal_names"] == [None, "Café (east)"]
+
+
+@pytest.mark.parametrize(
+    ("destinations", "words"),
+    [
+        ([{"cell": [1, 2], "name": "Hall"}], "destinations[0]: cell [1, 2] is a free cell"),
+        ([{"cell": [1, 1], "name": "A"}, {"cell": [1, 5], "name": "a"}],
+         "destinations[1]: the name 'a' is given twice (destinations[0] names it first)"),
+        ([{"cell": [1, 1], "name": "<script>"}], "destinations[0]: the name '<script>' holds '<'"),
+        ([{"cell": [1, 1], "name": "x" * 41}], "41 characters long"),
+        ([{"cell": [1, 1], "name": " "}], "destinations[0]: a destination's name is missing"),
+        ([{"cell": [99, 1], "name": "Far"}], "cell [99, 1] is off the 7x7 map"),
+    ],
+)  # fmt: skip
+def test_a_bad_destination_in_a_json_body_is_refused_naming_it(
+    client: TestClient, admin: dict[str, str], destinations: list[object], words: str
+) -> None:
+    r = client.put("/domains/named", json={"map": TINY, "destinations": destinations},
+                   headers=admin)  # fmt: skip
+    assert r.status_code == 422, r.text
+    detail = r.json()["detail"]
+    assert detail.startswith("map: destinations[") and words in detail
+    assert client.get("/domains/named").status_code == 404  # nothing was made
+
+
+def test_a_bad_destination_line_is_refused_as_maze_check_says(
+    client: TestClient, admin: dict[str, str]
+) -> None:
+    bad = "destination: 1 5 Exit\ndestination: 2 1 Hall\n" + "\n".join(TINY)
+    r = client.put("/domains/named", content=bad, headers=admin | TEXT)
+    assert r.status_code == 422, r.text
+    assert r.json()["detail"] == f"map: {maze_check(bad)}"
+    assert r.json()["detail"].startswith("map: line 2, column 14: cell [2, 1] is a free cell")
+    # with text, the names are its lines, not a field
+    both = {"text": NAMED, "destinations": [{"cell": [1, 1], "name": "Lobby"}]}
+    r = client.put("/domains/named", json=both, headers=admin)
+    assert r.status_code == 422 and "destination: ROW COL NAME" in r.json()["detail"]
+
+
+def test_names_of_the_same_map_are_checked_as_a_new_map_s(
+    client: TestClient, admin: dict[str, str]
+) -> None:
+    """The same rows put again are not read again (the grid is shared), but their names are
+    checked all the same; a refused put changes nothing."""
+    named = {"map": TINY, "destinations": [{"cell": [1, 5], "name": "Exit"}]}
+    assert client.put("/domains/same", json=named, headers=admin).status_code == 201
+    bad = {"map": TINY, "destinations": [{"cell": [5, 1], "name": "Start"}]}
+    r = client.put("/domains/same", json=bad, headers=admin)
+    assert r.status_code == 422 and "cell [5, 1] is the start" in r.json()["detail"]
+    assert client.get("/domains/same").json()["goal_names"] == [None, "Exit"]
+    renamed = {"map": TINY, "destinations": [{"cell": [1, 1], "name": "Lobby"}]}
+    assert client.put("/domains/same", json=renamed, headers=admin).json()["goal_names"] == [
+        "Lobby", None,
+    ]  # fmt: skip

@@ -85,3 +85,16 @@ def test_pages_and_static_files_are_served(tmp_path: Path) -> None:
         assert client.get("/walk").text == "<h1>walk</h1>"
         assert client.get("/static/app.js").text == "let x = 1;"
         assert client.get("/static/../config.py").status_code == 404
+
+
+def test_overview_says_which_key_asked_so_the_dashboard_offers_what_it_may_do(
+    client: TestClient, service: ServiceState
+) -> None:
+    """The admin key may end sessions, the operator key only read them: the answer says
+    which (and answers for one key are never served to the other from the cache)."""
+    open_session(client)
+    operator = client.get("/overview", headers={"X-API-Key": service.operator_key}).json()
+    admin = client.get("/overview", headers={"X-API-Key": service.admin_key}).json()
+    anyone = client.get("/overview").json()
+    assert (operator["role"], admin["role"], anyone["role"]) == ("operator", "admin", None)
+    assert operator["detail"] and admin["detail"] and not anyone["detail"]

@@ -176,3 +176,34 @@ def test_the_viewers_tick_time_reaches_the_metrics(client: TestClient) -> None:
         r = client.get("/viewer/snapshot", headers={"X-API-Key": ADMIN, "X-Viewer-Tick": bad})
         assert r.status_code == 200
     assert ticks() == before + 1
+
+
+def test_feed_carries_destination_names_and_what_the_advisor_believes(
+    client: TestClient,
+) -> None:
+    """A domain's named destinations reach the viewer's grid (its labels); a guide session's
+    beliefs (figures, the destination its advice leads to) reach its view."""
+    rows = ["#######", "#G..#G#", "#.#.#.#", "#...#.#", "###...#", "#S....#", "#######"]
+    text = "destination: 1 1 Lobby\ndestination: 1 5 Exit\n" + "\n".join(rows)
+    put = client.put("/domains/named-feed?experts=start&per_goal=2", content=text,
+                     headers={"X-API-Key": ADMIN, "Content-Type": "text/plain"})  # fmt: skip
+    assert put.status_code == 201, put.text
+    made = client.post("/domains/named-feed/sessions", json={"strategy": "guide", "kappa": 0})
+    sid, token = made.json()["session_id"], made.json()["token"]
+    auth = {"Authorization": f"Bearer {token}"}
+    moved = client.post(f"/sessions/{sid}/events", json={"state": [5, 1], "action": "S"},
+                        headers=auth)  # fmt: skip
+    assert moved.status_code == 200 and moved.json()["advise"]
+    snap = remote(client)()
+    grid = snap.domains["named-feed"].domain
+    assert grid.goal_names == ("Lobby", "Exit")
+    assert [grid.goal_label(i) for i in range(2)] == ["Lobby", "Exit"]
+    view = next(s for s in snap.sessions if s.session_id == sid)
+    assert [(f.name, f.symbol) for f in view.figures] == [
+        ("looks lost", "P(lost|H)"), ("on its way", "P(M1|H)"),
+    ]  # fmt: skip
+    assert view.leads_to is not None
+    assert view.leads_to.name == ("Lobby", "Exit")[view.leads_to.goal]
+    assert view.leads_to.label == f"{view.leads_to.name} (G{view.leads_to.goal})"
+    said = moved.json()["leads_to"]  # the decision's own
+    assert view.leads_to == (said["goal"], tuple(said["cell"]), said["name"])

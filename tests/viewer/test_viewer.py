@@ -18,7 +18,7 @@ from app.domain.grid import GridDomain
 from app.viewer import geometry as geo
 from app.viewer.controls import LOST_PICKED, NONE, PLOT_TITLE, SLIDER_KAPPA_HIGH
 from app.viewer.scene import DEFAULT_FOV, WALL_HEIGHT
-from app.viewer.state import DomainView, Snapshot
+from app.viewer.state import Destination, DomainView, Figure, Snapshot
 from app.viewer.viewer import Viewer, pump_wait
 from tests.viewer.conftest import Browser, FakeFeed, choose, free_port, wait_until, walk
 
@@ -89,17 +89,48 @@ def test_viewer_panel_has_a_legend_and_one_name_for_p_m1_h(
     controls = viewer.controls
     assert controls is not None
     legend = controls.legend.content
-    for drawn in ("walls", "start", "goals", "Prior arrows", "Kappa shading", "Session markers",
-                  "Session paths", "Advice given"):  # fmt: skip
+    for drawn in ("walls", "start", "destinations", "prior arrows", "kappa shading",
+                  "Session markers", "Session paths", "Advice given"):  # fmt: skip
         assert drawn in legend
-    # each layer's checkbox is named as the legend names it
+    # each layer's checkbox is named as the legend names it, plain words first
     assert all(box.label in legend for box in controls.layers.values())
-    assert controls.plot.title == PLOT_TITLE == "P(M1|H) over time"
+    assert controls.plot.title == PLOT_TITLE == "Knows the way (P(M1|H)) over time"
     choose(controls.session, "w0")
     viewer.tick()
     shown = (legend, controls.stats.content, controls.shading_text.content, controls.plot.title)
     assert all("p_normal" not in text for text in shown)
     assert "P(M1|H)" in controls.stats.content
+    assert controls.shading_text.content.startswith("Shaded: **")
+    assert "looks lost" in controls.shading_text.content
+
+
+def test_viewer_panel_says_what_the_advisor_believes_plain_words_first(
+    viewer: Viewer, feed: FakeFeed, domain: GridDomain, theta: np.ndarray
+) -> None:
+    """The picked session's figures as its strategy says them (the one that says most in
+    bold, its tone marked), and the destination its advice leads to, by name."""
+    base = snapshot(domain, theta, 1)
+    figures = (Figure("looks lost", "P(lost|H)", 0.97, "neutral"),
+               Figure("on its way", "P(M1|H)", 0.03, "neutral"))  # fmt: skip
+    to = Destination(1, domain.cell(domain.goals[1]), "Lecture hall B")
+    led = replace(base.sessions[0], figures=figures, headline=0, leads_to=to)
+    feed.snapshot = replace(base, sessions=[led])
+    viewer.tick()
+    controls = viewer.controls
+    assert controls is not None
+    choose(controls.session, "w0")
+    viewer.tick()
+    stats = controls.stats.content
+    assert (
+        "looks lost **97%** (P\\(lost\\|H\\)) (being handled); on its way 3% (P\\(M1\\|H\\))"
+        in stats
+    )
+    assert f"advice leads to **Lecture hall B \\(G1\\)** {list(to.cell)}" in stats
+    # a name cannot inject markup into the panel
+    odd = replace(led, leads_to=Destination(1, to.cell, "<b>x</b> *y*"))
+    feed.snapshot = replace(base, sessions=[odd])
+    viewer.tick()
+    assert "<b>" not in controls.stats.content and "\\*y\\*" in controls.stats.content
 
 
 def camera(width: int, height: int, fov: float = DEFAULT_FOV) -> _messages.ViewerCameraMessage:
@@ -313,12 +344,12 @@ def test_viewer_shows_a_goal_aware_sessions_goal_posterior(
     choose(viewer.controls.session, "g")
     viewer.tick()
     text = viewer.controls.stats.content
-    assert "strategy `goal_aware`" in text and "Goal posterior" in text
+    assert "strategy `goal_aware`" in text and "Where it may be going (P(goal|H))" in text
     assert f"G0 {list(cells[0])}: ~~ruled out~~" in text
     assert f"G1 {list(cells[1])}: **{p[1]:.2f}**" in text
     choose(viewer.controls.session, "w0")
     viewer.tick()
-    assert "Goal posterior" not in viewer.controls.stats.content
+    assert "Where it may be going" not in viewer.controls.stats.content
 
 
 @pytest.mark.parametrize(

@@ -31,7 +31,7 @@ from app.advice.guide import GuideMap
 from app.advice.models import AdviceTables
 from app.advice.priors import ActionPrior, GoalPriors
 from app.arrays import IntArray
-from app.domain.grid import Frame, GridDomain, MapError
+from app.domain.grid import Frame, GridDomain, MapError, NamedCell, name_goals
 from app.service.data.store import POOLED, DomainRecord, Store, TableCounts, Trajectory
 from app.strategies import DomainData, Need
 
@@ -196,10 +196,14 @@ class DomainCatalog:
         except KeyError:
             raise DomainNotFound(name) from None
 
-    def parse_map(self, rows: Sequence[str], name: str, frame: Frame | None = None) -> GridDomain:
-        """A validated grid; :class:`MapError` names the problem (line and column). The map
-        domain ``name`` holds (rows that read as its rows) is that grid in ``frame``
-        (:meth:`GridDomain.with_frame`), not read again."""
+    def parse_map(
+        self, rows: Sequence[str], name: str, frame: Frame | None = None,
+        names: Sequence[NamedCell] = (),
+    ) -> GridDomain:  # fmt: skip
+        """A validated grid (with its destinations' ``names``); :class:`MapError` names the
+        problem (line and column). The map domain ``name`` holds (rows that read as its rows)
+        is that grid in ``frame`` with these names (:meth:`GridDomain.with_frame`,
+        :meth:`GridDomain.with_names`), not read again."""
         if len(rows) * max((len(r) for r in rows), default=0) > self.max_cells:
             raise MapError(f"the map is larger than {self.max_cells} cells")
         old = self._domains.get(name)
@@ -208,8 +212,9 @@ class DomainCatalog:
             while cleaned and not cleaned[-1]:
                 cleaned.pop()
             if tuple(cleaned) == old.domain.rows_text:
-                return old.domain.with_frame(frame)
-        return GridDomain.from_strings(rows, name=name, frame=frame)
+                goal_names = name_goals(old.domain.rows_text, names)
+                return old.domain.with_frame(frame).with_names(goal_names)
+        return GridDomain.from_strings(rows, name=name, frame=frame, names=names)
 
     def put(
         self, name: str, domain: GridDomain, alpha0: float, preparing: bool = False

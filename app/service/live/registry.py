@@ -45,6 +45,7 @@ from app.service.live.history import Advice, AdviceLog, Recent
 from app.service.live.replay import DEFAULT_STEPS, Replay, retried
 from app.service.security import token_digest
 from app.strategies import AdvisorSettings
+from app.strategies.beliefs import Beliefs, paper_beliefs
 
 RECENT_ADVICE = 50
 
@@ -304,6 +305,9 @@ class SessionSnapshot:
     budget: Budget | None = None  # its advice budget
     advice_left: tuple[int | None, int | None] = (None, None)  # in all, this minute
     muted: bool = False
+    beliefs: Beliefs | None = None  # what its advisor believes, in plain words
+    # the destination its advice leads to: (goal index, cell, name or None)
+    leads_to: tuple[int, tuple[int, int], str | None] | None = None
 
 
 class SessionRegistry:
@@ -682,7 +686,7 @@ class SessionRegistry:
             adv.advice_per_100, s.path.array() if s.path else None,
             s.p_history.array() if s.p_history else None,
             s.advice_log.items() if s.advice_log else [], adv.goal_beliefs(),
-            s.advice_left(self.wall()),
+            s.advice_left(self.wall()), beliefs_of(adv, s.p_normal),
         )  # fmt: skip
 
     def forget_old(self) -> None:
@@ -742,6 +746,7 @@ class _Raw:
     advice: list[tuple[int, int, AdviceTables | Advice]]
     beliefs: list[tuple[int, float, bool]] | None
     advice_left: tuple[int | None, int | None]
+    plain: Beliefs
 
 
 def joined(parts: list[DecisionBatch]) -> DecisionBatch:
@@ -769,6 +774,10 @@ def _snap(r: _Raw) -> SessionSnapshot:
         return int(cells[state, 0]), int(cells[state, 1])
 
     path = cells[r.path if r.path is not None else [r.position]].tolist()
+    grid = s.domain.domain
+    leads, goal = None, r.plain.leads_to
+    if goal is not None and 0 <= goal < len(grid.goals):
+        leads = (goal, cell(grid.goals[goal]), grid.goal_names[goal] if grid.goal_names else None)
     return SessionSnapshot(
         s.id, s.domain.name, s.agent_type, s.table_key, r.kappa, r.window, r.strategy,
         r.params, r.steps, cell(r.position), r.p_normal, r.advice_count, r.total_cost,
@@ -776,8 +785,15 @@ def _snap(r: _Raw) -> SessionSnapshot:
         r.p_history.tolist() if r.p_history is not None else [r.p_normal],
         [(step, cell(st), _advice(tables, st)) for step, st, tables in r.advice],
         None if r.beliefs is None else [(cell(g), p, out) for g, p, out in r.beliefs],
-        s.budget, r.advice_left, s.muted,
+        s.budget, r.advice_left, s.muted, r.plain, leads,
     )  # fmt: skip
+
+
+def beliefs_of(advisor: Advisor, p_normal: float) -> Beliefs:
+    """What ``advisor`` believes, as its strategy's entry reads it (the paper's reading for
+    a strategy no longer in the table)."""
+    entry = strategies.STRATEGIES.get(advisor.strategy)
+    return (entry.beliefs if entry is not None else paper_beliefs)(advisor, p_normal)
 
 
 def _advice(source: AdviceTables | Advice, state: int) -> Advice:

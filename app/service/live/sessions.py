@@ -93,6 +93,11 @@ class Sessions(Protocol):
         """``session`` was seen now (it is not idle)."""
         ...
 
+    def current(self, session: LiveSession) -> LiveSession:
+        """The copy of ``session`` that its last event left (this process's, after that
+        event was answered): what an answer reads of its advisor besides the decision."""
+        ...
+
     async def observe_one(
         self, session: LiveSession, state: int, action: int, next_state: int, step: int = -1
     ) -> Decision:
@@ -192,6 +197,9 @@ class LocalSessions:
 
     def touch(self, session: LiveSession) -> None:
         self.registry.touch(session)
+
+    def current(self, session: LiveSession) -> LiveSession:
+        return session  # the registry's own: events change it in place
 
     async def observe_one(
         self, session: LiveSession, state: int, action: int, next_state: int, step: int = -1

@@ -621,6 +621,10 @@ class SharedSessions:
         """Activity is what the events write (their commit): a read does not keep a session
         alive across workers."""
 
+    def current(self, session: LiveSession) -> LiveSession:
+        """This worker's cached copy: an event that found Redis ahead loads a new one."""
+        return self.registry.cached(session.id) or session
+
     async def observe_one(
         self, session: LiveSession, state: int, action: int, next_state: int, step: int = -1
     ) -> Decision:

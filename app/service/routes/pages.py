@@ -25,7 +25,7 @@ PAGES = {"/": "index.html", "/walk": "walk.html"}
 )
 async def overview(
     state: StateDep,
-    detail: OperatorView,
+    role: OperatorView,
     limit: Annotated[int, Query(ge=0, le=1000, description="Sessions listed at most.")] = 100,
     domain: Annotated[str | None, Query(pattern=NAME_PATTERN)] = None,
 ) -> Response:
@@ -33,13 +33,13 @@ async def overview(
     operator key (X-API-Key) also the live sessions, most recently active first, with where
     each explorer is and was: personal data in a building that tracks people. Made at most
     once a second (ADVISOR_OVERVIEW_SECONDS), in a worker thread."""
-    key = ("overview", detail, limit, domain)
+    key = ("overview", role, limit, domain)
     age = state.settings.overview_seconds
 
     async def build() -> bytes:
         aggregates = await state.sessions.aggregates()
-        sessions = await state.sessions.snapshot(limit, domain) if detail else []
-        return await run_in_threadpool(ops.overview, state, detail, aggregates, sessions)
+        sessions = await state.sessions.snapshot(limit, domain) if role else []
+        return await run_in_threadpool(ops.overview, state, role, aggregates, sessions)
 
     text = await state.fresh.get(key, age, build)
     return Response(text, media_type="application/json")

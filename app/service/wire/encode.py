@@ -43,9 +43,13 @@ def decision_dict(d: Decision, domain: GridDomain) -> dict[str, Any]:
     }
 
 
-def decision_json(d: Decision, domain: GridDomain) -> bytes:
-    """One decision as JSON."""
-    return orjson.dumps(decision_dict(d, domain))
+def decision_json(d: Decision, domain: GridDomain, leads_to: Any = None) -> bytes:
+    """One decision as JSON; ``leads_to``: the destination its advice leads to (a
+    ``DestinationPublic`` as a dict), written only when given."""
+    out = decision_dict(d, domain)
+    if leads_to is not None:
+        out["leads_to"] = leads_to
+    return orjson.dumps(out)
 
 
 def batch_json(out: DecisionBatch, domain: GridDomain) -> bytes:
