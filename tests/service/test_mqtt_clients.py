@@ -328,7 +328,8 @@ def test_repeated_warnings_are_one_line_a_minute_for_each_kind(
     aiomqtt_log = connection._logger
     assert aiomqtt_log is bridge.client_log
     assert connection._client._logger is bridge.client_log  # paho's too
-    with caplog.at_level(logging.INFO, logger="app.service.mqtt"):
+    # the bridge's loggers write through uvicorn's error logger (its handler: the default format)
+    with caplog.at_level(logging.INFO, logger="uvicorn.error"):
         for k in range(10_000):  # a QoS 0 flood, as aiomqtt logs one
             now[0] = k * 0.005  # 50 s in all
             aiomqtt_log.warning("Message queue is full. Discarding message.")

@@ -117,14 +117,20 @@ def test_feed_prior_version_goes_up_when_trajectories_arrive(client: TestClient)
 def test_viewer_status_says_disabled_without_a_viewer(client: TestClient) -> None:
     answer = client.get("/viewer")
     assert answer.status_code == 200
-    assert answer.json() == {"enabled": False, "port": None, "host": None}
+    assert answer.json() == {"enabled": False, "running": False, "port": None, "host": None}
 
 
 def test_viewer_status_says_where_serve_starts_it(tmp_path: Path) -> None:
     cfg = settings(tmp_path, viewer=True)
     with TestClient(create_app(cfg)) as c:
         status = c.get("/viewer").json()
-    assert status == {"enabled": True, "port": cfg.viewer_port, "host": "127.0.0.1"}
+    # no viewer process of this app's (TestClient starts none): taken to be running
+    assert status == {
+        "enabled": True,
+        "running": True,
+        "port": cfg.viewer_port,
+        "host": "127.0.0.1",
+    }
 
 
 def test_the_snapshot_is_for_the_operator_and_admin_keys_only(client: TestClient) -> None:
