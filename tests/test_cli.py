@@ -2,6 +2,7 @@ from __future__ import annotations
 
 import json
 import socket
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -259,6 +260,9 @@ def test_cli_simulate_calls_the_port_of_advisor_port() -> None:
         port = free.getsockname()[1]  # bound, never listening: connections are refused
         env = {"ADVISOR_PORT": str(port), "COLUMNS": "200"}
         args = ["simulate", "--episodes", "1", "--no-progress"]
-        result = runner.invoke(cli, args, env=env)
-    assert result.exit_code == 2
+        # in a thread of its own: simulate runs asyncio, and the browser tests' Playwright keeps
+        # a loop running in this one (a user's process has none)
+        with ThreadPoolExecutor(1) as pool:
+            result = pool.submit(runner.invoke, cli, args, env=env).result()
+    assert result.exit_code == 2, result.output
     assert f"http://127.0.0.1:{port}" in result.output
