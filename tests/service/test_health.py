@@ -5,6 +5,10 @@ and a configured Redis, never for the MQTT bridge or the viewer."""
 from __future__ import annotations
 
 import socket
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
 
 from fastapi.testclient import TestClient
@@ -48,7 +52,37 @@ def test_a_bridge_without_its_broker_and_a_viewer_not_running_never_fail_readine
         deps = r.json()["dependencies"]
         assert deps["mqtt"]["state"] == "not connected" and not deps["mqtt"]["required"]
         assert deps["viewer"]["state"] == "not listening" and not deps["viewer"]["required"]
-        with socket.create_server(("127.0.0.1", viewer_port)):  # the viewer's port answers
+        with socket.create_server(("127.0.0.1", viewer_port)) as silent:  # accepts, says nothing
+            r = c.get("/health/ready")
+            assert r.json()["dependencies"]["viewer"]["state"] == "not listening"
+            silent.close()
+        with http_server(viewer_port) as requests:  # the viewer's port answers HTTP
             r = c.get("/health/ready")
             assert r.status_code == 200
             assert r.json()["dependencies"]["viewer"]["state"] == "listening"
+        # a request, not a bare connection (which the viewer logs as a failed handshake)
+        assert requests == ["GET / HTTP/1.1"]
+
+
+@contextmanager
+def http_server(port: int) -> Iterator[list[str]]:
+    """An HTTP server at ``port`` answering 200 to anything; yields the request lines."""
+    lines: list[str] = []
+
+    class Answer(BaseHTTPRequestHandler):
+        def do_GET(self) -> None:
+            lines.append(self.requestline)
+            self.send_response(200)
+            self.end_headers()
+
+        def log_message(self, *args: object) -> None:
+            pass
+
+    server = ThreadingHTTPServer(("127.0.0.1", port), Answer)
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    try:
+        yield lines
+    finally:
+        server.shutdown()
+        server.server_close()

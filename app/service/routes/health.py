@@ -91,13 +91,28 @@ async def _viewer(request: Request) -> dict[str, Any]:
     host = {"0.0.0.0": "127.0.0.1", "::": "::1", "": "127.0.0.1"}.get(
         settings.viewer_host, settings.viewer_host
     )
-    try:
-        _, writer = await asyncio.wait_for(asyncio.open_connection(host, settings.viewer_port), 0.5)
-    except (OSError, TimeoutError):
+    if not await _answers_http(host, settings.viewer_port):
         why = f"nothing answers at port {settings.viewer_port}"
         return _dependency("not listening", False, why)
-    writer.close()
     return _dependency("listening", False)
+
+
+async def _answers_http(host: str, port: int, timeout: float = 0.5) -> bool:
+    """Whether an HTTP server answers a request at ``host:port`` (its status line, whatever
+    the status). A request, not a bare connection: the viewer's websocket server logs a
+    connection closed before its request as a failed handshake, with a traceback."""
+    writer = None
+    try:
+        async with asyncio.timeout(timeout):
+            reader, writer = await asyncio.open_connection(host, port)
+            writer.write(f"GET / HTTP/1.1\r\nHost: {host}\r\nConnection: close\r\n\r\n".encode())
+            await writer.drain()
+            return (await reader.readline()).startswith(b"HTTP/")
+    except (OSError, TimeoutError):
+        return False
+    finally:
+        if writer is not None:
+            writer.close()
 
 
 async def readiness(request: Request, state: ServiceState) -> Response:
