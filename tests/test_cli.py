@@ -262,3 +262,50 @@ def test_cli_simulate_calls_the_port_of_advisor_port() -> None:
         result = runner.invoke(cli, args, env=env)
     assert result.exit_code == 2
     assert f"http://127.0.0.1:{port}" in result.output
+
+
+FLOORS = """\
+destination: 1 1 3 Roof garden
+connection: lift 4 0:1,1 1:1,1 Lift 1
+connection: stairs 6 0:1,3 1:1,1 Stairs A
+floor: 0 Ground floor elevation: 0.0
+#####
+#.S.#
+#####
+floor: 1 Roof elevation: 3.5
+#####
+#..G#
+#####
+"""
+
+
+def test_cli_maze_check_and_show_read_a_map_of_several_floors(tmp_path: Path) -> None:
+    path = tmp_path / "tower.txt"
+    path.write_text(FLOORS)
+    checked = runner.invoke(cli, ["maze", "check", str(path)])
+    assert checked.exit_code == 2  # the stairs' top stop is the lift's
+    assert checked.output == (
+        f"error: {path}: line 3, column 28: connection 'Stairs A': stop [1, 1] on floor 1 "
+        "'Roof' is a stop of 'Lift 1' too: a cell is a stop of one connection at most\n"
+    )
+    path.write_text(FLOORS.replace("1:1,1 Stairs", "1:1,2 Stairs"))
+    checked = runner.invoke(cli, ["maze", "check", str(path)])
+    assert checked.exit_code == 0, checked.output
+    assert checked.output.startswith(
+        "ok: tower: 2 floors of 3x5 (ordinals 0 to 1), 6 free cells, 2 connection(s), start "
+        "[0, 1, 2] on floor 0 'Ground floor'\n"
+    )
+    # W to the lift, U (4 moves of time), E E: 7; by the stairs: E, U (6), E: 8
+    assert "G0[1, 1, 3] 'Roof garden' at 7" in checked.output
+    shown = runner.invoke(cli, ["maze", "show", str(path)])
+    assert shown.exit_code == 0, shown.output
+    assert shown.output.startswith(
+        "floor 0 'Ground floor' (floor 0 of the cells, elevation 0 m)\n#####\n#ASB#\n#####\n\n"
+        "floor 1 'Roof' (floor 1 of the cells, elevation 3.5 m)\n#####\n#ABG#\n#####\n\n"
+        "A  lift 'Lift 1', 4 moves a floor: floors 0, 1 at [1, 1]\n"
+        "B  stairs 'Stairs A', 6 moves a floor: 0:[1, 3] 1:[1, 2]\n"
+    )
+    trained = runner.invoke(cli, ["train", "--maze", str(path)])
+    assert trained.exit_code == 2
+    assert "a map of 2 floors (0 'Ground floor', 1 'Roof'): this command runs on a one-floor " \
+        "map in this version" in trained.output  # fmt: skip

@@ -10,6 +10,8 @@ from typing import TYPE_CHECKING, Annotated, NoReturn, cast
 import numpy as np
 import typer
 
+from app.cli.building import describe_building, show_building
+from app.domain.building import Building, load_map_file
 from app.domain.grid import Frame, GridDomain, MapError, NamedCell, plain_names
 from app.domain.maps import DEFAULT_MAP
 from app.mapio.budget import DEFAULT_MAX_MEMORY_MIB
@@ -58,13 +60,28 @@ MazeOption = Annotated[
 ]
 
 
-def load_domain(path: Path) -> GridDomain:
-    """Load a map or exit with the loader's message (which names line and column)."""
+def load_any(path: Path) -> GridDomain | Building:
+    """Load a map of one floor or several, or exit with the loader's message (which names
+    the floor, line and column)."""
     try:
-        return GridDomain.from_file(path)
+        return load_map_file(path)
     except MapError as exc:
         typer.echo(f"error: {path}: {exc}", err=True)
         raise typer.Exit(code=2) from None
+
+
+def load_domain(path: Path) -> GridDomain:
+    """Load a one-floor map, or exit with the loader's message; a map of several floors is
+    refused, naming its floors (what uses this runs on one floor)."""
+    domain = load_any(path)
+    if isinstance(domain, Building):
+        floors = ", ".join(f.label for f in domain.floors[:6])
+        floors += f" and {domain.n_floors - 6} more" if domain.n_floors > 6 else ""
+        _fail(
+            f"{path}: a map of {domain.n_floors} floors ({floors}): this command runs on a "
+            "one-floor map in this version (`maze check` and `maze show` read floors)"
+        )
+    return domain
 
 
 def describe(domain: GridDomain) -> str:
@@ -94,17 +111,24 @@ def maze_show(
         Path, typer.Argument(help="Map file.", show_default=shown(DEFAULT_MAP))
     ] = DEFAULT_MAP,
 ) -> None:
-    """Print a map and what it contains."""
-    domain = load_domain(maze)
+    """Print a map and what it contains (a map of several floors: each floor, its
+    connections' stops marked by letter, and a legend)."""
+    domain = load_any(maze)
+    if isinstance(domain, Building):
+        typer.echo(show_building(domain))
+        typer.echo(describe_building(domain))
+        return
     typer.echo(str(domain))
     typer.echo(describe(domain))
 
 
 @maze_cli.command("check")
 def maze_check(maze: Annotated[Path, typer.Argument(help="Map file to validate.")]) -> None:
-    """Validate a map file: exit 0 if it is a valid domain, 2 with the problem otherwise."""
-    domain = load_domain(maze)
-    typer.echo(f"ok: {describe(domain)}")
+    """Validate a map file (of one floor or several): exit 0 if it is a valid domain, 2 with
+    the problem otherwise (its floor, line and column)."""
+    domain = load_any(maze)
+    said = describe_building(domain) if isinstance(domain, Building) else describe(domain)
+    typer.echo(f"ok: {said}")
 
 
 def _write(
