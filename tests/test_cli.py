@@ -309,3 +309,27 @@ def test_cli_maze_check_and_show_read_a_map_of_several_floors(tmp_path: Path) ->
     assert trained.exit_code == 2
     assert "a map of 2 floors (0 'Ground floor', 1 'Roof'): this command runs on a one-floor " \
         "map in this version" in trained.output  # fmt: skip
+
+
+def test_cli_maze_generate_buildings_of_several_floors(tmp_path: Path) -> None:
+    out = tmp_path / "clinic.txt"
+    args = ["maze", "generate", "--kind", "building", "--floors", "3", "--rows", "30",
+            "--cols", "40", "--purpose", "hospital", "--goals", "4", "--seed", "2"]  # fmt: skip
+    result = runner.invoke(cli, [*args, "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert result.output.startswith("wrote ") and "clinic: 3 floors of 30x40" in result.output
+    checked = runner.invoke(cli, ["maze", "check", str(out)])
+    assert checked.exit_code == 0 and "4 connection(s)" in checked.output
+    text = out.read_text()
+    assert text.count("\nfloor: ") + text.startswith("floor: ") == 3
+    assert text.count("connection: lift 12 0:") == 2 and text.count("connection: stairs 18") == 2
+    assert text.count("destination: ") == 12
+    assert runner.invoke(cli, args).output == text  # the same seed, the same building
+    # one floor: the building of before, no floor lines
+    one = runner.invoke(cli, ["maze", "generate", "--kind", "building", "--seed", "2"])
+    assert one.exit_code == 0 and "floor:" not in one.output
+    for wrong, said in ((["--floors", "2"], "--floors is for --kind building"),
+                        (["--kind", "building", "--floors", "2", "--rows", "12", "--cols", "12"],
+                         "a 12x12 plan has no corridor")):  # fmt: skip
+        refused = runner.invoke(cli, ["maze", "generate", *wrong])
+        assert refused.exit_code == 2 and said in refused.output

@@ -27,6 +27,11 @@ class Kind(StrEnum):
     building = "building"
 
 
+class Purpose(StrEnum):
+    hospital = "hospital"
+    office = "office"
+
+
 class ImportFormat(StrEnum):
     auto = "auto"
     movingai = "movingai"
@@ -145,6 +150,15 @@ def _write(
     typer.echo(f"wrote {out}: {describe(domain)}")
 
 
+def _write_building(building: Building, out: Path | None) -> None:
+    body = building.to_text() + "\n"
+    if out is None:
+        typer.echo(body, nl=False)
+        return
+    out.write_text(body, encoding="utf-8")
+    typer.echo(f"wrote {out}: {describe_building(building)}")
+
+
 def _fail(message: str) -> NoReturn:
     typer.echo(f"error: {message}", err=True)
     raise typer.Exit(code=2)
@@ -173,14 +187,40 @@ def maze_generate(
             min=0.0, max=1.0, help="Buildings: chance of a second door between joined spaces."
         ),
     ] = 0.1,
-    goals: Annotated[int, typer.Option(min=1, help="Number of goals.")] = 8,
+    goals: Annotated[
+        int, typer.Option(min=1, help="Number of goals (buildings of several floors: a floor).")
+    ] = 8,
+    floors: Annotated[
+        int,
+        typer.Option(
+            min=1,
+            help="Buildings: floors, the same plan on each, a lift bank and two stairwells "
+            "at the same cells on every floor.",
+        ),
+    ] = 1,
+    purpose: Annotated[
+        Purpose,
+        typer.Option(help="Buildings of several floors: what the destinations are named after."),
+    ] = Purpose.office,
 ) -> None:
     """Generate a map: a maze (start lower-left, goals at corners and corridor ends) or a
-    building (start at the corridor nearest the lower-left corner, goals in rooms)."""
+    building (start at the corridor nearest the lower-left corner, goals in rooms; with
+    --floors N, N floors joined by lifts and stairs, named destinations on each)."""
+    from app.domain.floorplans import generate_floors
     from app.domain.generate import generate_building, generate_maze
 
     rng = np.random.default_rng(seed)
+    if floors > 1 and kind is not Kind.building:
+        _fail("--floors is for --kind building (a maze has one floor)")
     try:
+        if floors > 1:
+            name = out.stem if out is not None else "building"
+            building = generate_floors(
+                rows, cols, floors, rng, purpose=purpose.value, n_goals=goals,
+                corridor=corridor, room=(room_min, room_max), loops=loops, name=name,
+            )  # fmt: skip
+            _write_building(building, out)
+            return
         if kind is Kind.building:
             text = generate_building(
                 rows,

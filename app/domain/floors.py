@@ -79,6 +79,12 @@ MAX_ELEVATION = 10_000.0
 MAX_CONNECTIONS = 4096
 #: the most moves of time a ride may take per floor
 MAX_RIDE_COST = 1000
+#: seconds a ride takes per floor, by kind, where a map gives no cost (an import, a generated
+#: building): stairs, a 4 m storey's 24 steps and a landing; a lift, its travel and doors and a
+#: share of the wait; an escalator, 8 m at 0.5 m/s; a ramp, a 4 m rise at 1:12 (48 m) walked
+SECONDS_PER_FLOOR = {"stairs": 15.0, "lift": 10.0, "escalator": 16.0, "ramp": 40.0}
+#: metres a second of someone walking, one cell a move
+WALKING_SPEED = 1.2
 #: how many characters of a value from the text an error quotes
 QUOTE = 40
 #: the keys of a floors header (``floor:`` lines start the floors)
@@ -102,6 +108,15 @@ CONNECTION_USAGE = (
     f"{', '.join(KINDS)}; COST the moves of time per floor, 1 to {MAX_RIDE_COST}; each stop a "
     "floor's ordinal and a cell)"
 )
+
+
+def default_cost(kind: str, resolution: float) -> int:
+    """A connection's cost (moves of time per floor) where a map gives none: its kind's
+    :data:`SECONDS_PER_FLOOR` in moves of someone walking :data:`WALKING_SPEED` across cells of
+    ``resolution`` metres, rounded, from 1 to :data:`MAX_RIDE_COST` (at 0.5 m: stairs 36, a
+    lift 24, an escalator 38, a ramp 96; at 1 m half that)."""
+    moves = round(SECONDS_PER_FLOOR[kind] * WALKING_SPEED / resolution)
+    return max(1, min(MAX_RIDE_COST, moves))
 
 
 def quoted(text: str, limit: int = QUOTE) -> str:

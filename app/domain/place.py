@@ -121,11 +121,13 @@ def place(
     start: Cell | None = None,
     goals: Sequence[Cell] | None = None,
     n_goals: int = 8,
+    avoid: Sequence[Cell] = (),
 ) -> list[str]:
     """The rows of a map: ``free`` (one connected region) with its start and goals marked.
 
     ``start`` and ``goals`` are used as given (each checked to be a free cell); otherwise they
-    are picked as the module docstring says, ties broken by ``rng``."""
+    are picked as the module docstring says, ties broken by ``rng``, no picked goal on a cell
+    of ``avoid`` (a building's stairs and lifts)."""
     free = np.asarray(free, dtype=bool)
     cells = np.argwhere(free)
     if len(cells) == 0:
@@ -161,7 +163,13 @@ def place(
             raise MapError(f"the number of goals must be at least 1, got {n_goals}")
         if n_goals > len(cells) - 1:
             raise MapError(f"a start and {n_goals} goals do not fit in {len(cells)} free cells")
-        chosen = _spread(nbr, free, cells, start_i, n_goals, rng)
+        kept = [int(index[c]) for c in avoid if index[c] >= 0]
+        if n_goals > len(cells) - 1 - len(set(kept) - {start_i}):
+            raise MapError(
+                f"a start and {n_goals} goals do not fit in {len(cells)} free cells beside "
+                f"{len(kept)} kept for stairs and lifts"
+            )
+        chosen = _spread(nbr, free, cells, start_i, n_goals, rng, kept)
     grid = np.where(free, FREE, WALL).astype("<U1")
     grid[tuple(cells[start_i])] = START
     for gi in chosen:
@@ -183,12 +191,15 @@ def _spread(
     start: int,
     n_goals: int,
     rng: np.random.Generator,
+    avoid: Sequence[int] = (),
 ) -> list[int]:
-    """Farthest-point sampling over BFS distance, preferring dead ends and room cells."""
+    """Farthest-point sampling over BFS distance, preferring dead ends and room cells (never
+    the cells ``avoid``)."""
     open_count = (nbr != np.arange(len(cells))[:, None]).sum(axis=1)
     rooms = room_cells(free)[cells[:, 0], cells[:, 1]]
     candidate = (open_count == 1) | rooms
     candidate[start] = False
+    candidate[list(avoid)] = False
     nearest = _bfs(nbr, start)
     chosen: list[int] = []
     for _ in range(n_goals):
@@ -196,7 +207,7 @@ def _spread(
         pool[chosen] = False
         if not pool.any():  # fewer candidates than goals: any free cell will do
             pool = np.ones(len(cells), dtype=bool)
-            pool[[start, *chosen]] = False
+            pool[[start, *chosen, *avoid]] = False
         g = _pick(nearest, rng, pool)
         chosen.append(g)
         nearest = np.minimum(nearest, _bfs(nbr, g))
