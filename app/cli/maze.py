@@ -282,8 +282,8 @@ def maze_import(
     level: Annotated[
         int | None,
         typer.Option(
-            help="IMDF: the ordinal of the level to import (0 the ground or entrance level); "
-            "required until maps of several floors exist.",
+            help="IMDF: the ordinal of one level to import as a one-floor map (0 the ground "
+            "or entrance level); without it, every level: a map of several floors.",
         ),
     ] = None,
     start: Annotated[
@@ -296,8 +296,9 @@ def maze_import(
         int,
         typer.Option(
             min=1,
-            help="How many goals to pick (spread out; rooms, dead ends); IMDF: the level's "
-            "named destinations are the goals, picked only when it has none.",
+            help="How many goals to pick (spread out; rooms, dead ends); IMDF: the named "
+            "destinations are the goals, picked only when there are none (a whole building: "
+            "on each floor).",
         ),
     ] = 8,
     seed: Annotated[int, typer.Option(help="Random seed for the picks' ties.")] = 0,
@@ -314,7 +315,8 @@ def maze_import(
 ) -> None:
     """Import a map: keep its largest connected region, place a start and goals, write it as
     an ASCII map (with the resolution and origin when the format has them). An IMDF archive:
-    one level (--level), its named destinations the goals."""
+    every level, a map of several floors joined by its stairs and lifts (or one level with
+    --level), its named destinations the goals."""
     from app.domain.place import largest_region, parse_cells, place
     from app.mapio import read_map
     from app.mapio.budget import MemoryBudget
@@ -326,8 +328,19 @@ def maze_import(
         goal_list = parse_cells(goal_cells, "--goal-cells") if goal_cells is not None else None
         budget = MemoryBudget.of_mib(max_memory, len(goal_list) if goal_list else goals)
         imdf = fmt is ImportFormat.imdf or (fmt is ImportFormat.auto and _looks_imdf(file))
+        if imdf and level is None and (start is not None or goal_list is not None):
+            raise ValueError(
+                "--start and --goal-cells place one level's start and goals: give --level "
+                "ORDINAL with them (a whole building's start is picked on its ground floor, its "
+                "goals are its named destinations)"
+            )
         if imdf:
-            imported = _read_imdf(file, resolution, level, budget)
+            name = out.stem if out is not None else "building"
+            read = _read_imdf(file, resolution, level, budget, goals, seed, name, out is None)
+            if isinstance(read, Building):
+                _write_building(read, out)
+                return
+            imported = read
         elif resolution is not None or level is not None:
             raise ValueError(
                 "--resolution and --level are for IMDF archives (a ROS map has its own "
@@ -394,27 +407,44 @@ def _looks_imdf(path: Path) -> bool:
 
 
 def _read_imdf(
-    path: Path, resolution: float | None, level: int | None, budget: MemoryBudget
-) -> Imported:
-    """One level of an IMDF archive, refused without --level (naming the levels)."""
+    path: Path, resolution: float | None, level: int | None, budget: MemoryBudget,
+    goals: int, seed: int, name: str, err: bool,
+) -> Imported | Building:  # fmt: skip
+    """An IMDF archive: one level (``level``, its ordinal) as a one-floor import, else the
+    whole building (:func:`app.mapio.building.venue_building`), or the one-floor import of
+    the one level its kept region lies on. A building's notes are printed here (on stderr when
+    ``err``: the map goes to stdout)."""
     from app.mapio import MapImportError
     from app.mapio.budget import MemoryBudget
+    from app.mapio.building import venue_building
     from app.mapio.imdf import DEFAULT_RESOLUTION, one_floor, open_imdf
 
     source = open_imdf(path, budget)
     listed = source.listed()
-    if level is None:
-        raise MapImportError(
-            f"{path}: an IMDF venue of {len(source.levels)} level(s), by ordinal: {listed}: give "
-            "--level ORDINAL to import one of them as a one-floor map (maps of several floors "
-            "come with the floors format)"
-        )
-    if level not in {o for o, _ in source.levels}:
+    if level is not None and level not in {o for o, _ in source.levels}:
         raise MapImportError(f"{path}: no level of ordinal {level}: the levels are {listed}")
-    # every named place of the level may be a goal: the map's distances to each are budgeted
-    budget = MemoryBudget(budget.limit, max(budget.goals, source.places_on(level)))
+    ordinals = [level] if level is not None else [o for o, _ in source.levels]
+    # every named place may be a goal: the map's distances to each are budgeted
+    places = sum(source.places_on(o) for o in ordinals)
+    budget = MemoryBudget(budget.limit, max(budget.goals, places), len(ordinals))
     venue = source.venue(resolution or DEFAULT_RESOLUTION, budget=budget)
-    return one_floor(venue, level)
+    notes: list[str] = []
+    if level is None:
+        stacked = venue_building(venue, np.random.default_rng(seed), n_goals=goals, name=name)
+        if stacked.building is not None:
+            b = stacked.building
+            shown = ", ".join(f"{f.label}" for f in b.floors[:12])
+            head = f"IMDF venue {venue.name!r}: {b.n_floors} floors ({shown})"
+            for note in [head, *venue.notes, *stacked.notes]:
+                typer.echo(note, err=err)
+            for i, g in enumerate(b.goals):
+                typer.echo(f"G{i} {list(b.cell(g))}: {b.goal_label(i)}", err=err)
+            return b
+        level, notes = stacked.ordinal, stacked.notes
+    assert level is not None
+    imported = one_floor(venue, level)
+    imported.notes.extend(notes)
+    return imported
 
 
 def _named_goals(

@@ -406,18 +406,14 @@ def name_goals(rows: Sequence[str], names: Sequence[NamedCell]) -> tuple[str | N
     return tuple(out)
 
 
-def plain_names(
-    given: Sequence[tuple[tuple[int, int], str]],
-) -> tuple[list[NamedCell], list[str]]:
+def plain_unique(texts: Iterable[str]) -> list[str]:
     """Names from elsewhere (an imported venue's) made into names a map may hold: every
     character :data:`NAME_RULE` does not allow a space, spaces collapsed, what precedes the
     first letter or digit dropped, cut to :data:`NAME_MAX`, a name already given (ignoring
-    case) numbered (``Restroom 2``); a name left empty is no name. Returns the names and a
-    note for each one changed."""
-    out: list[NamedCell] = []
-    notes: list[str] = []
+    case) numbered (``Restroom 2``); ``""`` when nothing is left (no name)."""
+    out: list[str] = []
     taken: set[str] = set()
-    for (row, col), text in given:
+    for text in texts:
         words = "".join(c if _NAME.fullmatch("a" + c) else " " for c in text).split()
         name = " ".join(words)
         name = name[next((i for i, c in enumerate(name) if c.isalnum()), len(name)) :]
@@ -426,6 +422,20 @@ def plain_names(
         while name and name.casefold() in taken:
             n += 1
             name = f"{base[: NAME_MAX - len(str(n)) - 1].rstrip()} {n}"
+        if name:
+            taken.add(name.casefold())
+        out.append(name)
+    return out
+
+
+def plain_names(
+    given: Sequence[tuple[tuple[int, int], str]],
+) -> tuple[list[NamedCell], list[str]]:
+    """The destinations' names from elsewhere made plain (:func:`plain_unique`); a name left
+    empty is no name. Returns the names and a note for each one changed."""
+    out: list[NamedCell] = []
+    notes: list[str] = []
+    for ((row, col), text), name in zip(given, plain_unique(t for _, t in given), strict=True):
         if name != text:
             notes.append(
                 f"destination [{row}, {col}] {text!r} written "
@@ -433,7 +443,6 @@ def plain_names(
                 + f" (a name is {NAME_RULE})"
             )
         if name:
-            taken.add(name.casefold())
             out.append(NamedCell(row, col, name))
     return out, notes
 

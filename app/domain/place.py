@@ -148,10 +148,7 @@ def place(
     if start is None:
         if len(chosen) >= len(cells):
             raise MapError(f"no cell is left for the start: {len(chosen)} goals fill the map")
-        far = _bfs(nbr, 0)
-        not_goal = np.ones(len(cells), dtype=bool)
-        not_goal[chosen] = False
-        start_i = _pick(far, rng, not_goal)  # a picked start is never a given goal
+        start_i = _edge(nbr, rng, chosen)  # a picked start is never a given goal
     else:
         _check_cell(free, start, "start")
         start_i = int(index[start])
@@ -163,7 +160,7 @@ def place(
             raise MapError(f"the number of goals must be at least 1, got {n_goals}")
         if n_goals > len(cells) - 1:
             raise MapError(f"a start and {n_goals} goals do not fit in {len(cells)} free cells")
-        kept = [int(index[c]) for c in avoid if index[c] >= 0]
+        kept = sorted({int(index[c]) for c in avoid if index[c] >= 0})
         if n_goals > len(cells) - 1 - len(set(kept) - {start_i}):
             raise MapError(
                 f"a start and {n_goals} goals do not fit in {len(cells)} free cells beside "
@@ -175,6 +172,28 @@ def place(
     for gi in chosen:
         grid[tuple(cells[gi])] = GOAL
     return ["".join(r) for r in grid]
+
+
+def _edge(nbr: IntArray, rng: np.random.Generator, avoid: Sequence[int]) -> int:
+    """The index of the cell farthest (BFS) from the first free cell in row-major order, not
+    one of ``avoid`` (ties broken by ``rng``)."""
+    among = np.ones(nbr.shape[0], dtype=bool)
+    among[list(avoid)] = False
+    return _pick(_bfs(nbr, 0), rng, among)
+
+
+def edge_cell(free: BoolArray, rng: np.random.Generator, avoid: Sequence[Cell] = ()) -> Cell:
+    """The start :func:`place` picks in ``free`` (one connected region): the cell farthest
+    from its first cell in row-major order, none of ``avoid``."""
+    free = np.asarray(free, dtype=bool)
+    cells = np.argwhere(free)
+    index = np.full(free.shape, -1, dtype=np.int64)
+    index[cells[:, 0], cells[:, 1]] = np.arange(len(cells))
+    kept = sorted({int(index[c]) for c in avoid if index[c] >= 0})
+    if len(kept) >= len(cells):
+        raise MapError("no free cell is left for the start")
+    r, c = cells[_edge(_neighbours(free), rng, kept)]
+    return int(r), int(c)
 
 
 def _pick(score: IntArray, rng: np.random.Generator, among: BoolArray | None = None) -> int:
