@@ -24,6 +24,11 @@ row 0 the top row, as the API's cells)::
 A name is 1 to 40 characters: letters, digits, spaces and ``- _ . , ' & ( ) / + #``, starting
 with a letter or digit; each cell and each name (ignoring case) at most once; only a ``G``
 cell has one. :attr:`GridDomain.goal_names` holds them in the order of ``goals``.
+
+A map of several floors is written with ``floor: ORDINAL NAME`` lines, each followed by its
+floor's rows, and ``connection:`` lines between the floors (:mod:`app.domain.floors`); it is a
+:class:`~app.domain.building.Building`, and :func:`app.domain.building.load_map` reads either
+kind. This module reads one floor and refuses those lines, saying so.
 """
 
 from __future__ import annotations
