@@ -370,6 +370,8 @@ def _connection(
                 "and column from 0, no spaces)", n, s_at, True,
             )  # fmt: skip
         stops.append((int(m.group(1)), int(m.group(2)), int(m.group(3)), s_at))
+        if len(stops) > MAX_FLOORS:  # one a floor at most: refused before more are read
+            raise MapError(f"more than {MAX_FLOORS} stops: one a floor at most", n, s_at, True)
         k += 1
     if k == len(fields):
         raise MapError(

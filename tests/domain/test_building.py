@@ -7,12 +7,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from app.domain import building as building_module
 from app.domain import floors as floors_module
 from app.domain.building import ACTIONS, Building, D, U, load_map, load_map_file
 from app.domain.floors import Connection, Floor, is_floors_text
-from app.domain.grid import Frame, GridDomain, MapError
+from app.domain.generate import generate_building, generate_maze
+from app.domain.grid import Frame, GridDomain, MapError, NamedCell
 from app.domain.maps import DEFAULT_MAP
 
 #: ordinals -1, 0, 1: the lift serves all three, the stairs the lower two
@@ -287,9 +290,10 @@ def test_building_limits_are_checked_before_the_arrays(monkeypatch: pytest.Monke
         refusal(TEXT)
     )
     monkeypatch.setattr(floors_module, "MAX_FLOORS", 2)
-    assert "line 16: more than 2 floors: a map has at most 2" in str(refusal(TEXT))
+    two_stops = changed("-1:1,1 0:1,1 1:1,1", "-1:1,1 0:1,1")
+    assert "line 16: more than 2 floors: a map has at most 2" in str(refusal(two_stops))
     monkeypatch.setattr(floors_module, "MAX_CONNECTIONS", 1)
-    assert "line 5: more than 1 connections" in str(refusal(TEXT))
+    assert "line 5: more than 1 connections" in str(refusal(two_stops))
 
 
 def test_building_from_parts_checks_parts_made_in_code() -> None:
@@ -318,3 +322,29 @@ def test_building_state_at_snaps_metres_to_a_cell_of_the_floor() -> None:
     assert np.array_equal(b.state_of[b.cells[:, 0], b.cells[:, 1], b.cells[:, 2]],
                           np.arange(b.n_states))  # fmt: skip
     assert b.next_state[:, D].max() < b.n_states
+
+
+def test_a_connection_of_more_stops_than_floors_is_refused_as_it_is_read(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.setattr(floors_module, "MAX_FLOORS", 3)
+    many = changed("-1:1,4 0:1,4", "-1:1,4 0:1,4 1:1,4 2:1,4 3:1,4")
+    assert "line 5, column 41: more than 3 stops: one a floor at most" in str(refusal(many))
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 10_000), kind=st.sampled_from(["maze", "building"]),
+       header=st.booleans())  # fmt: skip
+def test_load_map_writes_one_floor_maps_back_byte_for_byte(
+    seed: int, kind: str, header: bool
+) -> None:
+    rng = np.random.default_rng(seed)
+    make = generate_maze if kind == "maze" else generate_building
+    rows = make(21, 25, rng, n_goals=3)
+    grid = GridDomain.from_strings(rows)
+    if header:
+        names = [NamedCell(r, c, f"Room {i}") for i, (r, c) in enumerate(grid.goal_cells[:2])]
+        grid = GridDomain.from_strings(rows, frame=Frame(0.25, (1.0, -2.5, 0.1)), names=names)
+    text = grid.to_text() + "\n"
+    again = load_map(text)
+    assert isinstance(again, GridDomain) and again.to_text() + "\n" == text
