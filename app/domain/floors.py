@@ -49,8 +49,8 @@ error names the line and column, and the floor when it is on one
 (:class:`~app.domain.grid.MapError`). A building has at most
 :data:`~app.domain.building.MAX_CELLS` cells (floors x rows x columns). Writing gives the
 frame, the destinations in the order of the goals, the connections in their order (stops by
-floor), then the floors: text read and written again is the same text, and a text written is
-read back to the same building.
+floor), then the floors, with no blank line: a text so written is read back to the same
+building and written again byte for byte (another text is written in this order).
 """
 
 from __future__ import annotations
