@@ -266,3 +266,74 @@ def test_cli_simulate_calls_the_port_of_advisor_port() -> None:
             result = pool.submit(runner.invoke, cli, args, env=env).result()
     assert result.exit_code == 2, result.output
     assert f"http://127.0.0.1:{port}" in result.output
+
+
+FLOORS = """\
+destination: 1 1 3 Roof garden
+connection: lift 4 0:1,1 1:1,1 Lift 1
+connection: stairs 6 0:1,3 1:1,1 Stairs A
+floor: 0 Ground floor elevation: 0.0
+#####
+#.S.#
+#####
+floor: 1 Roof elevation: 3.5
+#####
+#..G#
+#####
+"""
+
+
+def test_cli_maze_check_and_show_read_a_map_of_several_floors(tmp_path: Path) -> None:
+    path = tmp_path / "tower.txt"
+    path.write_text(FLOORS)
+    checked = runner.invoke(cli, ["maze", "check", str(path)])
+    assert checked.exit_code == 2  # the stairs' top stop is the lift's
+    assert checked.output == (
+        f"error: {path}: line 3, column 28: connection 'Stairs A': stop [1, 1] on floor 1 "
+        "'Roof' is a stop of 'Lift 1' too: a cell is a stop of one connection at most\n"
+    )
+    path.write_text(FLOORS.replace("1:1,1 Stairs", "1:1,2 Stairs"))
+    checked = runner.invoke(cli, ["maze", "check", str(path)])
+    assert checked.exit_code == 0, checked.output
+    assert checked.output.startswith(
+        "ok: tower: 2 floors of 3x5 (ordinals 0 to 1), 6 free cells, 2 connection(s), start "
+        "[0, 1, 2] on floor 0 'Ground floor'\n"
+    )
+    # W to the lift, U (4 moves of time), E E: 7; by the stairs: E, U (6), E: 8
+    assert "G0[1, 1, 3] 'Roof garden' at 7" in checked.output
+    shown = runner.invoke(cli, ["maze", "show", str(path)])
+    assert shown.exit_code == 0, shown.output
+    assert shown.output.startswith(
+        "floor 0 'Ground floor' (floor 0 of the cells, elevation 0 m)\n#####\n#ASB#\n#####\n\n"
+        "floor 1 'Roof' (floor 1 of the cells, elevation 3.5 m)\n#####\n#ABG#\n#####\n\n"
+        "A  lift 'Lift 1', 4 moves a floor: floors 0, 1 at [1, 1]\n"
+        "B  stairs 'Stairs A', 6 moves a floor: 0:[1, 3] 1:[1, 2]\n"
+    )
+    trained = runner.invoke(cli, ["train", "--maze", str(path)])
+    assert trained.exit_code == 2
+    assert "a map of 2 floors (0 'Ground floor', 1 'Roof'): this command runs on a one-floor " \
+        "map in this version" in trained.output  # fmt: skip
+
+
+def test_cli_maze_generate_buildings_of_several_floors(tmp_path: Path) -> None:
+    out = tmp_path / "clinic.txt"
+    args = ["maze", "generate", "--kind", "building", "--floors", "3", "--rows", "30",
+            "--cols", "40", "--purpose", "hospital", "--goals", "4", "--seed", "2"]  # fmt: skip
+    result = runner.invoke(cli, [*args, "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert result.output.startswith("wrote ") and "clinic: 3 floors of 30x40" in result.output
+    checked = runner.invoke(cli, ["maze", "check", str(out)])
+    assert checked.exit_code == 0 and "4 connection(s)" in checked.output
+    text = out.read_text()
+    assert text.count("\nfloor: ") + text.startswith("floor: ") == 3
+    assert text.count("connection: lift 12 0:") == 2 and text.count("connection: stairs 18") == 2
+    assert text.count("destination: ") == 12
+    assert runner.invoke(cli, args).output == text  # the same seed, the same building
+    # one floor: the building of before, no floor lines
+    one = runner.invoke(cli, ["maze", "generate", "--kind", "building", "--seed", "2"])
+    assert one.exit_code == 0 and "floor:" not in one.output
+    for wrong, said in ((["--floors", "2"], "--floors is for --kind building"),
+                        (["--kind", "building", "--floors", "2", "--rows", "12", "--cols", "12"],
+                         "a 12x12 plan has no corridor")):  # fmt: skip
+        refused = runner.invoke(cli, ["maze", "generate", *wrong])
+        assert refused.exit_code == 2 and said in refused.output

@@ -8,8 +8,10 @@ import subprocess
 import sys
 from pathlib import Path
 
+from app.domain.building import Building, U
 from app.service.config import Settings
 from tests.browser.screenshots import PAGES, TARGET
+from tests.domain.test_building import TEXT as BUILDING_TEXT
 
 README = (Path(__file__).resolve().parents[1] / "README.md").read_text(encoding="utf-8")
 
@@ -46,3 +48,16 @@ def test_readme_shows_a_screenshot_of_every_page() -> None:
     for name in PAGES:
         assert (TARGET / f"{name}.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", name
     assert sorted(p.stem for p in TARGET.iterdir()) == sorted(PAGES)
+
+
+def test_readme_map_of_several_floors_is_the_one_the_tests_read() -> None:
+    """The README's example of a map of several floors is a map, the tests' own, and what the
+    README says of it holds."""
+    section = README.split("**Buildings of several floors.**", 1)[1]
+    text = section.split("```\n", 1)[1].split("```", 1)[0].rstrip("\n")
+    assert text == BUILDING_TEXT
+    b = Building.from_text(text)
+    assert b.to_text() == text
+    basement, first = b.state(0, 1, 1), b.state(2, 1, 1)
+    assert b.step(b.step(basement, U), U) == first  # "two U"
+    assert b.durations[basement, U] + b.durations[b.step(basement, U), U] == 10

@@ -10,6 +10,8 @@ from typing import TYPE_CHECKING, Annotated, NoReturn, cast
 import numpy as np
 import typer
 
+from app.cli.building import describe_building, show_building
+from app.domain.building import Building, load_map_file
 from app.domain.grid import Frame, GridDomain, MapError, NamedCell, plain_names
 from app.domain.maps import DEFAULT_MAP
 from app.mapio.budget import DEFAULT_MAX_MEMORY_MIB
@@ -23,6 +25,11 @@ if TYPE_CHECKING:
 class Kind(StrEnum):
     maze = "maze"
     building = "building"
+
+
+class Purpose(StrEnum):
+    hospital = "hospital"
+    office = "office"
 
 
 class ImportFormat(StrEnum):
@@ -58,13 +65,28 @@ MazeOption = Annotated[
 ]
 
 
-def load_domain(path: Path) -> GridDomain:
-    """Load a map or exit with the loader's message (which names line and column)."""
+def load_any(path: Path) -> GridDomain | Building:
+    """Load a map of one floor or several, or exit with the loader's message (which names
+    the floor, line and column)."""
     try:
-        return GridDomain.from_file(path)
+        return load_map_file(path)
     except MapError as exc:
         typer.echo(f"error: {path}: {exc}", err=True)
         raise typer.Exit(code=2) from None
+
+
+def load_domain(path: Path) -> GridDomain:
+    """Load a one-floor map, or exit with the loader's message; a map of several floors is
+    refused, naming its floors (what uses this runs on one floor)."""
+    domain = load_any(path)
+    if isinstance(domain, Building):
+        floors = ", ".join(f.label for f in domain.floors[:6])
+        floors += f" and {domain.n_floors - 6} more" if domain.n_floors > 6 else ""
+        _fail(
+            f"{path}: a map of {domain.n_floors} floors ({floors}): this command runs on a "
+            "one-floor map in this version (`maze check` and `maze show` read floors)"
+        )
+    return domain
 
 
 def describe(domain: GridDomain) -> str:
@@ -94,17 +116,24 @@ def maze_show(
         Path, typer.Argument(help="Map file.", show_default=shown(DEFAULT_MAP))
     ] = DEFAULT_MAP,
 ) -> None:
-    """Print a map and what it contains."""
-    domain = load_domain(maze)
+    """Print a map and what it contains (a map of several floors: each floor, its
+    connections' stops marked by letter, and a legend)."""
+    domain = load_any(maze)
+    if isinstance(domain, Building):
+        typer.echo(show_building(domain))
+        typer.echo(describe_building(domain))
+        return
     typer.echo(str(domain))
     typer.echo(describe(domain))
 
 
 @maze_cli.command("check")
 def maze_check(maze: Annotated[Path, typer.Argument(help="Map file to validate.")]) -> None:
-    """Validate a map file: exit 0 if it is a valid domain, 2 with the problem otherwise."""
-    domain = load_domain(maze)
-    typer.echo(f"ok: {describe(domain)}")
+    """Validate a map file (of one floor or several): exit 0 if it is a valid domain, 2 with
+    the problem otherwise (its floor, line and column)."""
+    domain = load_any(maze)
+    said = describe_building(domain) if isinstance(domain, Building) else describe(domain)
+    typer.echo(f"ok: {said}")
 
 
 def _write(
@@ -119,6 +148,15 @@ def _write(
         return
     out.write_text(body, encoding="utf-8")
     typer.echo(f"wrote {out}: {describe(domain)}")
+
+
+def _write_building(building: Building, out: Path | None) -> None:
+    body = building.to_text() + "\n"
+    if out is None:
+        typer.echo(body, nl=False)
+        return
+    out.write_text(body, encoding="utf-8")
+    typer.echo(f"wrote {out}: {describe_building(building)}")
 
 
 def _fail(message: str) -> NoReturn:
@@ -149,14 +187,40 @@ def maze_generate(
             min=0.0, max=1.0, help="Buildings: chance of a second door between joined spaces."
         ),
     ] = 0.1,
-    goals: Annotated[int, typer.Option(min=1, help="Number of goals.")] = 8,
+    goals: Annotated[
+        int, typer.Option(min=1, help="Number of goals (buildings of several floors: a floor).")
+    ] = 8,
+    floors: Annotated[
+        int,
+        typer.Option(
+            min=1,
+            help="Buildings: floors, the same plan on each, a lift bank and two stairwells "
+            "at the same cells on every floor.",
+        ),
+    ] = 1,
+    purpose: Annotated[
+        Purpose,
+        typer.Option(help="Buildings of several floors: what the destinations are named after."),
+    ] = Purpose.office,
 ) -> None:
     """Generate a map: a maze (start lower-left, goals at corners and corridor ends) or a
-    building (start at the corridor nearest the lower-left corner, goals in rooms)."""
+    building (start at the corridor nearest the lower-left corner, goals in rooms; with
+    --floors N, N floors joined by lifts and stairs, named destinations on each)."""
+    from app.domain.floorplans import generate_floors
     from app.domain.generate import generate_building, generate_maze
 
     rng = np.random.default_rng(seed)
+    if floors > 1 and kind is not Kind.building:
+        _fail("--floors is for --kind building (a maze has one floor)")
     try:
+        if floors > 1:
+            name = out.stem if out is not None else "building"
+            building = generate_floors(
+                rows, cols, floors, rng, purpose=purpose.value, n_goals=goals,
+                corridor=corridor, room=(room_min, room_max), loops=loops, name=name,
+            )  # fmt: skip
+            _write_building(building, out)
+            return
         if kind is Kind.building:
             text = generate_building(
                 rows,
@@ -218,8 +282,8 @@ def maze_import(
     level: Annotated[
         int | None,
         typer.Option(
-            help="IMDF: the ordinal of the level to import (0 the ground or entrance level); "
-            "required until maps of several floors exist.",
+            help="IMDF: the ordinal of one level to import as a one-floor map (0 the ground "
+            "or entrance level); without it, every level: a map of several floors.",
         ),
     ] = None,
     start: Annotated[
@@ -232,8 +296,9 @@ def maze_import(
         int,
         typer.Option(
             min=1,
-            help="How many goals to pick (spread out; rooms, dead ends); IMDF: the level's "
-            "named destinations are the goals, picked only when it has none.",
+            help="How many goals to pick (spread out; rooms, dead ends); IMDF: the named "
+            "destinations are the goals, picked only when there are none (a whole building: "
+            "on each floor).",
         ),
     ] = 8,
     seed: Annotated[int, typer.Option(help="Random seed for the picks' ties.")] = 0,
@@ -250,7 +315,8 @@ def maze_import(
 ) -> None:
     """Import a map: keep its largest connected region, place a start and goals, write it as
     an ASCII map (with the resolution and origin when the format has them). An IMDF archive:
-    one level (--level), its named destinations the goals."""
+    every level, a map of several floors joined by its stairs and lifts (or one level with
+    --level), its named destinations the goals."""
     from app.domain.place import largest_region, parse_cells, place
     from app.mapio import read_map
     from app.mapio.budget import MemoryBudget
@@ -262,8 +328,19 @@ def maze_import(
         goal_list = parse_cells(goal_cells, "--goal-cells") if goal_cells is not None else None
         budget = MemoryBudget.of_mib(max_memory, len(goal_list) if goal_list else goals)
         imdf = fmt is ImportFormat.imdf or (fmt is ImportFormat.auto and _looks_imdf(file))
+        if imdf and level is None and (start is not None or goal_list is not None):
+            raise ValueError(
+                "--start and --goal-cells place one level's start and goals: give --level "
+                "ORDINAL with them (a whole building's start is picked on its ground floor, its "
+                "goals are its named destinations)"
+            )
         if imdf:
-            imported = _read_imdf(file, resolution, level, budget)
+            name = out.stem if out is not None else "building"
+            read = _read_imdf(file, resolution, level, budget, goals, seed, name, out is None)
+            if isinstance(read, Building):
+                _write_building(read, out)
+                return
+            imported = read
         elif resolution is not None or level is not None:
             raise ValueError(
                 "--resolution and --level are for IMDF archives (a ROS map has its own "
@@ -330,27 +407,44 @@ def _looks_imdf(path: Path) -> bool:
 
 
 def _read_imdf(
-    path: Path, resolution: float | None, level: int | None, budget: MemoryBudget
-) -> Imported:
-    """One level of an IMDF archive, refused without --level (naming the levels)."""
+    path: Path, resolution: float | None, level: int | None, budget: MemoryBudget,
+    goals: int, seed: int, name: str, err: bool,
+) -> Imported | Building:  # fmt: skip
+    """An IMDF archive: one level (``level``, its ordinal) as a one-floor import, else the
+    whole building (:func:`app.mapio.building.venue_building`), or the one-floor import of
+    the one level its kept region lies on. A building's notes are printed here (on stderr when
+    ``err``: the map goes to stdout)."""
     from app.mapio import MapImportError
     from app.mapio.budget import MemoryBudget
+    from app.mapio.building import venue_building
     from app.mapio.imdf import DEFAULT_RESOLUTION, one_floor, open_imdf
 
     source = open_imdf(path, budget)
     listed = source.listed()
-    if level is None:
-        raise MapImportError(
-            f"{path}: an IMDF venue of {len(source.levels)} level(s), by ordinal: {listed}: give "
-            "--level ORDINAL to import one of them as a one-floor map (maps of several floors "
-            "come with the floors format)"
-        )
-    if level not in {o for o, _ in source.levels}:
+    if level is not None and level not in {o for o, _ in source.levels}:
         raise MapImportError(f"{path}: no level of ordinal {level}: the levels are {listed}")
-    # every named place of the level may be a goal: the map's distances to each are budgeted
-    budget = MemoryBudget(budget.limit, max(budget.goals, source.places_on(level)))
+    ordinals = [level] if level is not None else [o for o, _ in source.levels]
+    # every named place may be a goal: the map's distances to each are budgeted
+    places = sum(source.places_on(o) for o in ordinals)
+    budget = MemoryBudget(budget.limit, max(budget.goals, places), len(ordinals))
     venue = source.venue(resolution or DEFAULT_RESOLUTION, budget=budget)
-    return one_floor(venue, level)
+    notes: list[str] = []
+    if level is None:
+        stacked = venue_building(venue, np.random.default_rng(seed), n_goals=goals, name=name)
+        if stacked.building is not None:
+            b = stacked.building
+            shown = ", ".join(f"{f.label}" for f in b.floors[:12])
+            head = f"IMDF venue {venue.name!r}: {b.n_floors} floors ({shown})"
+            for note in [head, *venue.notes, *stacked.notes]:
+                typer.echo(note, err=err)
+            for i, g in enumerate(b.goals):
+                typer.echo(f"G{i} {list(b.cell(g))}: {b.goal_label(i)}", err=err)
+            return b
+        level, notes = stacked.ordinal, stacked.notes
+    assert level is not None
+    imported = one_floor(venue, level)
+    imported.notes.extend(notes)
+    return imported
 
 
 def _named_goals(

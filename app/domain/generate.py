@@ -107,6 +107,19 @@ def generate_building(
         raise ValueError(f"room sides must satisfy 1 <= least <= largest, got {lo}, {hi}")
     if not 0.0 <= loops <= 1.0:
         raise ValueError(f"loops must be in [0, 1], got {loops}")
+    free, hall = building_layout(rows, cols, rng, corridor=corridor, room=room)
+    doors(free, hall, loops, rng)
+    cells = np.argwhere(hall if hall.any() else free)
+    start = cells[np.argmin(cells[:, 1] - cells[:, 0])]  # nearest the lower-left corner
+    return place(free, rng, start=(int(start[0]), int(start[1])), n_goals=n_goals)
+
+
+def building_layout(
+    rows: int, cols: int, rng: np.random.Generator, *, corridor: int, room: tuple[int, int]
+) -> tuple[BoolArray, BoolArray]:
+    """A floor's rooms and corridors, no door yet (the recursive split of the module
+    docstring): (free cells, corridor cells). :func:`doors` joins them."""
+    lo, hi = room
     free = np.zeros((rows, cols), dtype=bool)
     hall = np.zeros((rows, cols), dtype=bool)
     blocks = [(1, 1, rows - 2, cols - 2)]
@@ -134,10 +147,7 @@ def generate_building(
         else:
             free[r0 : r1 + 1, c0 : c1 + 1] = True
     _join_corridors(free, hall)
-    _doors(free, hall, loops, rng)
-    cells = np.argwhere(hall if hall.any() else free)
-    start = cells[np.argmin(cells[:, 1] - cells[:, 0])]  # nearest the lower-left corner
-    return place(free, rng, start=(int(start[0]), int(start[1])), n_goals=n_goals)
+    return free, hall
 
 
 def generate_building_domain(
@@ -169,20 +179,21 @@ def _join_corridors(free: BoolArray, hall: BoolArray) -> None:
     hall |= join
 
 
-def _doors(free: BoolArray, hall: BoolArray, loops: float, rng: np.random.Generator) -> None:
-    """Doors: a random spanning tree over the spaces (corridor doors first), then extras."""
+def doors(free: BoolArray, hall: BoolArray, loops: float, rng: np.random.Generator) -> None:
+    """Doors (``free`` changed in place): a random spanning tree over the spaces (corridor
+    doors first), then extras, each with chance ``loops``."""
     label = components(free)
     ns, we = _between(free)
-    doors: dict[tuple[int, int], list[tuple[int, int]]] = {}
+    ways: dict[tuple[int, int], list[tuple[int, int]]] = {}
     for mask, (dr, dc) in ((ns, (1, 0)), (we, (0, 1))):
         for r, c in np.argwhere(mask).tolist():
             a, b = int(label[r - dr, c - dc]), int(label[r + dr, c + dc])
             if a != b:
-                doors.setdefault((min(a, b), max(a, b)), []).append((r, c))
-    pairs = list(doors)
+                ways.setdefault((min(a, b), max(a, b)), []).append((r, c))
+    pairs = list(ways)
     order = rng.permutation(len(pairs))
     rank = [
-        (0 if any(hall[r, c] for r, c in _sides(doors[pairs[i]][0], free)) else 1, k)
+        (0 if any(hall[r, c] for r, c in _sides(ways[pairs[i]][0], free)) else 1, k)
         for k, i in enumerate(order)
     ]
     parent = list(range(int(label.max()) + 1))
@@ -200,7 +211,7 @@ def _doors(free: BoolArray, hall: BoolArray, loops: float, rng: np.random.Genera
         if joined and rng.random() >= loops:
             continue
         parent[ra] = rb
-        options = doors[(a, b)]
+        options = ways[(a, b)]
         r, c = options[int(rng.integers(len(options)))]
         free[r, c] = True
 

@@ -24,6 +24,11 @@ row 0 the top row, as the API's cells)::
 A name is 1 to 40 characters: letters, digits, spaces and ``- _ . , ' & ( ) / + #``, starting
 with a letter or digit; each cell and each name (ignoring case) at most once; only a ``G``
 cell has one. :attr:`GridDomain.goal_names` holds them in the order of ``goals``.
+
+A map of several floors is written with ``floor: ORDINAL NAME`` lines, each followed by its
+floor's rows, and ``connection:`` lines between the floors (:mod:`app.domain.floors`); it is a
+:class:`~app.domain.building.Building`, and :func:`app.domain.building.load_map` reads either
+kind. This module reads one floor and refuses those lines, saying so.
 """
 
 from __future__ import annotations
@@ -53,32 +58,37 @@ ARROWS = ("^", ">", "v", "<")
 
 WALL, FREE, START, GOAL = "#", ".", "S", "G"
 MAP_CHARACTERS = (WALL, FREE, START, GOAL)
+_CHARACTERS = "".join(MAP_CHARACTERS)
 UNREACHABLE = -1
 
 
 class MapError(ValueError):
     """A map that cannot be a domain; ``line``/``column`` are 1-based when known; ``header``:
-    the problem is in the header, whose lines count from the text's first (not the rows')."""
+    the problem is in the header, whose lines count from the text's first (not the rows');
+    ``floor``: on a map of several floors, the floor it is on (``1 'First floor'``: its
+    ordinal and name, as its ``floor:`` line writes them)."""
 
     def __init__(
         self, message: str, line: int | None = None, column: int | None = None,
-        header: bool = False,
+        header: bool = False, *, floor: str | None = None,
     ):  # fmt: skip
-        where = ""
+        where = f"floor {floor}, " if floor is not None else ""
         if line is not None:
-            where = f"line {line}" + (f", column {column}" if column is not None else "") + ": "
-        super().__init__(where + message)
+            where += f"line {line}" + (f", column {column}" if column is not None else "")
+        where = where.removesuffix(", ")
+        super().__init__(f"{where}: {message}" if where else message)
         self.message = message
         self.line = line
         self.column = column
         self.header = header
+        self.floor = floor
 
     def below(self, lines: int) -> MapError:
         """The same problem in a text whose first ``lines`` lines (a header) came before the
         rows this error counted from."""
         if self.line is None or not lines or self.header:
             return self
-        return MapError(self.message, self.line + lines, self.column)
+        return MapError(self.message, self.line + lines, self.column, floor=self.floor)
 
 
 #: Bytes :func:`packed` copies at a time (a 250,000-cell map's moves are 8 MB)
@@ -202,6 +212,8 @@ NAME_RULE = (
 )
 _NAME = re.compile(r"[^\W_][\w .,'&()/+#-]*")
 HEADER_KEYS = ("resolution", "origin", "destination")
+#: the header keys only a map of several floors has (:mod:`app.domain.floors`)
+FLOORS_KEYS = ("floor", "connection")
 
 
 @dataclass(frozen=True)
@@ -228,18 +240,26 @@ class NamedCell:
 def check_name(named: NamedCell) -> str:
     """The name, stripped; :class:`MapError` when it breaks :data:`NAME_RULE`."""
     name = named.name.strip()
+    problem = name_problem(name)
+    if problem is not None:
+        raise named.error(problem, at_name=True)
+    return name
+
+
+def name_problem(name: str, what: str = "a destination's") -> str | None:
+    """How a name (stripped) breaks :data:`NAME_RULE` (``what``: whose name it is, for a
+    missing one), or None."""
     if not name:
-        raise named.error("a destination's name is missing", at_name=True)
+        return f"{what} name is missing"
     if len(name) > NAME_MAX:
-        raise named.error(
-            f"the name {name[:NAME_MAX]!r}... is {len(name)} characters long: a name is "
-            + NAME_RULE, at_name=True,
-        )  # fmt: skip
+        return (
+            f"the name {name[:NAME_MAX]!r}... is {len(name)} characters long: a name is {NAME_RULE}"
+        )
     if not _NAME.fullmatch(name):
         bad = next((c for c in name if not _NAME.fullmatch("a" + c)), None)
-        what = f"holds {bad!r}" if bad is not None else f"starts with {name[0]!r}"
-        raise named.error(f"the name {name!r} {what}: a name is {NAME_RULE}", at_name=True)
-    return name
+        how = f"holds {bad!r}" if bad is not None else f"starts with {name[0]!r}"
+        return f"the name {name!r} {how}: a name is {NAME_RULE}"
+    return None
 
 
 @dataclass(frozen=True)
@@ -252,11 +272,16 @@ class Header:
     lines: int = 0
 
 
+def fields_of(line: str) -> list[tuple[int, str]]:
+    """The words of a header line's value (after its first ``:``), each with its column
+    (1-based, in the line)."""
+    value_at = line.index(":") + 1
+    return [(value_at + m.start() + 1, m.group()) for m in re.finditer(r"\S+", line[value_at:])]
+
+
 def _destination(line: str, n: int) -> NamedCell:
     """A ``destination: ROW COL NAME`` line (``n``: its number, 1-based)."""
-    value_at = line.index(":") + 1
-    fields = [(m.start() + 1, m.group()) for m in re.finditer(r"\S+", line[value_at:])]
-    fields = [(value_at + at, text) for at, text in fields]
+    fields = fields_of(line)
     usage = "write destination: ROW COL NAME (row and column from 0, as the API's cells)"
     if len(fields) < 3:
         where = fields[-1][0] + len(fields[-1][1]) if fields else len(line) + 1
@@ -282,6 +307,12 @@ def parse_header(lines: Sequence[str]) -> Header:
             break
         key, _, value = line.partition(":")
         key = key.strip().lower()
+        if key in FLOORS_KEYS:
+            raise MapError(
+                f"{key} lines belong to a map of several floors (floor: lines, each followed by "
+                "its rows), which this reads not: it reads one floor (`maze check` reads both)",
+                n + 1, None, True,
+            )  # fmt: skip
         if key not in HEADER_KEYS:
             raise MapError(
                 f"unknown header {key!r}: a map header has resolution, origin and destination "
@@ -297,10 +328,10 @@ def parse_header(lines: Sequence[str]) -> Header:
         n = len(lines)
     if not values:
         return Header(None, tuple(names), n)
-    return Header(_frame(values), tuple(names), n)
+    return Header(frame_of(values), tuple(names), n)
 
 
-def _frame(values: dict[str, tuple[int, str]]) -> Frame:
+def frame_of(values: dict[str, tuple[int, str]]) -> Frame:
     """The frame of a header's ``resolution`` and ``origin`` lines (line, text)."""
     if "resolution" not in values:
         raise MapError(
@@ -380,18 +411,14 @@ def name_goals(rows: Sequence[str], names: Sequence[NamedCell]) -> tuple[str | N
     return tuple(out)
 
 
-def plain_names(
-    given: Sequence[tuple[tuple[int, int], str]],
-) -> tuple[list[NamedCell], list[str]]:
+def plain_unique(texts: Iterable[str]) -> list[str]:
     """Names from elsewhere (an imported venue's) made into names a map may hold: every
     character :data:`NAME_RULE` does not allow a space, spaces collapsed, what precedes the
     first letter or digit dropped, cut to :data:`NAME_MAX`, a name already given (ignoring
-    case) numbered (``Restroom 2``); a name left empty is no name. Returns the names and a
-    note for each one changed."""
-    out: list[NamedCell] = []
-    notes: list[str] = []
+    case) numbered (``Restroom 2``); ``""`` when nothing is left (no name)."""
+    out: list[str] = []
     taken: set[str] = set()
-    for (row, col), text in given:
+    for text in texts:
         words = "".join(c if _NAME.fullmatch("a" + c) else " " for c in text).split()
         name = " ".join(words)
         name = name[next((i for i, c in enumerate(name) if c.isalnum()), len(name)) :]
@@ -400,6 +427,20 @@ def plain_names(
         while name and name.casefold() in taken:
             n += 1
             name = f"{base[: NAME_MAX - len(str(n)) - 1].rstrip()} {n}"
+        if name:
+            taken.add(name.casefold())
+        out.append(name)
+    return out
+
+
+def plain_names(
+    given: Sequence[tuple[tuple[int, int], str]],
+) -> tuple[list[NamedCell], list[str]]:
+    """The destinations' names from elsewhere made plain (:func:`plain_unique`); a name left
+    empty is no name. Returns the names and a note for each one changed."""
+    out: list[NamedCell] = []
+    notes: list[str] = []
+    for ((row, col), text), name in zip(given, plain_unique(t for _, t in given), strict=True):
         if name != text:
             notes.append(
                 f"destination [{row}, {col}] {text!r} written "
@@ -407,7 +448,6 @@ def plain_names(
                 + f" (a name is {NAME_RULE})"
             )
         if name:
-            taken.add(name.casefold())
             out.append(NamedCell(row, col, name))
     return out, notes
 
@@ -440,28 +480,12 @@ class GridDomain:
     def __post_init__(self) -> None:
         grid = np.array([list(r) for r in self.rows_text])
         walls = grid == WALL
-        state_of = np.full(walls.shape, -1, dtype=np.int64)
-        free = np.argwhere(~walls)
-        state_of[free[:, 0], free[:, 1]] = np.arange(len(free))
-        # next_state[s, a]: target cell if on the map and free, else s itself.
-        target = free[:, None, :] + MOVES[None, :, :]
-        rows, cols = walls.shape
-        on_map = (
-            (target[..., 0] >= 0)
-            & (target[..., 0] < rows)
-            & (target[..., 1] >= 0)
-            & (target[..., 1] < cols)
-        )
-        tr = np.clip(target[..., 0], 0, rows - 1)
-        tc = np.clip(target[..., 1], 0, cols - 1)
-        tgt_state = state_of[tr, tc]
-        stay = np.arange(len(free))[:, None].repeat(N_ACTIONS, axis=1)
-        next_state = np.where(on_map & (tgt_state >= 0), tgt_state, stay)
+        state_of, cells, next_state = moves_table(walls)
         for name, value in (
             ("walls", walls),
             ("state_of", state_of),
-            ("cells", free.astype(np.int64)),
-            ("next_state", next_state.astype(np.int64)),
+            ("cells", cells),
+            ("next_state", next_state),
         ):
             value.setflags(write=False)
             object.__setattr__(self, name, value)
@@ -496,15 +520,7 @@ class GridDomain:
     @classmethod
     def from_file(cls, path: str | Path, name: str | None = None) -> GridDomain:
         p = Path(path)
-        try:
-            text = p.read_text(encoding="utf-8")
-        except OSError as exc:
-            raise MapError(f"cannot read map file {p}: {exc.strerror or exc}") from exc
-        except UnicodeDecodeError:
-            raise MapError(
-                f"{p} is not a text map (use `maze import` for images and other formats)"
-            ) from None
-        return cls.from_text(text, name=name or p.stem)
+        return cls.from_text(read_map_text(p), name=name or p.stem)
 
     def with_frame(self, frame: Frame | None) -> GridDomain:
         """This map in ``frame`` (itself when it is its own): its arrays and everything it
@@ -631,11 +647,34 @@ class GridDomain:
         return "\n".join(self.rows_text)
 
 
-def validate_map(rows: Sequence[str]) -> list[str]:
-    """Check an ASCII map and return its rows; raise :class:`MapError` naming the problem.
+def moves_table(walls: BoolArray) -> tuple[IntArray, IntArray, IntArray]:
+    """A grid's states and compass moves: ``state_of`` (the grid's shape, ``-1`` for walls),
+    ``cells`` (S x 2, the free cells in row-major order) and ``next_state`` (S x 4: the cell a
+    move leads to if it is on the map and free, else the state itself)."""
+    state_of = np.full(walls.shape, -1, dtype=np.int64)
+    free = np.argwhere(~walls).astype(np.int64)
+    state_of[free[:, 0], free[:, 1]] = np.arange(len(free))
+    target = free[:, None, :] + MOVES[None, :, :]
+    rows, cols = walls.shape
+    on_map = (
+        (target[..., 0] >= 0)
+        & (target[..., 0] < rows)
+        & (target[..., 1] >= 0)
+        & (target[..., 1] < cols)
+    )
+    tr = np.clip(target[..., 0], 0, rows - 1)
+    tc = np.clip(target[..., 1], 0, cols - 1)
+    tgt_state = state_of[tr, tc]
+    stay = np.arange(len(free))[:, None].repeat(N_ACTIONS, axis=1)
+    next_state = np.where(on_map & (tgt_state >= 0), tgt_state, stay).astype(np.int64)
+    return state_of, free, next_state
 
-    Trailing whitespace (and ``\\r``) is ignored; blank trailing lines are dropped.
-    """
+
+def check_rows(rows: Sequence[str]) -> list[str]:
+    """The rows of a grid, checked for shape and characters only (no start, goal or
+    reachability: :func:`validate_map` checks those too); :class:`MapError` names the line
+    (counted from the first row) and column. Trailing whitespace (and ``\\r``) is ignored;
+    blank trailing lines are dropped."""
     if isinstance(rows, str):
         raise MapError("a map is a list of row strings, not one string (split it into lines)")
     cleaned = [str(r).rstrip() for r in rows]
@@ -653,13 +692,36 @@ def validate_map(rows: Sequence[str]) -> list[str]:
                 "(every row must have the same length)",
                 line=i,
             )
-        for j, ch in enumerate(row, start=1):
-            if ch not in MAP_CHARACTERS:
+        if row.strip(_CHARACTERS):  # a character that is not a map's: find it
+            for j, ch in enumerate(row, start=1):
+                if ch in MAP_CHARACTERS:
+                    continue
                 raise MapError(
                     f"unknown character {ch!r}: use '#' wall, '.' free, 'S' start, 'G' goal",
                     line=i,
                     column=j,
                 )
+    return cleaned
+
+
+def read_map_text(path: Path) -> str:
+    """A map file's text; :class:`MapError` when it cannot be read or is not UTF-8 text."""
+    try:
+        return path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise MapError(f"cannot read map file {path}: {exc.strerror or exc}") from exc
+    except UnicodeDecodeError:
+        raise MapError(
+            f"{path} is not a text map (use `maze import` for images and other formats)"
+        ) from None
+
+
+def validate_map(rows: Sequence[str]) -> list[str]:
+    """Check an ASCII map and return its rows; raise :class:`MapError` naming the problem.
+
+    Trailing whitespace (and ``\\r``) is ignored; blank trailing lines are dropped.
+    """
+    cleaned = check_rows(rows)
     starts = [(i, j) for i, row in enumerate(cleaned) for j, ch in enumerate(row) if ch == START]
     if not starts:
         raise MapError("no start: mark exactly one cell with 'S'")

@@ -121,11 +121,13 @@ def place(
     start: Cell | None = None,
     goals: Sequence[Cell] | None = None,
     n_goals: int = 8,
+    avoid: Sequence[Cell] = (),
 ) -> list[str]:
     """The rows of a map: ``free`` (one connected region) with its start and goals marked.
 
     ``start`` and ``goals`` are used as given (each checked to be a free cell); otherwise they
-    are picked as the module docstring says, ties broken by ``rng``."""
+    are picked as the module docstring says, ties broken by ``rng``, no picked goal on a cell
+    of ``avoid`` (a building's stairs and lifts)."""
     free = np.asarray(free, dtype=bool)
     cells = np.argwhere(free)
     if len(cells) == 0:
@@ -146,10 +148,7 @@ def place(
     if start is None:
         if len(chosen) >= len(cells):
             raise MapError(f"no cell is left for the start: {len(chosen)} goals fill the map")
-        far = _bfs(nbr, 0)
-        not_goal = np.ones(len(cells), dtype=bool)
-        not_goal[chosen] = False
-        start_i = _pick(far, rng, not_goal)  # a picked start is never a given goal
+        start_i = _edge(nbr, rng, chosen)  # a picked start is never a given goal
     else:
         _check_cell(free, start, "start")
         start_i = int(index[start])
@@ -161,12 +160,40 @@ def place(
             raise MapError(f"the number of goals must be at least 1, got {n_goals}")
         if n_goals > len(cells) - 1:
             raise MapError(f"a start and {n_goals} goals do not fit in {len(cells)} free cells")
-        chosen = _spread(nbr, free, cells, start_i, n_goals, rng)
+        kept = sorted({int(index[c]) for c in avoid if index[c] >= 0})
+        if n_goals > len(cells) - 1 - len(set(kept) - {start_i}):
+            raise MapError(
+                f"a start and {n_goals} goals do not fit in {len(cells)} free cells beside "
+                f"{len(kept)} kept for stairs and lifts"
+            )
+        chosen = _spread(nbr, free, cells, start_i, n_goals, rng, kept)
     grid = np.where(free, FREE, WALL).astype("<U1")
     grid[tuple(cells[start_i])] = START
     for gi in chosen:
         grid[tuple(cells[gi])] = GOAL
     return ["".join(r) for r in grid]
+
+
+def _edge(nbr: IntArray, rng: np.random.Generator, avoid: Sequence[int]) -> int:
+    """The index of the cell farthest (BFS) from the first free cell in row-major order, not
+    one of ``avoid`` (ties broken by ``rng``)."""
+    among = np.ones(nbr.shape[0], dtype=bool)
+    among[list(avoid)] = False
+    return _pick(_bfs(nbr, 0), rng, among)
+
+
+def edge_cell(free: BoolArray, rng: np.random.Generator, avoid: Sequence[Cell] = ()) -> Cell:
+    """The start :func:`place` picks in ``free`` (one connected region): the cell farthest
+    from its first cell in row-major order, none of ``avoid``."""
+    free = np.asarray(free, dtype=bool)
+    cells = np.argwhere(free)
+    index = np.full(free.shape, -1, dtype=np.int64)
+    index[cells[:, 0], cells[:, 1]] = np.arange(len(cells))
+    kept = sorted({int(index[c]) for c in avoid if index[c] >= 0})
+    if len(kept) >= len(cells):
+        raise MapError("no free cell is left for the start")
+    r, c = cells[_edge(_neighbours(free), rng, kept)]
+    return int(r), int(c)
 
 
 def _pick(score: IntArray, rng: np.random.Generator, among: BoolArray | None = None) -> int:
@@ -183,12 +210,15 @@ def _spread(
     start: int,
     n_goals: int,
     rng: np.random.Generator,
+    avoid: Sequence[int] = (),
 ) -> list[int]:
-    """Farthest-point sampling over BFS distance, preferring dead ends and room cells."""
+    """Farthest-point sampling over BFS distance, preferring dead ends and room cells (never
+    the cells ``avoid``)."""
     open_count = (nbr != np.arange(len(cells))[:, None]).sum(axis=1)
     rooms = room_cells(free)[cells[:, 0], cells[:, 1]]
     candidate = (open_count == 1) | rooms
     candidate[start] = False
+    candidate[list(avoid)] = False
     nearest = _bfs(nbr, start)
     chosen: list[int] = []
     for _ in range(n_goals):
@@ -196,7 +226,7 @@ def _spread(
         pool[chosen] = False
         if not pool.any():  # fewer candidates than goals: any free cell will do
             pool = np.ones(len(cells), dtype=bool)
-            pool[[start, *chosen]] = False
+            pool[[start, *chosen, *avoid]] = False
         g = _pick(nearest, rng, pool)
         chosen.append(g)
         nearest = np.minimum(nearest, _bfs(nbr, g))

@@ -99,10 +99,13 @@ def mib(n: int) -> str:
 
 @dataclass(frozen=True)
 class MemoryBudget:
-    """At most ``limit`` bytes for one import, whose written map gets ``goals`` goals."""
+    """At most ``limit`` bytes for one import, whose written map gets ``goals`` goals;
+    ``placed``: the levels of a venue placed as the map (all of them for a map of several
+    floors)."""
 
     limit: int = DEFAULT_MAX_MEMORY_MIB * MIB
     goals: int = 8
+    placed: int = 1
 
     @classmethod
     def of_mib(cls, mebibytes: int, goals: int = 8) -> MemoryBudget:
@@ -158,9 +161,10 @@ class MemoryBudget:
     def venue_estimate(self, rows: int, cols: int, levels: int, json_bytes: int = 0) -> int:
         """Bytes an import of a venue of ``levels`` levels of ``rows`` x ``cols`` cells, read
         from ``json_bytes`` of GeoJSON, holds at most: the records, every level drawn, one level
-        being drawn, and one placed as a map."""
+        being drawn, and ``placed`` placed as a map."""
         cells = rows * cols
-        per_cell = levels * VENUE_LEVEL_CELL_BYTES + VENUE_BUILD_CELL_BYTES + self.cell_bytes
+        placed = self.placed * self.cell_bytes
+        per_cell = levels * VENUE_LEVEL_CELL_BYTES + VENUE_BUILD_CELL_BYTES + placed
         return cells * per_cell + json_bytes * RECORD_BYTE_COST
 
     def check_json(self, where: str, n_bytes: int) -> None:

@@ -37,7 +37,7 @@ from app.service.live.registry import (
     TooManySessions,
 )
 from app.service.live.replay import StepConflict
-from app.service.mapbody import map_of
+from app.service.mapbody import map_of, refuse_floors
 from app.service.metrics import METRICS, ingested
 from app.service.problems import BadInput
 from app.service.public import (
@@ -296,6 +296,7 @@ def put_domain(state: ServiceState, name: str, body: DomainPut) -> tuple[DomainS
     is built before the answer (:meth:`DomainCatalog.prepare_all`: a map whose needs would
     pass ``ADVISOR_MAX_DOMAIN_MEMORY`` is refused first), and what the event paths read of it
     (:func:`app.service.wire.warm.warm`), so that no session or event builds them."""
+    refuse_floors(body, state.settings.max_map_cells)  # read, checked, not served yet
     header, rows = map_of(body)  # rows, or a map file's text
     old = state.catalog.find(name)
     try:

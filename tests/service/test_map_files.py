@@ -240,3 +240,57 @@ def test_names_of_the_same_map_are_checked_as_a_new_map_s(
     assert client.put("/domains/same", json=renamed, headers=admin).json()["goal_names"] == [
         "Lobby", None,
     ]  # fmt: skip
+
+
+#: a map of two floors: read and checked, not served by this version
+FLOORS = (
+    "connection: lift 4 0:1,1 1:1,1 Lift 1\n"
+    "floor: 0 Ground floor\n#####\n#.S.#\n#####\n"
+    "floor: 1 First floor\n#####\n#..G#\n#####\n"
+)
+
+
+def test_a_map_of_several_floors_is_read_checked_and_refused_plainly(
+    client: TestClient, admin: dict[str, str]
+) -> None:
+    said = (
+        "map: a map of 2 floors (0 'Ground floor', 1 'First floor') with 1 connection(s) "
+        "(lift 'Lift 1') and 1 destination(s), read and checked: this version of the service "
+        "serves maps of one floor only"
+    )
+    for body in ({"content": FLOORS, "headers": admin | TEXT},
+                 {"json": {"text": FLOORS}, "headers": admin}):  # fmt: skip
+        r = client.put("/domains/tower", **body)
+        assert r.status_code == 422, r.text
+        assert r.json()["detail"].startswith(said)
+        assert "`maze import --level ORDINAL`" in r.json()["detail"]
+    # a mistake in it is named as `maze check` names it: floor, line, column
+    bad = client.put("/domains/tower", content=FLOORS.replace("#..G#", "#..Gx"),
+                     headers=admin | TEXT)  # fmt: skip
+    assert bad.status_code == 422
+    assert bad.json()["detail"] == (
+        "map: floor 1 'First floor', line 8, column 5: unknown character 'x': use '#' wall, '.' "
+        "free, 'S' start, 'G' goal"
+    )
+    wall = client.put("/domains/tower", content=FLOORS.replace("1:1,1", "1:0,1"),
+                      headers=admin | TEXT)  # fmt: skip
+    assert wall.status_code == 422
+    assert wall.json()["detail"].startswith(
+        "map: line 1, column 26: connection 'Lift 1': stop [0, 1] on floor 1 'First floor' is a "
+        "wall"
+    )
+    assert "tower" not in [d["name"] for d in client.get("/domains").json()]
+
+
+def test_a_map_of_several_floors_past_the_cells_limit_is_refused_before_its_check(
+    settings: Settings,
+) -> None:
+    small = settings.model_copy(update={"max_map_cells": 20})
+    with TestClient(create_app(small)) as c:
+        admin = {"X-API-Key": c.app.state.service.admin_key}  # type: ignore[attr-defined]
+        r = c.put("/domains/tower", content=FLOORS, headers=admin | TEXT)
+        assert r.status_code == 422
+        assert r.json()["detail"] == (
+            "map: 2 floors of 30 cells in all: this service takes maps of at most 20 cells "
+            "(ADVISOR_MAX_MAP_CELLS)"
+        )
