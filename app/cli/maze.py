@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from enum import StrEnum
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, NoReturn, cast
@@ -142,21 +142,20 @@ def _write(
 ) -> None:  # fmt: skip
     name = out.stem if out is not None else "maze"
     domain = GridDomain.from_strings(rows, name=name, frame=frame, names=names)
-    body = domain.to_text() + "\n"
-    if out is None:
-        typer.echo(body, nl=False)
-        return
-    out.write_text(body, encoding="utf-8")
-    typer.echo(f"wrote {out}: {describe(domain)}")
+    _emit(domain.to_text(), out, lambda: describe(domain))
 
 
 def _write_building(building: Building, out: Path | None) -> None:
-    body = building.to_text() + "\n"
+    _emit(building.to_text(), out, lambda: describe_building(building))
+
+
+def _emit(text: str, out: Path | None, what: Callable[[], str]) -> None:
+    """A map's text to ``out`` (saying what it wrote) or to standard output."""
     if out is None:
-        typer.echo(body, nl=False)
+        typer.echo(text + "\n", nl=False)
         return
-    out.write_text(body, encoding="utf-8")
-    typer.echo(f"wrote {out}: {describe_building(building)}")
+    out.write_text(text + "\n", encoding="utf-8")
+    typer.echo(f"wrote {out}: {what()}")
 
 
 def _fail(message: str) -> NoReturn:

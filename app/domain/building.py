@@ -69,11 +69,12 @@ from app.domain.grid import (
     Frame,
     GridDomain,
     MapError,
+    Placed,
     bfs_distances,
-    check_name,
     check_rows,
     moves_table,
     name_problem,
+    names_in_order,
     read_map_text,
 )
 
@@ -408,16 +409,21 @@ def _floor_problem(floor: Floor, below: Floor | None, names: dict[str, Floor]) -
     return None
 
 
-def _check_marks(floors: Sequence[Floor]) -> None:
-    """One start in the building, one goal or more."""
-    starts = [
+def _marked(floors: Sequence[Floor], mark: str) -> list[tuple[int, int, int]]:
+    """The cells marked ``mark`` (floor index, row, column), floor by floor, row-major."""
+    return [
         (f, r, c)
         for f, floor in enumerate(floors)
         for r, row in enumerate(floor.rows)
-        if START in row
+        if mark in row
         for c, ch in enumerate(row)
-        if ch == START
+        if ch == mark
     ]
+
+
+def _check_marks(floors: Sequence[Floor]) -> None:
+    """One start in the building, one goal or more."""
+    starts = _marked(floors, START)
     if not starts:
         raise MapError("no start: mark exactly one cell of the building with 'S'")
     if len(starts) > 1:
@@ -495,47 +501,17 @@ def _name_goals(
     if not names:
         return None
     n, rows, cols = len(floors), len(floors[0].rows), len(floors[0].rows[0])
-    goals = [
-        (f, r, c)
-        for f, floor in enumerate(floors)
-        for r, row in enumerate(floor.rows)
-        if GOAL in row
-        for c, ch in enumerate(row)
-        if ch == GOAL
-    ]
-    index = {cell: i for i, cell in enumerate(goals)}
-    out: list[str | None] = [None] * len(goals)
-    by_cell: dict[tuple[int, int, int], FloorName] = {}
-    by_name: dict[str, FloorName] = {}
+    placed = []
     for given in names:
         named, f = given.named, given.floor
-        name = check_name(named)
         if not 0 <= f < n:
             raise named.error(f"floor {f}: the map's floors are 0 to {n - 1}")
-        cell = (f, named.row, named.col)
         where = f"[{named.row}, {named.col}] on floor {floors[f].label}"
         if not (named.row < rows and named.col < cols):
             raise named.error(f"cell {where} is off its {rows}x{cols} map")
-        if cell not in index:
-            ch = floors[f].rows[named.row][named.col]
-            what = {WALL: "a wall", START: "the start"}.get(ch, "a free cell")
-            raise named.error(
-                f"cell {where} is {what}, not a destination: only a 'G' cell has a name"
-            )
-        if cell in by_cell:
-            raise named.error(f"cell {where} is named twice{_first(by_cell[cell])}")
-        if name.casefold() in by_name:
-            raise named.error(
-                f"the name {name!r} is given twice{_first(by_name[name.casefold()])}: each "
-                "destination's name must be its own", at_name=True,
-            )  # fmt: skip
-        by_cell[cell], by_name[name.casefold()] = given, given
-        out[index[cell]] = name
-    return tuple(out)
-
-
-def _first(given: FloorName) -> str:
-    return f" (line {given.named.line} names it first)" if given.named.line is not None else ""
+        char = floors[f].rows[named.row][named.col]
+        placed.append(Placed(named, (f, named.row, named.col), where, char))
+    return names_in_order(_marked(floors, GOAL), placed)
 
 
 def _rides(

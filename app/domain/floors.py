@@ -314,15 +314,20 @@ def _floor_line(line: str, n: int) -> tuple[int, str, float | None]:
     return int(text), name, elevation
 
 
+def _at_least(line: str, n: int, count: int, usage: str) -> list[tuple[int, str]]:
+    """The fields of header line ``n`` (column, text), at least ``count`` of them; else
+    :class:`MapError` saying ``usage`` at the end of the line's last field."""
+    fields = fields_of(line)
+    if len(fields) < count:
+        where = fields[-1][0] + len(fields[-1][1]) if fields else len(line) + 1
+        raise MapError(usage, n, where, True)
+    return fields
+
+
 def _destination(line: str, n: int) -> tuple[int, int, NamedCell]:
     """A ``destination: FLOOR ROW COL NAME`` line: (ordinal, its column, the named cell)."""
-    fields = fields_of(line)
-    if len(fields) < 4:
-        where = fields[-1][0] + len(fields[-1][1]) if fields else len(line) + 1
-        raise MapError(
-            f"a destination on a map of several floors needs a floor, a row, a column and a "
-            f"name: {DESTINATION_USAGE}", n, where, True,
-        )  # fmt: skip
+    fields = _at_least(line, n, 4, "a destination on a map of several floors needs a floor, a "
+                       f"row, a column and a name: {DESTINATION_USAGE}")  # fmt: skip
     at, text = fields[0]
     if not _ORDINAL.fullmatch(text):
         raise MapError(f"{quoted(text)} is not a floor's ordinal: {DESTINATION_USAGE}", n, at, True)
@@ -344,13 +349,8 @@ def _connection(
 ) -> tuple[str, int, list[tuple[int, int, int, int]], str, int, int]:
     """A ``connection:`` line: (kind, cost, stops as (ordinal, row, col, column), name, line,
     the kind's column)."""
-    fields = fields_of(line)
-    if len(fields) < 5:
-        where = fields[-1][0] + len(fields[-1][1]) if fields else len(line) + 1
-        raise MapError(
-            f"a connection needs a kind, a cost, two stops or more and a name: "
-            f"{CONNECTION_USAGE}", n, where, True,
-        )  # fmt: skip
+    fields = _at_least(line, n, 5, "a connection needs a kind, a cost, two stops or more and a "
+                       f"name: {CONNECTION_USAGE}")  # fmt: skip
     (k_at, kind), (c_at, cost) = fields[0], fields[1]
     if kind.lower() not in KINDS:
         raise MapError(f"unknown kind {quoted(kind)}: {CONNECTION_USAGE}", n, k_at, True)

@@ -384,17 +384,40 @@ def name_goals(rows: Sequence[str], names: Sequence[NamedCell]) -> tuple[str | N
         return None
     height, width = len(rows), len(rows[0])
     goals = [(r, c) for r, row in enumerate(rows) for c, ch in enumerate(row) if ch == GOAL]
-    index = {cell: i for i, cell in enumerate(goals)}
-    out: list[str | None] = [None] * len(goals)
-    by_cell: dict[tuple[int, int], NamedCell] = {}
-    by_name: dict[str, NamedCell] = {}
+    placed = []
     for named in names:
-        cell, name = (named.row, named.col), check_name(named)
         where = f"[{named.row}, {named.col}]"
         if not (named.row < height and named.col < width):
             raise named.error(f"cell {where} is off the {height}x{width} map")
+        placed.append(Placed(named, (named.row, named.col), where, rows[named.row][named.col]))
+    return names_in_order(goals, placed)
+
+
+@dataclass(frozen=True)
+class Placed:
+    """A destination's name at a cell on the map (``cell``: its key among the goals), where
+    it is in words and the map's character there."""
+
+    named: NamedCell
+    cell: tuple[int, ...]
+    where: str
+    char: str
+
+
+def names_in_order(
+    goals: Sequence[tuple[int, ...]], names: Sequence[Placed]
+) -> tuple[str | None, ...]:
+    """Each of ``goals``' names (None: unnamed); :class:`MapError` for a name of a cell that
+    is not a goal, a cell or a name given twice (a map of one floor or of several)."""
+    index = {cell: i for i, cell in enumerate(goals)}
+    out: list[str | None] = [None] * len(goals)
+    by_cell: dict[tuple[int, ...], NamedCell] = {}
+    by_name: dict[str, NamedCell] = {}
+    for placed in names:
+        named, cell, where = placed.named, placed.cell, placed.where
+        name = check_name(named)
         if cell not in index:
-            what = {WALL: "a wall", FREE: "a free cell", START: "the start"}[rows[cell[0]][cell[1]]]
+            what = {WALL: "a wall", START: "the start"}.get(placed.char, "a free cell")
             raise named.error(
                 f"cell {where} is {what}, not a destination: only a 'G' cell has a name"
             )

@@ -47,6 +47,15 @@ def brief(error: object, limit: int = 2 * QUOTE_CHARS) -> str:
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
+def utf8(raw: bytes, where: str, what: str, bom: bool = False) -> str:
+    """``raw`` as UTF-8 text (a byte order mark dropped with ``bom``), else
+    :class:`MapImportError`: ``where`` is not ``what`` (not UTF-8 text)."""
+    try:
+        return raw.decode("utf-8-sig" if bom else "utf-8")
+    except UnicodeDecodeError:
+        raise MapImportError(f"{where}: not {what} (not UTF-8 text)") from None
+
+
 @dataclass
 class Imported:
     """A passability grid (row 0 at the top) and what the reader noticed; ``goals``: named

@@ -24,7 +24,7 @@ import numpy as np
 import yaml
 
 from app.domain.grid import Frame
-from app.mapio import Imported, MapImportError, brief, shorten
+from app.mapio import Imported, MapImportError, brief, shorten, utf8
 from app.mapio.budget import MemoryBudget
 from app.mapio.raster import merge_cells, read_image
 
@@ -84,10 +84,7 @@ def load_yaml(path: Path) -> Any:
             f"{where}: larger than {MAX_YAML_BYTES // 1024} KiB: not a map_server YAML "
             "(which is a few lines)"
         )
-    try:
-        text = raw.decode("utf-8")
-    except UnicodeDecodeError:
-        raise MapImportError(f"{where}: not a YAML file (not UTF-8 text)") from None
+    text = utf8(raw, where, "a YAML file")
     try:
         return yaml.load(text, Loader=_NoAliasLoader)
     except yaml.MarkedYAMLError as exc:

@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 
 from app.arrays import FloatArray
-from app.mapio import MapImportError, brief, shorten
+from app.mapio import MapImportError, brief, shorten, utf8
 
 NAME_CHARS = 80
 
@@ -48,10 +48,7 @@ Rings = list[FloatArray]  # every ring of a polygon or multipolygon, (n, 2) lon/
 
 def load_json(data: bytes, where: str) -> Any:
     """A JSON document from bytes (UTF-8); one-line errors."""
-    try:
-        text = data.decode("utf-8-sig")
-    except UnicodeDecodeError:
-        raise MapImportError(f"{where}: not JSON (not UTF-8 text)") from None
+    text = utf8(data, where, "JSON", bom=True)
     try:
         return json.loads(text, parse_constant=_no_constant)
     except json.JSONDecodeError as exc:
