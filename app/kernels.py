@@ -44,7 +44,7 @@ GoalTables = tuple[IntArray, float, FloatArray, FloatArray, FloatArray]
 #: against the compass on a way to each destination (G, S))
 GuideArrays = tuple[IntArray, IntArray, IntArray, IntArray, IntArray, FloatArray, IntArray]
 #: (lam, p_lost, slack, spread, bump, the most destinations a tour is planned through)
-GuideParams = tuple[float, float, float, float, float, int]
+GuideParams = tuple[float, float, float, float, float, int, float, float, float, float, float, int]
 
 #: explorer kinds, in the order of app.agents.explorers.WALKERS (the paper's five first)
 RANDOM, RANDOM_AVOID, LEFT, BUG, OPTIMAL, CORRIDOR, STRAIGHT = 0, 1, 2, 3, 4, 5, 6
@@ -579,17 +579,21 @@ def guide_compass_route(
 def guide_append(
     gmap: GuideArrays, params: GuideParams, goals: IntArray, ll: FloatArray, alive: BoolArray,
     s: int, a: int, advised: bool, advice: FloatArray, heading: int, pi: FloatArray,
-    rows: FloatArray, known: bool,
-) -> int:  # pragma: no cover - compiled  # fmt: skip
+    rows: FloatArray, known: bool, comply: FloatArray, came: int,
+) -> tuple[int, int]:  # pragma: no cover - compiled  # fmt: skip
     """``GuideAdvisor.append``: fade the evidence, add log P(a | s, k), rule out a destination
     the explorer stood on. ``goals`` holds each destination's state; ``advised``: the last
     decision, for ``s``, gave ``advice`` (4,); ``pi`` is scratch (4,). ``rows`` (2 G, 4):
     every destination's pi_g(. | s), then its c_g(. | s), as :func:`guide_decide` leaves them
     in its scratch (:func:`guide_rows`); ``known``: they are already there for ``s`` (a
-    decision for ``s`` came just before), else they are made here."""
-    lam, _, slack, _, bump, _ = params
+    decision for ``s`` came just before), else they are made here. ``comply``
+    (:func:`guide_observe_compliance`) learns whether the explorer took the advice. ``came``:
+    where the last move led on the map (-1: none); a destination is ruled out only where it
+    can have led. Returns (the heading, where this move leads)."""
+    lam, _, slack, _, bump, _, _, _, _, _, _, _ = params
     next_state = gmap[0]
     n_goals = alive.shape[0]
+    guide_observe_compliance(params, comply, advised, advice, a)
     if not known:
         guide_fill_rows(gmap, goals, s, rows)
     guide_open(gmap, s, pi)
@@ -613,7 +617,7 @@ def guide_append(
         ll[k + 1] = lam * ll[k + 1] + math.log((1.0 - slack) * pa + slack * lo)
         ll[k + 2] = lam * ll[k + 2] + math.log((1.0 - slack) * ca + slack * lo)
     gi = gmap[4][s]
-    if gi >= 0:
+    if gi >= 0 and (came < 0 or came == s):  # a reading one cell off rules nothing out
         alive[gi] = False
         passed_all = True
         for g in range(alive.shape[0]):
@@ -621,7 +625,70 @@ def guide_append(
         if passed_all:  # it passed every one: the others count again
             for g in range(alive.shape[0]):
                 alive[g] = g != gi
-    return a if next_state[s, a] != s else heading
+    to = next_state[s, a]
+    return (a if to != s else heading), to
+
+
+@njit(cache=True)
+def guide_observe_compliance(
+    params: GuideParams, comply: FloatArray, advised: bool, advice: FloatArray, a: int
+) -> None:  # pragma: no cover - compiled  # fmt: skip
+    """``GuideAdvisor._observe_compliance``. ``comply`` (L + 4,): the log-likelihood of each
+    compliance level (j + 1/2) / L, the chance that the explorer's own move is the last
+    decision's advice, the decisions since the last piece of advice, P(compliance <
+    IGNORED), whether advice is held back (1.0: from P >= SURE until P < RELEASE)."""
+    fade, ignored, sure, release = params[6], params[7], params[8], params[9]
+    n = comply.shape[0] - 4
+    if not advised:
+        comply[n + 1] += 1.0
+        return
+    comply[n + 1] = 1.0
+    best = 0
+    for b in range(4):
+        if advice[b] > advice[best]:
+            best = b
+    chance = min(max(comply[n], 0.01), 0.99)
+    for j in range(n):
+        c = (j + 0.5) / n
+        lik = c + (1.0 - c) * chance if a == best else (1.0 - c) * (1.0 - chance)
+        comply[j] = fade * comply[j] + math.log(lik)
+    low = guide_compliance_below(comply[:n], ignored)
+    comply[n + 2] = low
+    if low >= sure:  # it ignores advice: hold it back
+        comply[n + 3] = 1.0
+    elif low < release:  # it takes advice (again)
+        comply[n + 3] = 0.0
+
+
+@njit(cache=True)
+def guide_compliance_state(params: GuideParams) -> FloatArray:  # pragma: no cover - compiled
+    """``compliance_state``: no advice yet (``COMPLY_LEVELS`` levels, chance 1/2, ``BACKOFF``
+    decisions since the last piece, the prior's P(compliance < IGNORED), not held back)."""
+    n = params[11]
+    comply = np.zeros(n + 4)
+    comply[n] = 0.5
+    comply[n + 1] = params[10]
+    comply[n + 2] = guide_compliance_below(comply[:n], params[7])
+    return comply
+
+
+@njit(cache=True)
+def guide_compliance_below(levels: FloatArray, bound: float) -> float:  # pragma: no cover
+    """``compliance_below``: the posterior probability that the explorer's compliance is
+    below ``bound``, from the log-likelihood of each level."""
+    n = levels.shape[0]
+    mx = levels[0]
+    for j in range(1, n):
+        if levels[j] > mx:
+            mx = levels[j]
+    low = 0.0
+    tot = 0.0
+    for j in range(n):
+        w = math.exp(levels[j] - mx)
+        if (j + 0.5) / n < bound:
+            low += w
+        tot += w
+    return low / tot
 
 
 @njit(cache=True)
@@ -715,11 +782,15 @@ def guide_first_of_tour(
 def guide_decide(
     gmap: GuideArrays, params: GuideParams, goals: IntArray, ll: FloatArray, alive: BoolArray,
     target: int, heading: int, s: int, theta: FloatArray, scratch: FloatArray,
-) -> tuple[float, float, int]:  # pragma: no cover - compiled  # fmt: skip
+    comply: FloatArray,
+) -> tuple[float, float, int, bool]:  # pragma: no cover - compiled  # fmt: skip
     """``GuideAdvisor.decide``: fills ``theta`` (4,) with the advice; returns (the value
-    compared with kappa, 1 - P(lost | H), the target). ``heading``: the last move that moved
-    (-1: none). ``scratch`` is (4 + 3 G + 12 G + 4,)."""
-    _, p_lost, slack, spread, bump, max_tour = params
+    compared with kappa, 1 - P(lost | H), the target, whether advice may be given at all: not
+    to an explorer that ignores it, advice held back, within ``BACKOFF`` decisions of the
+    last piece).
+    ``heading``: the last move that moved (-1: none). ``scratch`` is (4 + 3 G + 12 G + 4,);
+    ``comply`` as :func:`guide_observe_compliance` keeps it."""
+    _, p_lost, slack, spread, bump, max_tour, _, _, _, _, backoff, _ = params
     dist = gmap[3]
     n_goals = alive.shape[0]
     n_models = 4 + 3 * n_goals
@@ -784,6 +855,7 @@ def guide_decide(
     wl = guide_wall(gmap[0], s, heading, 0)
     wr = guide_wall(gmap[0], s, heading, 1)
     kl = 0.0
+    chance = pi_t  # P(A | s, H), written over r_T once r_T is read
     for a in range(4):
         lo = (1.0 - bump) * op[a] + bump / 4.0
         v = lost * pi_t[a]
@@ -799,17 +871,23 @@ def guide_decide(
                 m += post[k + 2] * ((1.0 - slack) * cs[g, a] + slack * lo)
         th = (1.0 - spread) * v + spread / 4.0
         theta[a] = th
+        chance[a] = m
         if th > 0.0:
             kl += th * (math.log(th) - math.log(m))
     if target >= 0:  # the value: weighted by what a lost explorer's move costs here
         kl = kl * (1.0 + lost * guide_drift(gmap, target, s))
+    kl = kl if kl > 0.0 else 0.0
     best = 0  # the advice: theta's favourite move
     for a in range(4):
         if theta[a] > theta[best]:
             best = a
+    n_levels = comply.shape[0] - 4
+    comply[n_levels] = chance[best]  # its own move would be the advice this often
     for a in range(4):
         theta[a] = (1.0 - spread) * (1.0 if a == best else 0.0) + spread / 4.0
-    return (kl if kl > 0.0 else 0.0), 1.0 - lost, target
+    # an explorer that ignores advice is left in peace, but for a piece now and then
+    allowed = comply[n_levels + 3] == 0.0 or comply[n_levels + 1] >= backoff
+    return kl, 1.0 - lost, target, allowed
 
 
 @njit(cache=True)
@@ -850,18 +928,22 @@ def guide_stream(
     target: int,
     last: int,
     heading: int,
+    came: int,
     advice: FloatArray,
+    comply: FloatArray,
     kappa: float,
     count: int,
     benefit: float,
     cap: int,
     moves: tuple[IntArray, IntArray, IntArray],
     out: tuple[FloatArray, FloatArray, BoolArray, IntArray, FloatArray, FloatArray],
-) -> tuple[int, int, int, int, float]:  # pragma: no cover - compiled
+) -> tuple[int, int, int, int, int, float]:  # pragma: no cover - compiled
     """A batch of ``GuideAdvisor.observe``; ``last`` is the state the last decision advised
     (-1 if it did not), ``advice`` (4,) that advice, updated in place, ``heading`` the last
-    move that moved. Fills ``out`` (kl, p_normal, advise, count, benefit, advice (n, 4));
-    returns (target, last, heading, advice count, benefit)."""
+    move that moved, ``came`` where the last move led on the map (-1: none), ``comply`` the
+    compliance evidence (:func:`guide_observe_compliance`), updated in place. Fills ``out``
+    (kl, p_normal, advise, count, benefit, advice (n, 4)); returns (target, last, heading,
+    came, advice count, benefit)."""
     states, actions, next_states = moves
     kl_out, p_out, advise_out, count_out, benefit_out, advice_out = out
     n_goals = alive.shape[0]
@@ -869,14 +951,15 @@ def guide_stream(
     rows = guide_rows(scratch, n_goals)
     for i in range(states.shape[0]):
         known = i > 0 and states[i] == next_states[i - 1]  # decided there just before
-        heading = guide_append(
+        heading, came = guide_append(
             gmap, params, goals, ll, alive, states[i], actions[i], last == states[i], advice,
-            heading, pi, rows, known,
+            heading, pi, rows, known, comply, came,
         )  # fmt: skip
-        kl, p0, target = guide_decide(
-            gmap, params, goals, ll, alive, target, heading, next_states[i], theta, scratch
-        )
-        if kl >= kappa and count < cap:
+        kl, p0, target, allowed = guide_decide(
+            gmap, params, goals, ll, alive, target, heading, next_states[i], theta, scratch,
+            comply,
+        )  # fmt: skip
+        if kl >= kappa and count < cap and allowed:
             count += 1
             benefit += kl
             advise_out[i] = True
@@ -892,7 +975,7 @@ def guide_stream(
         p_out[i] = p0
         count_out[i] = count
         benefit_out[i] = benefit
-    return target, last, heading, count, benefit
+    return target, last, heading, came, count, benefit
 
 
 # ---- a domain's guide map, built without the GIL -------------------------------------------------
@@ -1172,6 +1255,8 @@ def episode(
     g_alive = np.ones(n_dest, dtype=np.bool_)
     g_target = -1
     g_heading = -1
+    g_comply = guide_compliance_state(gparams)
+    g_came = -1
     g_scratch, g_pi, _ = guide_buffers(n_dest)
     g_rows = guide_rows(g_scratch, n_dest)
     heading = 0
@@ -1192,11 +1277,11 @@ def episode(
             kl, p = goal_decide(loglik, tables, goals, w, s, theta_w, z)
             advise = kl >= kappa
         elif rule == GUIDE:
-            kl, p, g_target = guide_decide(
+            kl, p, g_target, allowed = guide_decide(
                 gmap, gparams, g_goals, g_ll, g_alive, g_target, g_heading, s, theta_w,
-                g_scratch,
+                g_scratch, g_comply,
             )  # fmt: skip
-            advise = kl >= kappa
+            advise = kl >= kappa and allowed
         else:
             says = rule == PAPER or rule_says(
                 rule, t, s, last_s, last_a, rule_params, tables, rule_rng
@@ -1246,9 +1331,9 @@ def episode(
                     for g in range(n_goals):
                         goal_ll[g] = fsum(goal_ring[g])
         if rule == GUIDE:  # guide keeps its own evidence, not the paper's window
-            g_heading = guide_append(  # the decision for s came just before
+            g_heading, g_came = guide_append(  # the decision for s came just before
                 gmap, gparams, g_goals, g_ll, g_alive, s, a, advise, theta_w, g_heading, g_pi,
-                g_rows, True,
+                g_rows, True, g_comply, g_came,
             )  # fmt: skip
         else:
             pos = push(ring, loglik, pos, t + 1, period, log_probs, s, a)
@@ -1304,6 +1389,8 @@ def q_learning(
     g_alive = np.ones(n_dest, dtype=np.bool_)
     g_target = -1
     g_heading = -1
+    g_comply = guide_compliance_state(gparams)
+    g_came = -1
     g_scratch, g_pi, theta_w = guide_buffers(n_dest)
     g_rows = guide_rows(g_scratch, n_dest)
     total_steps = 0
@@ -1317,6 +1404,8 @@ def q_learning(
             g_alive[:] = True
             g_target = -1
             g_heading = -1
+            g_comply[:] = guide_compliance_state(gparams)
+            g_came = -1
         s = start
         n_advice = 0
         p_sum = 0.0
@@ -1324,15 +1413,16 @@ def q_learning(
         t = 0
         while t < max_steps:
             if rule == GUIDE:
-                kl, p, g_target = guide_decide(
+                kl, p, g_target, allowed = guide_decide(
                     gmap, gparams, g_goals, g_ll, g_alive, g_target, g_heading, s, theta_w,
-                    g_scratch,
+                    g_scratch, g_comply,
                 )  # fmt: skip
                 row = theta_w
             else:
                 kl, p = decide(loglik, tables, s, z)
                 row = theta[s * 4 : s * 4 + 4]
-            advise = kl >= kappa
+                allowed = True
+            advise = kl >= kappa and allowed
             n_advice += advise
             p_sum += p
             give = advised and advise
@@ -1362,9 +1452,9 @@ def q_learning(
             q[s, a] += alpha * (gamma * q[s2].max() - q[s, a])
             appended += 1
             if rule == GUIDE:
-                g_heading = guide_append(  # the decision for s came just before
+                g_heading, g_came = guide_append(  # the decision for s came just before
                     gmap, gparams, g_goals, g_ll, g_alive, s, a, advise, theta_w, g_heading,
-                    g_pi, g_rows, True,
+                    g_pi, g_rows, True, g_comply, g_came,
                 )  # fmt: skip
             else:
                 pos = push(ring, loglik, pos, appended, period, log_probs, s, a)

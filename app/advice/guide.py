@@ -34,10 +34,11 @@ The evidence fades with time constant W, the session's window::
                                                   3 n_alive P(D4_g) = ... = 1 - p_lost
 
 A destination is ruled out once the explorer stood on it and went on (its task would have
-ended there); when the last one is, the others count again. A lost explorer is led to a
-*target* T: the first destination of the shortest walk from where it is through every
-destination not ruled out (it could be going to any of them), planned again when T is ruled
-out. With P(lost | H) the sum over L4, LO, WL, WR::
+ended there), if the last move can have led there: a position read one cell off, which the
+last move cannot have led to, rules nothing out. When the last one is, the others count
+again. A lost explorer is led to a *target* T: the first destination of the shortest walk
+from where it is through every destination not ruled out (it could be going to any of them),
+planned again when T is ruled out. With P(lost | H) the sum over L4, LO, WL, WR::
 
     theta_s     = P(lost | H) r_T(s) + sum_g [P(D4_g | H) + P(DO_g | H)] pi_g(s)
                                      + sum_g P(C_g | H) pc_g(s)
@@ -52,6 +53,22 @@ out. With P(lost | H) the sum over L4, LO, WL, WR::
 * ``delta_T(s)``: how far a random open move from ``s`` takes a lost explorer from T, on
   average (BFS distance); advice saves 1 + delta_T moves where it saves 1 in the open, so the
   paper's KL (eq. (3)'s stand-in for the benefit) is weighted by it.
+
+How far this explorer takes advice is learned per session. After each piece, whether its
+move was the advised one is weighed against the chance of that move anyway (``m``, P(A | s, H)
+of the advised move at the decision), over compliance levels c_j = (j + 1/2) / L::
+
+    Lc_j  <-  f Lc_j + log (c_j + (1 - c_j) m)        it took the advised move
+    Lc_j  <-  f Lc_j + log ((1 - c_j) (1 - m))        it did not
+    P(c_j | H) ~ exp(Lc_j)                            (uniform prior, mean 1/2; f = 0.97)
+
+An explorer whose compliance is below ``IGNORED`` (0.25) with probability at least ``SURE``
+(0.7) is taken to ignore advice and gets at most one piece every ``BACKOFF`` (25) decisions,
+the piece that lets it show otherwise; once that probability falls below ``RELEASE`` (0.3:
+it takes them), advice comes as before. The estimate gates advice rather than
+scaling its value: scaling (value x mean compliance / 0.5) gave visitors who take half the advice
+less of it and longer walks, and never advised again one estimated to ignore it, who then
+could not show that it takes it (docs/RESULTS.md, "Advice that is not taken").
 
 A competent explorer is explained by some D_g, so the prediction already is what it should do
 and nothing is said; a lost one is explained by a lost model and is led, most insistently
@@ -85,6 +102,20 @@ N_LOST = 4
 MAX_TOUR = 10
 #: most destinations x states a guide map holds (its distances and detours: 16 bytes each)
 MAX_GUIDE_CELLS = 16_777_216
+#: how far the explorer takes advice, per session: a posterior over COMPLY_LEVELS compliance
+#: levels c_j = (j + 1/2) / COMPLY_LEVELS (uniform prior, mean 1/2), its evidence fading by
+#: COMPLY_FADE per piece of advice (about the last 30 pieces count)
+COMPLY_LEVELS = 10
+COMPLY_FADE = 0.97
+#: an explorer whose compliance is below IGNORED with posterior probability at least SURE is
+#: taken to ignore advice: at most one piece every BACKOFF decisions (4 per 100 steps) until
+#: its moves show that it takes advice again (that probability below RELEASE)
+IGNORED = 0.25
+SURE = 0.7
+RELEASE = 0.3
+BACKOFF = 25
+#: the chance that an explorer's own move is the advised one, kept within these bounds
+CHANCE_MIN, CHANCE_MAX = 0.01, 0.99
 
 
 #: (next_state (S, 4), cells (S, 2), destinations) -> (distances (G, S), detours (G, S))
@@ -339,13 +370,51 @@ class GuideParams:
         return cls(p.p_lost, p.slack, p.spread)
 
 
-def kernel_params(window: int, p: GuideParams) -> tuple[float, float, float, float, float, int]:
+def kernel_params(
+    window: int, p: GuideParams
+) -> tuple[float, float, float, float, float, int, float, float, float, float, float, int]:
     """The parameters as app/kernels.py reads them: (lam, p_lost, slack, spread, bump,
-    MAX_TOUR), with lam = 1 - 1/W the evidence's fading."""
+    MAX_TOUR, COMPLY_FADE, IGNORED, SURE, RELEASE, BACKOFF, COMPLY_LEVELS), with lam = 1 - 1/W
+    the evidence's fading."""
     return (
         1.0 - 1.0 / window, float(p.p_lost), float(p.slack), float(p.spread), LOST_BUMP,
-        MAX_TOUR,
+        MAX_TOUR, COMPLY_FADE, IGNORED, SURE, RELEASE, float(BACKOFF), COMPLY_LEVELS,
     )  # fmt: skip
+
+
+def compliance_state() -> list[float]:
+    """A session's compliance evidence before any advice: a log-likelihood per level, then
+    the chance that the explorer's own move is the last decision's advice, the decisions
+    since the last piece of advice (:data:`BACKOFF`: none yet), P(compliance < IGNORED) and
+    whether advice is held back (1.0) or not (0.0)."""
+    levels = [0.0] * COMPLY_LEVELS
+    return [*levels, 0.5, float(BACKOFF), compliance_below(levels, IGNORED), 0.0]
+
+
+def compliance_below(levels: list[float], bound: float) -> float:
+    """The posterior probability that the explorer's compliance is below ``bound``, from the
+    log-likelihood of each level."""
+    n = len(levels)
+    mx = levels[0]
+    for j in range(1, n):
+        if levels[j] > mx:
+            mx = levels[j]
+    low = 0.0
+    tot = 0.0
+    for j in range(n):
+        w = math.exp(levels[j] - mx)
+        if (j + 0.5) / n < bound:
+            low += w
+        tot += w
+    return low / tot
+
+
+def compliance_mean(levels: list[float]) -> float:
+    """The posterior mean of the explorer's compliance (how often it takes advice)."""
+    n = len(levels)
+    mx = max(levels)
+    w = [math.exp(v - mx) for v in levels]
+    return sum(wj * (j + 0.5) / n for j, wj in enumerate(w)) / sum(w)
 
 
 class GuideAdvisor(Advisor):
@@ -355,8 +424,8 @@ class GuideAdvisor(Advisor):
     own_advice = True
 
     __slots__ = (
-        "_heading", "_lam", "_last", "_last_advice", "_target", "alive", "guide", "p_lost",
-        "slack", "spread",
+        "_came", "_comply", "_heading", "_lam", "_last", "_last_advice", "_target", "alive",
+        "guide", "p_lost", "slack", "spread",
     )  # fmt: skip
 
     def __init__(
@@ -401,6 +470,13 @@ class GuideAdvisor(Advisor):
         self._last = -1  # the state the last decision advised (-1: it did not advise)
         self._last_advice = (0.25, 0.25, 0.25, 0.25)
         self._heading = -1  # the last move that moved (-1: none yet)
+        self._came = -1  # where the last move led on the map (-1: no move yet)
+        self._comply = compliance_state()
+
+    @property
+    def compliance(self) -> float:
+        """How often this explorer takes advice, as estimated from its moves after advice."""
+        return compliance_mean(self._comply[:-4])
 
     @property
     def target(self) -> int:
@@ -417,6 +493,7 @@ class GuideAdvisor(Advisor):
         ll[0] = lam * ll[0] + math.log(0.25)
         ll[1] = lam * ll[1] + math.log(lo)
         advised = state == self._last
+        self._observe_compliance(advised, action)
         for hand in range(2):
             ind = 1.0 if action == g.wall(state, self._heading, hand) else 0.0
             if advised:
@@ -433,13 +510,41 @@ class GuideAdvisor(Advisor):
             ll[k + 1] = lam * ll[k + 1] + math.log((1.0 - slack) * pa + slack * lo)
             ll[k + 2] = lam * ll[k + 2] + math.log((1.0 - slack) * ca + slack * lo)
         gi = int(g.goal_of_state[state])
-        if gi >= 0:  # it stood on this destination and went on: not its destination
+        if gi >= 0 and (self._came < 0 or self._came == state):
+            # it stood on this destination and went on: not its destination (a reading that
+            # the last move cannot have led to, one cell off, say, rules nothing out)
             self.alive[gi] = False
             if not any(self.alive):  # it passed every one: the others count again
                 self.alive = [i != gi for i in range(g.n_goals)]
-        if int(g.next_state[state, action]) != state:
+        self._came = int(g.next_state[state, action])
+        if self._came != state:
             self._heading = action
         self.steps += 1
+
+    def _observe_compliance(self, advised: bool, action: int) -> None:
+        """After a piece of advice: did the explorer take it? Weighed against the chance that
+        its own move was the advised one."""
+        comply = self._comply
+        n = len(comply) - 4
+        if not advised:
+            comply[n + 1] += 1.0
+            return
+        comply[n + 1] = 1.0
+        best = 0
+        for a in range(N_ACTIONS):
+            if self._last_advice[a] > self._last_advice[best]:
+                best = a
+        chance = min(max(comply[n], CHANCE_MIN), CHANCE_MAX)
+        for j in range(n):
+            c = (j + 0.5) / n
+            lik = c + (1.0 - c) * chance if action == best else (1.0 - c) * (1.0 - chance)
+            comply[j] = COMPLY_FADE * comply[j] + math.log(lik)
+        low = compliance_below(comply[:n], IGNORED)
+        comply[n + 2] = low
+        if low >= SURE:  # it ignores advice: hold it back
+            comply[n + 3] = 1.0
+        elif low < RELEASE:  # it takes advice (again)
+            comply[n + 3] = 0.0
 
     def _lost_open(self, s: int) -> list[float]:
         o = self.guide.open_policy(s)
@@ -512,6 +617,7 @@ class GuideAdvisor(Advisor):
         wl, wr = g.wall(state, self._heading, 0), g.wall(state, self._heading, 1)
         slack, spread = self.slack, self.spread
         theta = [0.0, 0.0, 0.0, 0.0]
+        chance = [0.0, 0.0, 0.0, 0.0]  # P(A | s, H): what the explorer does by itself
         kl = 0.0
         for a in range(N_ACTIONS):
             v = lost * pi_t[a]
@@ -528,6 +634,7 @@ class GuideAdvisor(Advisor):
                     m += post[k + 2] * ((1.0 - slack) * c[a] + slack * lo[a])
             th = (1.0 - spread) * v + spread / 4.0
             theta[a] = th
+            chance[a] = m
             if th > 0.0:
                 kl += th * (math.log(th) - math.log(m))
         if self._target >= 0:  # the value: weighted by what a lost explorer's move costs here
@@ -537,10 +644,13 @@ class GuideAdvisor(Advisor):
         for a in range(N_ACTIONS):
             if theta[a] > theta[best]:
                 best = a
+        self._comply[-4] = chance[best]  # its own move would be the advice this often
         for a in range(N_ACTIONS):
             theta[a] = (1.0 - spread) * (1.0 if a == best else 0.0) + spread / 4.0
         row = (theta[0], theta[1], theta[2], theta[3])
-        advise = kl >= self.kappa and self.advice_count < self.cap
+        # an explorer that ignores advice is left in peace, but for a piece now and then
+        allowed = self._comply[-1] == 0.0 or self._comply[-3] >= BACKOFF
+        advise = kl >= self.kappa and self.advice_count < self.cap and allowed
         self._last = state if advise else -1
         if advise:
             self._last_advice = row

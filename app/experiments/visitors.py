@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from functools import partial
 from pathlib import Path
 from typing import Any
@@ -73,7 +73,10 @@ StrategyOptions = strategy_args("VisitorsStrategies", STRATEGIES, {"guide": ()})
 TRAP_WINDOW, TRAP_CELLS = 50, 4
 #: the most destinations the floor's exact order is searched over (2^G G^2 steps)
 MAX_FLOOR_GOALS = 12
-MEASURES = ("success", "steps", "advice", "shortest", "trapped")
+MEASURES = ("success", "steps", "advice", "shortest", "trapped", "late_advice", "late_steps")
+#: advice "late" in a task: after its first LATE_AFTER pieces (a visitor who ignores every
+#: piece is to get at most 5 per 100 steps after its first 20)
+LATE_AFTER = 20
 PALETTE = ("tab:green", "tab:blue", "tab:red", "tab:purple", "tab:brown")
 
 
@@ -234,6 +237,10 @@ def run_job(args: Args, spec: MapSpec, spec_text: str) -> dict[str, dict[str, Fl
             m["advice"][i] = run.advice_count if c.advised else 0
             m["shortest"][i] = here.from_start[goal]
             m["trapped"][i] = trapped_moves(run.states)
+            given = np.flatnonzero(run.advise) if c.advised else np.zeros(0, dtype=np.int64)
+            if given.size > LATE_AFTER:  # the pieces and steps after the first LATE_AFTER
+                m["late_advice"][i] = given.size - LATE_AFTER
+                m["late_steps"][i] = run.steps - (int(given[LATE_AFTER - 1]) + 1)
         out[c.key] = m
     return out
 
@@ -286,6 +293,10 @@ def measures(m: dict[str, FloatArray]) -> dict[str, Any]:
         "mean_steps": float(m["steps"].mean()),
         "advice_per_100_steps": float((100.0 * m["advice"] / np.maximum(m["steps"], 1)).mean()),
         "advice_per_task": float(m["advice"].mean()),
+        "late_advice_per_100_steps": (
+            100.0 * float(m["late_advice"].sum()) / float(m["late_steps"].sum())
+            if m["late_steps"].sum() > 0 else math.nan
+        ),
         "trapped_share": float(trapped.mean()),
         "trapped_moves": float(m["trapped"][trapped].mean()) if trapped.any() else 0.0,
     }  # fmt: skip
@@ -347,6 +358,32 @@ def rows(results: Results, floor: dict[str, dict[str, Any]]) -> list[dict[str, A
     return out
 
 
+def noise_rows(results: Results) -> list[dict[str, Any]]:
+    """Positions read one cell off against exact positions: for every visitor with q > 0 whose
+    exact twin (the same spec at q = 0) ran too, per map and advised configuration, the
+    success of both and the paired change (the same tasks, the same walker's draws)."""
+    out = []
+    scopes = [(s.name, [s.index]) for s in results.maps]
+    scopes.append(("suite", [s.index for s in results.maps]))
+    for v in results.visitors:
+        exact = replace(v, noise=0.0).name
+        if v.noise == 0.0 or exact not in results.runs:
+            continue
+        for c in results.configs:
+            if not c.advised:
+                continue
+            for scope, idx in scopes:
+                noisy = results.runs[v.name][c.key]["success"][idx].ravel()
+                base = results.runs[exact][c.key]["success"][idx].ravel()
+                d = paired(noisy, base)
+                out.append({
+                    "map": scope, "visitor": v.name, "exact": exact, "key": c.key,
+                    "success_exact": float(base.mean()), "success": float(noisy.mean()),
+                    "change": d[0], "change_ci_low": d[1], "change_ci_high": d[2],
+                })  # fmt: skip
+    return out
+
+
 def find(table: list[dict[str, Any]], **match: Any) -> dict[str, Any]:
     return next(r for r in table if all(r[k] == v for k, v in match.items()))
 
@@ -401,8 +438,8 @@ def _ci(r: dict[str, Any], name: str, pct: bool = True) -> str:
     return f"{mean:+.2f} [{lo:+.2f}, {hi:+.2f}]"
 
 
-def _ratio(x: float) -> str:
-    return "-" if x is None or not math.isfinite(x) else f"{x:.2f}"
+def _ratio(x: float, digits: int = 2) -> str:
+    return "-" if x is None or not math.isfinite(x) else f"{x:.{digits}f}"
 
 
 def markdown(table: list[dict[str, Any]], maps: list[dict[str, Any]], results: Results,
@@ -424,8 +461,10 @@ def markdown(table: list[dict[str, Any]], maps: list[dict[str, Any]], results: R
         "the tasks drew.", "",
         "Per map and visitor: success (Wilson 95%); steps / shortest path over the tasks that "
         "arrived (the change over the tasks that arrived both ways); advice per 100 steps "
-        "and per task; trapped: the share of tasks with 50 consecutive positions on at most 4 "
-        "cells (moves spent so, per trapped task); arrival / floor: the mean steps (a task "
+        f"and per task, and per 100 steps after a task's first {LATE_AFTER} pieces (pooled "
+        f"over the tasks with more than {LATE_AFTER}); trapped: the share of tasks with 50 "
+        "consecutive positions on at most 4 cells (moves spent so, per trapped task); "
+        "arrival / floor: the mean steps (a task "
         "that did not arrive counts as the step limit) over the floor on these tasks, for "
         "visitors bound for the destinations. Changes: paired over the tasks, 95% normal "
         "interval.", "",
@@ -448,6 +487,7 @@ def markdown(table: list[dict[str, Any]], maps: list[dict[str, Any]], results: R
                     f"{_ratio(r0['steps_over_shortest'])} → {_ratio(r['steps_over_shortest'])}",
                     _ci(r, "change_steps_over_shortest", pct=False),
                     f"{r['advice_per_100_steps']:.1f}", f"{r['advice_per_task']:.1f}",
+                    _ratio(r["late_advice_per_100_steps"], 1),
                     f"{r0['trapped_share']:.0%} ({r0['trapped_moves']:.0f}) → "
                     f"{r['trapped_share']:.0%} ({r['trapped_moves']:.0f})",
                     _ratio(r["arrival_over_floor"]),
@@ -456,8 +496,20 @@ def markdown(table: list[dict[str, Any]], maps: list[dict[str, Any]], results: R
             markdown_table(
                 ["visitor", "map", "success: none → advised [95%]", "change [95%]",
                  "steps / shortest", "change [95%]", "advice / 100 steps", "advice / task",
-                 "trapped (moves)", "arrival / floor"],
+                 f"after {LATE_AFTER} pieces / 100 steps", "trapped (moves)", "arrival / floor"],
                 body,
+            ), "",
+        ]  # fmt: skip
+    noise = noise_rows(results)
+    if noise:
+        lines += [
+            "## Positions read one cell off against exact positions", "",
+            "The same tasks and walker draws with exact positions and with each cell read one "
+            "cell off with probability q; success of both and the paired change [95%].", "",
+            markdown_table(
+                ["visitor", "map", "advised by", "exact", "read off", "change [95%]"],
+                [[r["visitor"], r["map"], r["key"], f"{r['success_exact']:.0%}",
+                  f"{r['success']:.0%}", _ci(r, "change")] for r in noise],
             ), "",
         ]  # fmt: skip
     lines += ["Bars: visitors.png (success per map and visitor)."]
@@ -478,6 +530,7 @@ def run(args: Args, out: RunDir) -> dict[str, Any]:
         **header("visitors", args, elapsed), "maps": maps,
         "visitors": [{"spec": v.name, **asdict(v)} for v in results.visitors],
         "configs": [{"key": c.key, **asdict(c)} for c in results.configs], "rows": table,
+        "noise": noise_rows(results),
     }  # fmt: skip
     out.json("visitors", result)
     out.csv("visitors", table)

@@ -26,7 +26,7 @@ import numpy.typing as npt
 from app import kernels
 from app.advice.advisor import Advisor, Decision, DecisionBatch, resync_period
 from app.advice.goals import GoalAwareAdvisor
-from app.advice.guide import GuideAdvisor, GuideParams, kernel_params
+from app.advice.guide import COMPLY_LEVELS, GuideAdvisor, GuideParams, kernel_params
 from app.advice.models import AdviceTables
 from app.advice.rules import RuleAdvisor
 from app.arrays import BoolArray, FloatArray, IntArray
@@ -419,9 +419,10 @@ class StreamGuide(GuideAdvisor):
 
     def footprint(self) -> int:
         """Bytes the session's state can take at most: no window, but a sum per model (4 + 3G
-        Python floats in a list, 32 bytes each) and a flag per destination (a list)."""
+        Python floats in a list, 32 bytes each), a flag per destination (a list) and the
+        compliance evidence (COMPLY_LEVELS + 4 floats)."""
         g = self.guide.n_goals
-        return (4 + 3 * g) * 32 + g * 8 + 4 * 8
+        return (4 + 3 * g + COMPLY_LEVELS + 4) * 32 + g * 8 + 4 * 8
 
     def batch_slice(self) -> int:
         return max(64, 5_000 // (self.guide.n_goals + 1))  # compiled: 0.35 us a destination
@@ -435,14 +436,16 @@ class StreamGuide(GuideAdvisor):
         ll = np.array(self._loglik, dtype=np.float64)
         alive = np.array(self.alive, dtype=np.bool_)
         last_advice = np.array(self._last_advice, dtype=np.float64)
+        comply = np.array(self._comply, dtype=np.float64)
         out, rows = columns(n), np.empty((n, N_ACTIONS))
         params = kernel_params(self.window, GuideParams(self.p_lost, self.slack, self.spread))
         got = kernels.guide_stream(
             g.arrays, params, g.goal_states, ll, alive, self._target, self._last, self._heading,
-            last_advice, self.kappa, count_before, benefit_before, self.cap,
+            self._came, last_advice, comply, self.kappa, count_before, benefit_before, self.cap,
             (states, actions, next_states), (*out, rows),
         )  # fmt: skip
-        self._target, self._last, self._heading, self.advice_count, self.benefit = got
+        self._comply = comply.tolist()
+        self._target, self._last, self._heading, self._came, self.advice_count, self.benefit = got
         self._loglik = ll.tolist()
         self.alive = alive.tolist()
         a = last_advice.tolist()

@@ -223,3 +223,68 @@ def test_compiled_guide_q_learning_is_the_core_s(
     assert fast.success.tolist() == [r.success for r in ref]
     assert fast.advice_count.tolist() == [r.advice_count for r in ref]
     np.testing.assert_array_equal(fast.q, learner.q)
+
+
+def test_advice_that_is_ignored_stops_and_comes_back_once_it_is_taken() -> None:
+    """A random walker that ignores every piece of advice is advised at most 5 times per 100
+    steps after its first 20 ignored pieces (it learns how far this visitor takes advice);
+    once the same walker takes the advice, the advice comes back. The compiled episode of a
+    visitor of compliance 0 is held to the same bound."""
+    d = generate_building_domain(48, 48, 48)
+    prior, goal_priors = train_goal_priors(d, np.random.default_rng(0), "start", 10, 1.0)
+    tables = AdviceTables.paper(prior.theta())
+    adv = make_advisor("guide", tables, 0.5, 300, StrategyParams(), goal_priors,
+                       GuideMap.of(d, goal_priors))  # fmt: skip
+    rng = np.random.default_rng(1)
+    walker = make_explorer("random", d)
+    s, dec = d.start, adv.start(d.start)
+    given_at: list[int] = []
+    for t in range(1600):
+        if dec.advise:
+            given_at.append(t)
+        takes = t >= 1000  # ignores all advice, then takes all of it
+        if t == 1000:
+            estimate = adv.compliance  # type: ignore[attr-defined]
+        if takes and dec.advise and dec.advice is not None:
+            a = max(range(4), key=lambda b: (dec.advice[b], -b))  # type: ignore[index]
+        else:
+            a = walker.act(s, rng)
+        s2 = int(d.next_state[s, a])
+        dec = adv.observe(s, a, s2)
+        s = s2
+    ignoring = [t for t in given_at if t < 1000]
+    assert len(ignoring) >= 5  # it was advised, and ignored it
+    after = [t for t in ignoring if t > ignoring[min(19, len(ignoring) - 1)]]
+    assert len(after) <= 5 * 1000 / 100
+    assert estimate < guide.IGNORED
+    taking = [t for t in given_at if t >= 1300]
+    assert len(taking) > 10 * 300 / 100  # the advice came back
+    assert adv.compliance > 0.5  # type: ignore[attr-defined]
+    sim = Simulator(d, tables, goal_priors)
+    for seed in range(5):
+        run = sim.fixed("random", d.goals[seed], np.random.default_rng(seed), advised=True,
+                        strategy="guide", max_steps=3000, compliance=0.0)  # fmt: skip
+        assert run.advice_count <= 20 + 5 * run.steps / 100
+
+
+def test_no_single_reading_off_by_a_cell_rules_out_a_destination() -> None:
+    """A destination is ruled out when the explorer stood on it, having come there by a move
+    of the map, and went on; a reading on it that the last move cannot have led to (a
+    position seen one cell off) rules nothing out."""
+    d = generate_building_domain(24, 28, 3, n_goals=3)
+    prior, goal_priors = train_goal_priors(d, np.random.default_rng(0), "start", 2, 1.0)
+    gm = GuideMap.of(d, goal_priors)
+    g0 = gm.goals[0]
+    before = next(a for a in range(4) if int(d.next_state[g0, a]) != g0)  # a neighbour of g0
+    near = int(d.next_state[g0, before])
+    back = next(a for a in range(4) if int(d.next_state[near, a]) == g0)
+    away = next(a for a in range(4) if int(d.next_state[near, a]) not in (near, g0))
+    for came_by_a_move in (True, False):
+        adv = make_advisor("guide", AdviceTables.paper(prior.theta()), 0.5, 300,
+                           StrategyParams(), goal_priors, gm)  # fmt: skip
+        adv.start(near)
+        # near -> g0 by a move, or near -> (a move away) and then read on g0: one cell off
+        a = back if came_by_a_move else away
+        adv.observe(near, a, int(d.next_state[near, a]))
+        adv.observe(g0, before, near)  # read on g0, then it goes on
+        assert adv.alive[0] is (not came_by_a_move)  # type: ignore[attr-defined]

@@ -19,7 +19,9 @@ from app.domain.grid import GridDomain
 from app.experiments import buildings, visitors
 from app.experiments.output import RunDir
 
-VISITORS = ("random", "corridor p=0.5", "optimal q=0.2", "random anywhere", "straight r=5")
+VISITORS = (
+    "random", "corridor p=0.5", "optimal q=0.2", "random anywhere", "straight r=5", "optimal",
+)  # fmt: skip
 TINY: dict[str, Any] = {
     "tasks": 3, "buildings": (24,), "steps": 300, "workers": 1, "progress": False,
     "visitors": VISITORS,
@@ -66,6 +68,24 @@ def test_writes_every_file_and_a_row_per_map_visitor_and_config(
     for m in result["maps"]:
         assert m["floor"] is not None and m["floor_on_tasks"] is not None
         assert sorted(m["order"]) == list(range(m["goals"]))
+    # positions read off against exact ones: only "optimal q=0.2" has its exact twin here
+    assert "## Positions read one cell off against exact positions" in text
+    noise = result["noise"]
+    scopes = [m["name"] for m in result["maps"]] + ["suite"]
+    assert [(r["visitor"], r["exact"], r["map"]) for r in noise] == [
+        ("optimal q=0.2", "optimal", m) for m in scopes
+    ]
+    for r in noise:
+        row = find_row(result["rows"], r["map"], r["visitor"])
+        exact = find_row(result["rows"], r["map"], r["exact"])
+        assert (r["success"], r["success_exact"]) == (row["success"], exact["success"])
+        assert r["change"] == pytest.approx(row["success"] - exact["success"])
+
+
+def find_row(rows: list[dict[str, Any]], scope: str, visitor: str) -> dict[str, Any]:
+    return next(
+        r for r in rows if r["map"] == scope and r["visitor"] == visitor and r["key"] != "none"
+    )
 
 
 def test_a_plain_walker_repeats_the_buildings_tasks(floor: Path) -> None:

@@ -8,7 +8,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from app.advice.advisor import NO_CAP, Advisor, DecisionBatch, resync_period
+from app.advice.advisor import NO_CAP, Advisor, Decision, DecisionBatch, resync_period
 from app.advice.goals import GoalAwareAdvisor
 from app.advice.guide import GuideAdvisor, GuideMap, GuideParams
 from app.advice.models import AdviceTables
@@ -131,13 +131,16 @@ def test_every_form_reads_the_same_log_weights() -> None:
     kappa=st.sampled_from([0.0, 0.3, 0.5, 1.5]),
     follow=st.booleans(),
     batches=st.lists(st.integers(0, 300), min_size=1, max_size=6),
+    taking=st.sampled_from([0.0, 0.5, 1.0]),
 )
 def test_guide_batches_equal_the_core_guide(
-    seed: int, building: bool, window: int, kappa: float, follow: bool, batches: list[int]
-) -> None:
+    seed: int, building: bool, window: int, kappa: float, follow: bool, batches: list[int],
+    taking: float,
+) -> None:  # fmt: skip
     """StreamGuide's compiled batches against GuideAdvisor.observe, on moves that follow the
-    map (and, with ``follow`` off, jump anywhere, as a client's reports may), with new expert
-    counts mid-session, mixed with single events."""
+    map (and, with ``follow`` off, jump anywhere, as a client's reports may), by explorers
+    that take a piece of advice with probability ``taking`` (the compliance they learn), with
+    new expert counts mid-session, mixed with single events."""
     rng = np.random.default_rng(seed)
     if building:
         d = generate_building_domain(20, 24, seed % 1000, n_goals=1 + seed % 6)
@@ -159,9 +162,12 @@ def test_guide_batches_equal_the_core_guide(
             fast.use_tables(tables, more)
         _maybe_cap(rng, core, fast)
         states, actions, nexts = [], [], []
-        decided = []
+        decided: list[Decision] = []
         for _ in range(n):
             a = int(rng.integers(4))
+            last = decided[-1] if decided else None
+            if last is not None and last.advise and rng.random() < taking:  # takes the advice
+                a = max(range(4), key=lambda b: (last.advice[b], -b))  # type: ignore[index]
             if follow or rng.random() < 0.8:
                 s2 = int(d.next_state[s, a])
             else:
@@ -177,6 +183,8 @@ def test_guide_batches_equal_the_core_guide(
         )  # fmt: skip
         assert got.decisions() == decided
         assert fast._loglik == core._loglik and fast.alive == core.alive
+        assert fast._comply == core._comply and fast.compliance == core.compliance
+        assert fast._came == core._came
         assert fast.target == core.target and fast.goal_beliefs() == core.goal_beliefs()
         a = int(rng.integers(4))  # a single event between batches
         s2 = int(d.next_state[s, a])
