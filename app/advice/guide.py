@@ -479,6 +479,12 @@ class GuideAdvisor(Advisor):
         return compliance_mean(self._comply[:-4])
 
     @property
+    def holding_back(self) -> bool:
+        """Whether advice is held back: the explorer is taken to ignore it (one piece every
+        :data:`BACKOFF` decisions at most)."""
+        return self._comply[-1] != 0.0
+
+    @property
     def target(self) -> int:
         """The destination (index) the advice leads to; -1 before the first decision."""
         return self._target

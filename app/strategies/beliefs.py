@@ -27,6 +27,7 @@ Tone = Literal["good", "neutral", "bad"]
 KNOWS_THE_WAY = "moves like someone who knows the building"
 LOOKS_LOST = "looks lost"
 ON_ITS_WAY = "on its way"
+TAKES_ADVICE = "takes the advice"
 
 
 @dataclass(frozen=True, slots=True)
@@ -73,14 +74,20 @@ def guide_beliefs(advisor: Advisor, p_normal: float) -> Beliefs:
     leads to (:func:`guide_target`). A lost explorer that guide is leading reads ``neutral``,
     not ``bad``: following advice is what guide asks of it. ``bad`` only when it looks lost and
     guide cannot lead it now (no destination reachable, or no advice left: its budget is spent
-    or the visitor muted it)."""
+    or the visitor muted it). Third, how often it takes the advice, as guide has learned it
+    ("takes the advice", the posterior mean of its compliance): ``neutral`` while guide holds
+    advice back from a visitor who ignores it, else ``good``."""
     lost = 1.0 - p_normal
     target = guide_target(advisor)
     leading = target is not None and advisor.advice_count < advisor.cap
     looks_lost = lost >= 0.5
     lost_tone: Tone = "good" if not looks_lost else ("neutral" if leading else "bad")
-    figures = (
+    figures: tuple[Figure, ...] = (
         Figure(LOOKS_LOST, "P(lost|H)", lost, lost_tone),
         Figure(ON_ITS_WAY, "P(M1|H)", p_normal, lost_tone),
     )
+    takes = getattr(advisor, "compliance", None)
+    if takes is not None:
+        held: Tone = "neutral" if getattr(advisor, "holding_back", False) else "good"
+        figures += (Figure(TAKES_ADVICE, "P(take)", float(takes), held),)
     return Beliefs(figures, headline=0 if looks_lost else 1, leads_to=target)

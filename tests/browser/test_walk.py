@@ -275,7 +275,9 @@ def test_walk_keeps_its_panel_in_view_and_names_readable_on_a_141_by_162_map(
     page.wait_for_function(f"document.body.dataset.beliefsStep === '{step}'")
     for part in ("#panel", "#beliefs", "#kl-rule"):
         assert in_view(page, part), part
-    expect(page.locator("#beliefs dt")).to_have_text(["looks lost", "on its way"])
+    expect(page.locator("#beliefs dt")).to_have_text(
+        ["looks lost", "on its way", "takes the advice"]
+    )
     expect(page.locator("#leads-to")).to_contain_text("Advice leads to Room ")
     assert in_view(page, "#leads-to")
     target = page.locator("#destinations li.target")  # the panel's list marks it too

@@ -49,7 +49,9 @@ def test_client_names_destinations_and_reads_what_guide_believes(server: Server)
         assert leads["name"] == ("Exit" if leads["cell"] == [1, 5] else None)
         beliefs = client.session(session).get("beliefs")
         assert beliefs is not None and beliefs["leads_to"] == leads
-        assert [f["name"] for f in beliefs["figures"]] == ["looks lost", "on its way"]
+        assert [f["name"] for f in beliefs["figures"]] == [
+            "looks lost", "on its way", "takes the advice",
+        ]  # fmt: skip
         with pytest.raises(AdvisorError, match="cell \\[2, 1\\] is a free cell"):
             client.put_domain("tiny-named", TINY, destinations={(2, 1): "Hall"})
 

@@ -206,7 +206,7 @@ def test_feed_carries_destination_names_and_what_the_advisor_believes(
     assert [grid.goal_label(i) for i in range(2)] == ["Lobby", "Exit"]
     view = next(s for s in snap.sessions if s.session_id == sid)
     assert [(f.name, f.symbol) for f in view.figures] == [
-        ("looks lost", "P(lost|H)"), ("on its way", "P(M1|H)"),
+        ("looks lost", "P(lost|H)"), ("on its way", "P(M1|H)"), ("takes the advice", "P(take)"),
     ]  # fmt: skip
     assert view.leads_to is not None
     assert view.leads_to.name == ("Lobby", "Exit")[view.leads_to.goal]

@@ -12,12 +12,14 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from app.advice.advisor import DecisionBatch
+from app.advice.guide import compliance_state
 from app.advice.params import StrategyParams
 from app.arrays import Moves
 from app.service.data.domains import DomainState
 from app.service.data.store import Trajectory
 from app.service.live.codec import (
     CodecError,
+    advisor_state,
     decision_record,
     dump,
     load,
@@ -28,6 +30,7 @@ from app.service.live.codec import (
     read_replay_record,
     read_replay_records,
     replay_record,
+    restore_advisor,
     unpacked,
 )
 from app.service.live.registry import Limits, LiveSession, SessionRegistry, SessionSettings
@@ -253,3 +256,23 @@ def test_a_packed_state_loads_as_the_plain_one_and_a_plain_one_still_loads(
         unpacked(b"\x01not lz4")
     with pytest.raises(CodecError):
         unpacked(b"\x07")
+
+
+def test_a_guide_session_saved_before_compliance_was_learned_loads_with_the_prior(
+    domain: DomainState,
+) -> None:
+    """A guide session written by the version before guide learned compliance and checked
+    where a reading can have come from (no ``_comply``, no ``_came`` slot) loads, starts from
+    the prior's compliance, and goes on deciding."""
+    reg = SessionRegistry(Limits(100), 3600.0, replay_steps=32)
+    session, _ = reg.create(domain, SessionSettings.of("guide", 0.5, 40, params_for("guide")))
+    reg.observe_batch(session, walk(domain, domain.domain.start, 30, np.random.default_rng(3)))
+    state = advisor_state(session.advisor)
+    assert {"_comply", "_came"} <= set(state["slots"])
+    del state["slots"]["_comply"], state["slots"]["_came"]
+    old = restore_advisor(state, domain, "*")
+    assert old._comply == compliance_state() and old._came == -1  # type: ignore[attr-defined]
+    assert old._loglik == session.advisor._loglik
+    here = int(domain.domain.start)
+    moves = walk(domain, here, 20, np.random.default_rng(4))
+    assert len(old.observe_batch(*moves)) == 20
