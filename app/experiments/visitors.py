@@ -61,11 +61,12 @@ from app.experiments.curves import configs as curve_configs
 from app.experiments.output import RunDir, header, markdown_table
 
 #: every model the visitors' issue names: the paper's explorers, walkers with a purpose,
-#: compliance, positions read one cell off, any free cell as the goal, sight
+#: compliance (one who ignores every piece too), positions read one cell off (with their
+#: exact twins), any free cell as the goal, sight
 DEFAULT_VISITORS = (
     "random", "random-avoid", "left", "bug", "optimal", "corridor", "straight",
-    "random p=0.5", "corridor p=0.5", "corridor q=0.1", "optimal q=0.1",
-    "random anywhere", "optimal anywhere", "random r=8", "corridor r=8",
+    "random p=0.5", "corridor p=0.5", "random p=0", "corridor q=0.1", "optimal q=0.1",
+    "random q=0.1", "random anywhere", "optimal anywhere", "random r=8", "corridor r=8",
 )  # fmt: skip
 STRATEGIES = ("guide",)
 StrategyOptions = strategy_args("VisitorsStrategies", STRATEGIES, {"guide": ()})
