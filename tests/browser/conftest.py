@@ -83,8 +83,12 @@ class Service:
         return state
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="package")
 def service(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Service]:
+    """The service and its viewer for the browser tests, stopped after the last of them: the
+    viewer reads the service every tick, and in this process those requests would count in
+    the metrics and take CPU from every later test. Idle connections are kept open (uvicorn
+    closes them after 5 s by default, which raced with a client reusing one: a reset)."""
     settings = Settings(
         host="127.0.0.1",
         port=free_port(),
@@ -95,9 +99,10 @@ def service(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Service]:
         overview_seconds=0.0,  # every read sees the events before it
     )
     app = create_app(settings)
-    server = uvicorn.Server(
-        uvicorn.Config(app, host="127.0.0.1", port=settings.port, log_level="warning")
+    config = uvicorn.Config(
+        app, host="127.0.0.1", port=settings.port, log_level="warning", timeout_keep_alive=3600
     )
+    server = uvicorn.Server(config)
     thread = threading.Thread(target=server.run, name="uvicorn", daemon=True)
     thread.start()
     wait_until(lambda: server.started, 60.0, "uvicorn to start")
@@ -115,7 +120,7 @@ def service(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Service]:
     thread.join(timeout=30.0)
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="package")
 def browser() -> Iterator[Browser]:
     if shutil.which(CHROMIUM) is None:
         pytest.fail(f"{CHROMIUM} is missing: install Debian's chromium (make chromium)")
