@@ -633,12 +633,12 @@ def guide_append(
 def guide_observe_compliance(
     params: GuideParams, comply: FloatArray, advised: bool, advice: FloatArray, a: int
 ) -> None:  # pragma: no cover - compiled  # fmt: skip
-    """``GuideAdvisor._observe_compliance``. ``comply`` (L + 4,): the log-likelihood of each
+    """``GuideAdvisor._observe_compliance``. ``comply`` (L + 3,): the log-likelihood of each
     compliance level (j + 1/2) / L, the chance that the explorer's own move is the last
-    decision's advice, the decisions since the last piece of advice, P(compliance <
-    IGNORED), whether advice is held back (1.0: from P >= SURE until P < RELEASE)."""
+    decision's advice, the decisions since the last piece of advice, whether advice is held
+    back (1.0: from P(compliance < IGNORED) >= SURE until it is below RELEASE)."""
     fade, ignored, sure, release = params[6], params[7], params[8], params[9]
-    n = comply.shape[0] - 4
+    n = comply.shape[0] - 3
     if not advised:
         comply[n + 1] += 1.0
         return
@@ -653,22 +653,20 @@ def guide_observe_compliance(
         lik = c + (1.0 - c) * chance if a == best else (1.0 - c) * (1.0 - chance)
         comply[j] = fade * comply[j] + math.log(lik)
     low = guide_compliance_below(comply[:n], ignored)
-    comply[n + 2] = low
     if low >= sure:  # it ignores advice: hold it back
-        comply[n + 3] = 1.0
+        comply[n + 2] = 1.0
     elif low < release:  # it takes advice (again)
-        comply[n + 3] = 0.0
+        comply[n + 2] = 0.0
 
 
 @njit(cache=True)
 def guide_compliance_state(params: GuideParams) -> FloatArray:  # pragma: no cover - compiled
     """``compliance_state``: no advice yet (``COMPLY_LEVELS`` levels, chance 1/2, ``BACKOFF``
-    decisions since the last piece, the prior's P(compliance < IGNORED), not held back)."""
+    decisions since the last piece, not held back)."""
     n = params[11]
-    comply = np.zeros(n + 4)
+    comply = np.zeros(n + 3)
     comply[n] = 0.5
     comply[n + 1] = params[10]
-    comply[n + 2] = guide_compliance_below(comply[:n], params[7])
     return comply
 
 
@@ -881,12 +879,12 @@ def guide_decide(
     for a in range(4):
         if theta[a] > theta[best]:
             best = a
-    n_levels = comply.shape[0] - 4
+    n_levels = comply.shape[0] - 3
     comply[n_levels] = chance[best]  # its own move would be the advice this often
     for a in range(4):
         theta[a] = (1.0 - spread) * (1.0 if a == best else 0.0) + spread / 4.0
     # an explorer that ignores advice is left in peace, but for a piece now and then
-    allowed = comply[n_levels + 3] == 0.0 or comply[n_levels + 1] >= backoff
+    allowed = comply[n_levels + 2] == 0.0 or comply[n_levels + 1] >= backoff
     return kl, 1.0 - lost, target, allowed
 
 

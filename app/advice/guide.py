@@ -385,10 +385,9 @@ def kernel_params(
 def compliance_state() -> list[float]:
     """A session's compliance evidence before any advice: a log-likelihood per level, then
     the chance that the explorer's own move is the last decision's advice, the decisions
-    since the last piece of advice (:data:`BACKOFF`: none yet), P(compliance < IGNORED) and
-    whether advice is held back (1.0) or not (0.0)."""
-    levels = [0.0] * COMPLY_LEVELS
-    return [*levels, 0.5, float(BACKOFF), compliance_below(levels, IGNORED), 0.0]
+    since the last piece of advice (:data:`BACKOFF`: none yet) and whether advice is held
+    back (1.0) or not (0.0)."""
+    return [*[0.0] * COMPLY_LEVELS, 0.5, float(BACKOFF), 0.0]
 
 
 def compliance_below(levels: list[float], bound: float) -> float:
@@ -476,7 +475,7 @@ class GuideAdvisor(Advisor):
     @property
     def compliance(self) -> float:
         """How often this explorer takes advice, as estimated from its moves after advice."""
-        return compliance_mean(self._comply[:-4])
+        return compliance_mean(self._comply[:-3])
 
     @property
     def holding_back(self) -> bool:
@@ -531,7 +530,7 @@ class GuideAdvisor(Advisor):
         """After a piece of advice: did the explorer take it? Weighed against the chance that
         its own move was the advised one."""
         comply = self._comply
-        n = len(comply) - 4
+        n = len(comply) - 3
         if not advised:
             comply[n + 1] += 1.0
             return
@@ -546,11 +545,10 @@ class GuideAdvisor(Advisor):
             lik = c + (1.0 - c) * chance if action == best else (1.0 - c) * (1.0 - chance)
             comply[j] = COMPLY_FADE * comply[j] + math.log(lik)
         low = compliance_below(comply[:n], IGNORED)
-        comply[n + 2] = low
         if low >= SURE:  # it ignores advice: hold it back
-            comply[n + 3] = 1.0
+            comply[n + 2] = 1.0
         elif low < RELEASE:  # it takes advice (again)
-            comply[n + 3] = 0.0
+            comply[n + 2] = 0.0
 
     def _lost_open(self, s: int) -> list[float]:
         o = self.guide.open_policy(s)
@@ -650,12 +648,12 @@ class GuideAdvisor(Advisor):
         for a in range(N_ACTIONS):
             if theta[a] > theta[best]:
                 best = a
-        self._comply[-4] = chance[best]  # its own move would be the advice this often
+        self._comply[-3] = chance[best]  # its own move would be the advice this often
         for a in range(N_ACTIONS):
             theta[a] = (1.0 - spread) * (1.0 if a == best else 0.0) + spread / 4.0
         row = (theta[0], theta[1], theta[2], theta[3])
         # an explorer that ignores advice is left in peace, but for a piece now and then
-        allowed = self._comply[-1] == 0.0 or self._comply[-3] >= BACKOFF
+        allowed = self._comply[-1] == 0.0 or self._comply[-2] >= BACKOFF
         advise = kl >= self.kappa and self.advice_count < self.cap and allowed
         self._last = state if advise else -1
         if advise:
