@@ -44,7 +44,9 @@ GoalTables = tuple[IntArray, float, FloatArray, FloatArray, FloatArray]
 #: against the compass on a way to each destination (G, S))
 GuideArrays = tuple[IntArray, IntArray, IntArray, IntArray, IntArray, FloatArray, IntArray]
 #: (lam, p_lost, slack, spread, bump, the most destinations a tour is planned through)
-GuideParams = tuple[float, float, float, float, float, int, float, float, float, float, float, int]
+GuideParams = tuple[
+    float, float, float, float, float, int, float, float, float, float, float, int, float, float
+]
 
 #: explorer kinds, in the order of app.agents.explorers.WALKERS (the paper's five first)
 RANDOM, RANDOM_AVOID, LEFT, BUG, OPTIMAL, CORRIDOR, STRAIGHT = 0, 1, 2, 3, 4, 5, 6
@@ -590,7 +592,7 @@ def guide_append(
     (:func:`guide_observe_compliance`) learns whether the explorer took the advice. ``came``:
     where the last move led on the map (-1: none); a destination is ruled out only where it
     can have led. Returns (the heading, where this move leads)."""
-    lam, _, slack, _, bump, _, _, _, _, _, _, _ = params
+    lam, _, slack, _, bump, _, _, _, _, _, _, _, _, _ = params
     next_state = gmap[0]
     n_goals = alive.shape[0]
     guide_observe_compliance(params, comply, advised, advice, a)
@@ -647,7 +649,7 @@ def guide_observe_compliance(
     for b in range(4):
         if advice[b] > advice[best]:
             best = b
-    chance = min(max(comply[n], 0.01), 0.99)
+    chance = min(max(comply[n], params[12]), params[13])
     for j in range(n):
         c = (j + 0.5) / n
         lik = c + (1.0 - c) * chance if a == best else (1.0 - c) * (1.0 - chance)
@@ -788,7 +790,7 @@ def guide_decide(
     last piece).
     ``heading``: the last move that moved (-1: none). ``scratch`` is (4 + 3 G + 12 G + 4,);
     ``comply`` as :func:`guide_observe_compliance` keeps it."""
-    _, p_lost, slack, spread, bump, max_tour, _, _, _, _, backoff, _ = params
+    _, p_lost, slack, spread, bump, max_tour, _, _, _, _, backoff, _, _, _ = params
     dist = gmap[3]
     n_goals = alive.shape[0]
     n_models = 4 + 3 * n_goals

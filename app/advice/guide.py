@@ -372,13 +372,16 @@ class GuideParams:
 
 def kernel_params(
     window: int, p: GuideParams
-) -> tuple[float, float, float, float, float, int, float, float, float, float, float, int]:
+) -> tuple[
+    float, float, float, float, float, int, float, float, float, float, float, int, float, float
+]:
     """The parameters as app/kernels.py reads them: (lam, p_lost, slack, spread, bump,
-    MAX_TOUR, COMPLY_FADE, IGNORED, SURE, RELEASE, BACKOFF, COMPLY_LEVELS), with lam = 1 - 1/W
-    the evidence's fading."""
+    MAX_TOUR, COMPLY_FADE, IGNORED, SURE, RELEASE, BACKOFF, COMPLY_LEVELS, CHANCE_MIN,
+    CHANCE_MAX), with lam = 1 - 1/W the evidence's fading."""
     return (
         1.0 - 1.0 / window, float(p.p_lost), float(p.slack), float(p.spread), LOST_BUMP,
         MAX_TOUR, COMPLY_FADE, IGNORED, SURE, RELEASE, float(BACKOFF), COMPLY_LEVELS,
+        CHANCE_MIN, CHANCE_MAX,
     )  # fmt: skip
 
 
