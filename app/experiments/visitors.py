@@ -319,12 +319,16 @@ def floor_of(args: Args, spec: MapSpec) -> dict[str, Any]:
     }  # fmt: skip
 
 
+def map_scopes(results: Results) -> list[tuple[str, list[int]]]:
+    """Each map (its name and row) and the whole suite (every row)."""
+    each = [(s.name, [s.index]) for s in results.maps]
+    return [*each, ("suite", [s.index for s in results.maps])]
+
+
 def rows(results: Results, floor: dict[str, dict[str, Any]]) -> list[dict[str, Any]]:
     """One row per map (and the whole suite), visitor and configuration."""
     out = []
-    scopes = [(s.name, [s.index]) for s in results.maps]
-    scopes.append(("suite", [s.index for s in results.maps]))
-    for scope, idx in scopes:
+    for scope, idx in map_scopes(results):
         for v in results.visitors:
             by_key = results.runs[v.name]
             none = {k: x[idx].ravel() for k, x in by_key["none"].items()}
@@ -364,8 +368,6 @@ def noise_rows(results: Results) -> list[dict[str, Any]]:
     exact twin (the same spec at q = 0) ran too, per map and advised configuration, the
     success of both and the paired change (the same tasks, the same walker's draws)."""
     out = []
-    scopes = [(s.name, [s.index]) for s in results.maps]
-    scopes.append(("suite", [s.index for s in results.maps]))
     for v in results.visitors:
         exact = replace(v, noise=0.0).name
         if v.noise == 0.0 or exact not in results.runs:
@@ -373,7 +375,7 @@ def noise_rows(results: Results) -> list[dict[str, Any]]:
         for c in results.configs:
             if not c.advised:
                 continue
-            for scope, idx in scopes:
+            for scope, idx in map_scopes(results):
                 noisy = results.runs[v.name][c.key]["success"][idx].ravel()
                 base = results.runs[exact][c.key]["success"][idx].ravel()
                 d = paired(noisy, base)
