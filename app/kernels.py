@@ -45,8 +45,9 @@ GoalTables = tuple[IntArray, float, FloatArray, FloatArray, FloatArray]
 GuideArrays = tuple[IntArray, IntArray, IntArray, IntArray, IntArray, FloatArray, IntArray]
 #: (lam, p_lost, slack, spread, bump, the most destinations a tour is planned through)
 GuideParams = tuple[
-    float, float, float, float, float, int, float, float, float, float, float, int, float, float
-]
+    float, float, float, float, float, int, float, float, float, float, float, int, float, float,
+    float,
+]  # fmt: skip
 
 #: explorer kinds, in the order of app.agents.explorers.WALKERS (the paper's five first)
 RANDOM, RANDOM_AVOID, LEFT, BUG, OPTIMAL, CORRIDOR, STRAIGHT = 0, 1, 2, 3, 4, 5, 6
@@ -592,10 +593,10 @@ def guide_append(
     (:func:`guide_observe_compliance`) learns whether the explorer took the advice. ``came``:
     where the last move led on the map (-1: none); a destination is ruled out only where it
     can have led. Returns (the heading, where this move leads)."""
-    lam, _, slack, _, bump, _, _, _, _, _, _, _, _, _ = params
+    lam, _, slack, _, bump, _, _, _, _, _, _, _, _, _, _ = params
     next_state = gmap[0]
     n_goals = alive.shape[0]
-    guide_observe_compliance(params, comply, advised, advice, a)
+    guide_observe_compliance(params, comply, advised, advice, a, s, next_state[s, a])
     if not known:
         guide_fill_rows(gmap, goals, s, rows)
     guide_open(gmap, s, pi)
@@ -620,35 +621,60 @@ def guide_append(
         ll[k + 2] = lam * ll[k + 2] + math.log((1.0 - slack) * ca + slack * lo)
     gi = gmap[4][s]
     if gi >= 0 and (came < 0 or came == s):  # a reading one cell off rules nothing out
-        alive[gi] = False
-        passed_all = True
-        for g in range(alive.shape[0]):
-            passed_all = passed_all and not alive[g]
-        if passed_all:  # it passed every one: the others count again
-            for g in range(alive.shape[0]):
-                alive[g] = g != gi
+        alive[gi] = False  # once it passed every one, it is bound elsewhere
     to = next_state[s, a]
     return (a if to != s else heading), to
 
 
 @njit(cache=True)
 def guide_observe_compliance(
-    params: GuideParams, comply: FloatArray, advised: bool, advice: FloatArray, a: int
+    params: GuideParams, comply: FloatArray, advised: bool, advice: FloatArray, a: int,
+    s: int, to: int,
 ) -> None:  # pragma: no cover - compiled  # fmt: skip
-    """``GuideAdvisor._observe_compliance``. ``comply`` (L + 3,): the log-likelihood of each
-    compliance level (j + 1/2) / L, the chance that the explorer's own move is the last
-    decision's advice, the decisions since the last piece of advice, whether advice is held
-    back (1.0: from P(compliance < IGNORED) >= SURE until it is below RELEASE)."""
+    """``GuideAdvisor._observe_compliance`` of move ``a`` at ``s``, leading to ``to``.
+    ``comply`` (L + 9,): the log-likelihood of each compliance level (j + 1/2) / L, the
+    chance that the explorer's own move is the last decision's advice, the decisions since
+    the last piece of advice, whether advice is held back (1.0: from P(compliance < IGNORED)
+    >= SURE until it is below RELEASE); the last chain of pieces taken in a row (where it
+    began, -1: none open; its length k; the explorer's own moves since: undone if they lead
+    back there within k moves, else kept); how many chains in a row were undone, where the
+    last began (-1: none) and whether the explorer has left it since (back there by its own
+    moves, the run is forgotten)."""
     fade, ignored, sure, release = params[6], params[7], params[8], params[9]
-    n = comply.shape[0] - 3
-    if not advised:
-        comply[n + 1] += 1.0
-        return
-    comply[n + 1] = 1.0
+    n = params[11]
     best = 0
     for b in range(4):
         if advice[b] > advice[best]:
             best = b
+    if comply[n + 7] >= 0.0:
+        if s != int(comply[n + 7]):
+            comply[n + 8] = 1.0
+        elif comply[n + 8] != 0.0:  # back where it undid advice, by its own moves:
+            comply[n + 6] = 0.0  # it circles here rather than goes its own way
+            comply[n + 7] = -1.0
+            comply[n + 8] = 0.0
+    if advised and a == best and to != s:  # a piece taken
+        if comply[n + 3] < 0.0 or comply[n + 5] > 0.0:  # the first of a chain
+            comply[n + 3] = float(s)
+            comply[n + 4] = 1.0
+            comply[n + 5] = 0.0
+        else:
+            comply[n + 4] += 1.0
+    elif comply[n + 3] >= 0.0:  # its own move after a chain: kept, or undone?
+        comply[n + 5] += 1.0
+        if to == int(comply[n + 3]):  # back where the chain began: undone
+            comply[n + 6] += 1.0
+            comply[n + 7] = comply[n + 3]
+            comply[n + 8] = 0.0
+            comply[n + 3] = -1.0
+        elif comply[n + 5] >= comply[n + 4]:  # as many moves as it took: kept
+            comply[n + 6] = 0.0
+            comply[n + 7] = -1.0
+            comply[n + 3] = -1.0
+    if not advised:
+        comply[n + 1] += 1.0
+        return
+    comply[n + 1] = 1.0
     chance = min(max(comply[n], params[12]), params[13])
     for j in range(n):
         c = (j + 0.5) / n
@@ -664,11 +690,13 @@ def guide_observe_compliance(
 @njit(cache=True)
 def guide_compliance_state(params: GuideParams) -> FloatArray:  # pragma: no cover - compiled
     """``compliance_state``: no advice yet (``COMPLY_LEVELS`` levels, chance 1/2, ``BACKOFF``
-    decisions since the last piece, not held back)."""
+    decisions since the last piece, not held back, no piece taken awaiting its next move)."""
     n = params[11]
-    comply = np.zeros(n + 3)
+    comply = np.zeros(n + 9)
     comply[n] = 0.5
     comply[n + 1] = params[10]
+    comply[n + 3] = -1.0
+    comply[n + 7] = -1.0
     return comply
 
 
@@ -790,7 +818,7 @@ def guide_decide(
     last piece).
     ``heading``: the last move that moved (-1: none). ``scratch`` is (4 + 3 G + 12 G + 4,);
     ``comply`` as :func:`guide_observe_compliance` keeps it."""
-    _, p_lost, slack, spread, bump, max_tour, _, _, _, _, backoff, _, _, _ = params
+    _, p_lost, slack, spread, bump, max_tour, _, _, _, _, backoff, _, _, _, _ = params
     dist = gmap[3]
     n_goals = alive.shape[0]
     n_models = 4 + 3 * n_goals
@@ -881,12 +909,14 @@ def guide_decide(
     for a in range(4):
         if theta[a] > theta[best]:
             best = a
-    n_levels = comply.shape[0] - 3
+    n_levels = params[11]
     comply[n_levels] = chance[best]  # its own move would be the advice this often
     for a in range(4):
         theta[a] = (1.0 - spread) * (1.0 if a == best else 0.0) + spread / 4.0
     # an explorer that ignores advice is left in peace, but for a piece now and then
-    allowed = comply[n_levels + 2] == 0.0 or comply[n_levels + 1] >= backoff
+    held = comply[n_levels + 2] != 0.0 or comply[n_levels + 6] >= params[14]
+    allowed = not held or comply[n_levels + 1] >= backoff
+    allowed = allowed and any_alive  # none left: it is bound elsewhere
     return kl, 1.0 - lost, target, allowed
 
 

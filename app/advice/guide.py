@@ -35,10 +35,11 @@ The evidence fades with time constant W, the session's window::
 
 A destination is ruled out once the explorer stood on it and went on (its task would have
 ended there), if the last move can have led there: a position read one cell off, which the
-last move cannot have led to, rules nothing out. When the last one is, the others count
-again. A lost explorer is led to a *target* T: the first destination of the shortest walk
-from where it is through every destination not ruled out (it could be going to any of them),
-planned again when T is ruled out. With P(lost | H) the sum over L4, LO, WL, WR::
+last move cannot have led to, rules nothing out. Once every one is, the explorer is bound
+somewhere else (it passed every destination): nothing more is advised. A lost explorer is
+led to a *target* T: the first destination of the shortest walk from where it is through
+every destination not ruled out (it could be going to any of them), planned again when T is
+ruled out. With P(lost | H) the sum over L4, LO, WL, WR::
 
     theta_s     = P(lost | H) r_T(s) + sum_g [P(D4_g | H) + P(DO_g | H)] pi_g(s)
                                      + sum_g P(C_g | H) pc_g(s)
@@ -69,6 +70,17 @@ it takes them), advice comes as before. The estimate gates advice rather than
 scaling its value: scaling (value x mean compliance / 0.5) gave visitors who take half the advice
 less of it and longer walks, and never advised again one estimated to ignore it, who then
 could not show that it takes it (docs/RESULTS.md, "Advice that is not taken").
+
+Pieces taken in a row (a chain of k) are followed further: if the explorer's own moves
+after them lead back to where the chain began within k moves, they undid it; after k own
+moves elsewhere it is kept. An explorer that undid ``UNDO_RUN`` (4) chains in a row is held
+back the same way until it keeps one, or until its own moves bring it back to where it
+undid the last (it circles there, as a bug in a pocket does, rather than goes its own way).
+One bound for a place of its own, taken for one bound for a listed destination, that takes
+the advice and goes back to its way, is not advised the same detour again and again. A lost
+walker undoes a chain only when its own moves happen to retrace it: four one-piece chains
+in a row come to one in 256 in the open, one in 16 in a corridor for one that never bumps
+into walls.
 
 A competent explorer is explained by some D_g, so the prediction already is what it should do
 and nothing is said; a lost one is explained by a lost model and is led, most insistently
@@ -114,6 +126,10 @@ IGNORED = 0.25
 SURE = 0.7
 RELEASE = 0.3
 BACKOFF = 25
+#: an explorer whose own moves undid UNDO_RUN chains of advice in a row (a chain: pieces
+#: taken in a row; undone: back where it began within as many moves) is held back as one
+#: that ignores advice, until it keeps one or comes back there by itself
+UNDO_RUN = 4
 #: the chance that an explorer's own move is the advised one, kept within these bounds
 CHANCE_MIN, CHANCE_MAX = 0.01, 0.99
 
@@ -373,24 +389,46 @@ class GuideParams:
 def kernel_params(
     window: int, p: GuideParams
 ) -> tuple[
-    float, float, float, float, float, int, float, float, float, float, float, int, float, float
-]:
+    float, float, float, float, float, int, float, float, float, float, float, int, float, float,
+    float,
+]:  # fmt: skip
     """The parameters as app/kernels.py reads them: (lam, p_lost, slack, spread, bump,
     MAX_TOUR, COMPLY_FADE, IGNORED, SURE, RELEASE, BACKOFF, COMPLY_LEVELS, CHANCE_MIN,
-    CHANCE_MAX), with lam = 1 - 1/W the evidence's fading."""
+    CHANCE_MAX, UNDO_RUN), with lam = 1 - 1/W the evidence's fading."""
     return (
         1.0 - 1.0 / window, float(p.p_lost), float(p.slack), float(p.spread), LOST_BUMP,
         MAX_TOUR, COMPLY_FADE, IGNORED, SURE, RELEASE, float(BACKOFF), COMPLY_LEVELS,
-        CHANCE_MIN, CHANCE_MAX,
+        CHANCE_MIN, CHANCE_MAX, float(UNDO_RUN),
     )  # fmt: skip
+
+
+#: where :func:`compliance_state` keeps, after the levels' log-likelihoods: the chance that
+#: the explorer's own move is the last decision's advice, the decisions since the last piece,
+#: whether advice is held back; the state where the last chain of pieces taken in a row
+#: began (-1: none open), how many it took, its own moves since; how many chains in a row
+#: its own moves undid (led back to where they began), where the last began (-1: none) and
+#: whether it has left that state since (1.0) or not (0.0)
+CHANCE, SINCE, HELD, CHAIN_FROM, CHAIN_LEN, OWN, UNDONE, UNDONE_AT, AWAY = range(
+    COMPLY_LEVELS, COMPLY_LEVELS + 9
+)
 
 
 def compliance_state() -> list[float]:
     """A session's compliance evidence before any advice: a log-likelihood per level, then
     the chance that the explorer's own move is the last decision's advice, the decisions
-    since the last piece of advice (:data:`BACKOFF`: none yet) and whether advice is held
-    back (1.0) or not (0.0)."""
-    return [*[0.0] * COMPLY_LEVELS, 0.5, float(BACKOFF), 0.0]
+    since the last piece of advice (:data:`BACKOFF`: none yet), whether advice is held
+    back (1.0) or not (0.0), the last chain of pieces taken in a row (where it began, -1:
+    none open; its length; the explorer's own moves since), how many chains in a row were
+    undone, where the last began (-1: none) and whether the explorer has left it since."""
+    return [
+        *[0.0] * COMPLY_LEVELS, 0.5, float(BACKOFF), 0.0, -1.0, 0.0, 0.0, 0.0, -1.0, 0.0,
+    ]  # fmt: skip
+
+
+def upgraded_compliance(comply: list[float]) -> list[float]:
+    """A session's compliance evidence as written by a version without the slots of undone
+    advice (``COMPLY_LEVELS + 3`` values), with them (none taken, none undone)."""
+    return [*comply, -1.0, 0.0, 0.0, 0.0, -1.0, 0.0] if len(comply) == COMPLY_LEVELS + 3 else comply
 
 
 def compliance_below(levels: list[float], bound: float) -> float:
@@ -478,13 +516,13 @@ class GuideAdvisor(Advisor):
     @property
     def compliance(self) -> float:
         """How often this explorer takes advice, as estimated from its moves after advice."""
-        return compliance_mean(self._comply[:-3])
+        return compliance_mean(self._comply[:COMPLY_LEVELS])
 
     @property
     def holding_back(self) -> bool:
         """Whether advice is held back: the explorer is taken to ignore it (one piece every
         :data:`BACKOFF` decisions at most)."""
-        return self._comply[-1] != 0.0
+        return self._comply[HELD] != 0.0 or self._comply[UNDONE] >= UNDO_RUN
 
     @property
     def target(self) -> int:
@@ -501,7 +539,7 @@ class GuideAdvisor(Advisor):
         ll[0] = lam * ll[0] + math.log(0.25)
         ll[1] = lam * ll[1] + math.log(lo)
         advised = state == self._last
-        self._observe_compliance(advised, action)
+        self._observe_compliance(state, advised, action)
         for hand in range(2):
             ind = 1.0 if action == g.wall(state, self._heading, hand) else 0.0
             if advised:
@@ -521,37 +559,63 @@ class GuideAdvisor(Advisor):
         if gi >= 0 and (self._came < 0 or self._came == state):
             # it stood on this destination and went on: not its destination (a reading that
             # the last move cannot have led to, one cell off, say, rules nothing out)
-            self.alive[gi] = False
-            if not any(self.alive):  # it passed every one: the others count again
-                self.alive = [i != gi for i in range(g.n_goals)]
+            self.alive[gi] = False  # once it passed every one, it is bound elsewhere
         self._came = int(g.next_state[state, action])
         if self._came != state:
             self._heading = action
         self.steps += 1
 
-    def _observe_compliance(self, advised: bool, action: int) -> None:
-        """After a piece of advice: did the explorer take it? Weighed against the chance that
-        its own move was the advised one."""
+    def _observe_compliance(self, state: int, advised: bool, action: int) -> None:
+        """After a piece of advice: did the explorer take it? Weighed against the chance
+        that its own move was the advised one. And the pieces it took in a row (a chain of
+        k): did its own moves after them undo them (lead back to where the chain began
+        within k moves)?"""
         comply = self._comply
-        n = len(comply) - 3
-        if not advised:
-            comply[n + 1] += 1.0
-            return
-        comply[n + 1] = 1.0
         best = 0
         for a in range(N_ACTIONS):
             if self._last_advice[a] > self._last_advice[best]:
                 best = a
-        chance = min(max(comply[n], CHANCE_MIN), CHANCE_MAX)
+        to = int(self.guide.next_state[state, action])
+        if comply[UNDONE_AT] >= 0.0:
+            if state != int(comply[UNDONE_AT]):
+                comply[AWAY] = 1.0
+            elif comply[AWAY] != 0.0:  # back where it undid advice, by its own moves:
+                comply[UNDONE] = 0.0  # it circles here rather than goes its own way
+                comply[UNDONE_AT] = -1.0
+                comply[AWAY] = 0.0
+        if advised and action == best and to != state:  # a piece taken
+            if comply[CHAIN_FROM] < 0.0 or comply[OWN] > 0.0:  # the first of a chain
+                comply[CHAIN_FROM] = float(state)
+                comply[CHAIN_LEN] = 1.0
+                comply[OWN] = 0.0
+            else:
+                comply[CHAIN_LEN] += 1.0
+        elif comply[CHAIN_FROM] >= 0.0:  # its own move after a chain: kept, or undone?
+            comply[OWN] += 1.0
+            if to == int(comply[CHAIN_FROM]):  # back where the chain began: undone
+                comply[UNDONE] += 1.0
+                comply[UNDONE_AT] = comply[CHAIN_FROM]
+                comply[AWAY] = 0.0
+                comply[CHAIN_FROM] = -1.0
+            elif comply[OWN] >= comply[CHAIN_LEN]:  # as many moves as it took: kept
+                comply[UNDONE] = 0.0
+                comply[UNDONE_AT] = -1.0
+                comply[CHAIN_FROM] = -1.0
+        if not advised:
+            comply[SINCE] += 1.0
+            return
+        comply[SINCE] = 1.0
+        n = COMPLY_LEVELS
+        chance = min(max(comply[CHANCE], CHANCE_MIN), CHANCE_MAX)
         for j in range(n):
             c = (j + 0.5) / n
             lik = c + (1.0 - c) * chance if action == best else (1.0 - c) * (1.0 - chance)
             comply[j] = COMPLY_FADE * comply[j] + math.log(lik)
         low = compliance_below(comply[:n], IGNORED)
         if low >= SURE:  # it ignores advice: hold it back
-            comply[n + 2] = 1.0
+            comply[HELD] = 1.0
         elif low < RELEASE:  # it takes advice (again)
-            comply[n + 2] = 0.0
+            comply[HELD] = 0.0
 
     def _lost_open(self, s: int) -> list[float]:
         o = self.guide.open_policy(s)
@@ -651,12 +715,14 @@ class GuideAdvisor(Advisor):
         for a in range(N_ACTIONS):
             if theta[a] > theta[best]:
                 best = a
-        self._comply[-3] = chance[best]  # its own move would be the advice this often
+        self._comply[CHANCE] = chance[best]  # its own move would be the advice this often
         for a in range(N_ACTIONS):
             theta[a] = (1.0 - spread) * (1.0 if a == best else 0.0) + spread / 4.0
         row = (theta[0], theta[1], theta[2], theta[3])
         # an explorer that ignores advice is left in peace, but for a piece now and then
-        allowed = self._comply[-1] == 0.0 or self._comply[-2] >= BACKOFF
+        held = self._comply[HELD] != 0.0 or self._comply[UNDONE] >= UNDO_RUN
+        allowed = not held or self._comply[SINCE] >= BACKOFF
+        allowed = allowed and any(self.alive)  # none left: it is bound elsewhere
         advise = kl >= self.kappa and self.advice_count < self.cap and allowed
         self._last = state if advise else -1
         if advise:

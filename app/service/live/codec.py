@@ -33,6 +33,7 @@ import numpy.typing as npt
 
 from app import strategies
 from app.advice.advisor import Advisor, Decision, DecisionBatch
+from app.advice.guide import GuideAdvisor, upgraded_compliance
 from app.advice.models import AdviceTables
 from app.domain.grid import GridDomain
 from app.service.data.domains import DomainState
@@ -144,6 +145,8 @@ def restore_advisor(state: dict[str, Any], domain: DomainState, table_key: str) 
     adv = entry.service_advisor(domain.data(table_key), settings)
     for name, v in slots.items():
         setattr(adv, name, _unvalue(v))
+    if isinstance(adv, GuideAdvisor):  # written before a taken piece awaited its next move
+        adv._comply = upgraded_compliance(adv._comply)
     if isinstance(adv, KeyedWindow):
         try:
             adv.restore_window(state)

@@ -12,7 +12,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from app.advice.advisor import DecisionBatch
-from app.advice.guide import compliance_state
+from app.advice.guide import COMPLY_LEVELS, compliance_state
 from app.advice.params import StrategyParams
 from app.arrays import Moves
 from app.service.data.domains import DomainState
@@ -276,3 +276,26 @@ def test_a_guide_session_saved_before_compliance_was_learned_loads_with_the_prio
     here = int(domain.domain.start)
     moves = walk(domain, here, 20, np.random.default_rng(4))
     assert len(old.observe_batch(*moves)) == 20
+
+
+def test_a_guide_session_saved_before_undone_advice_was_counted_loads(
+    domain: DomainState,
+) -> None:
+    """A guide session whose compliance evidence was written without the slots of undone
+    advice (levels, chance, since, held; not where a piece was taken on the last move, the
+    run of undone pieces, where the last was undone and whether the explorer left it since)
+    loads with them (none) and decides as the same session with them does."""
+    reg = SessionRegistry(Limits(100), 3600.0, replay_steps=32)
+    session, _ = reg.create(domain, SessionSettings.of("guide", 0.5, 40, params_for("guide")))
+    reg.observe_batch(session, walk(domain, domain.domain.start, 30, np.random.default_rng(3)))
+    state = advisor_state(session.advisor)
+    comply = list(state["slots"]["_comply"])
+    assert len(comply) == COMPLY_LEVELS + 9
+    state["slots"]["_comply"] = [*comply[: COMPLY_LEVELS + 3]]
+    old = restore_advisor(state, domain, "*")
+    assert old._comply == [*comply[: COMPLY_LEVELS + 3], -1.0, 0.0, 0.0, 0.0, -1.0, 0.0]  # type: ignore[attr-defined]
+    same = restore_advisor(advisor_state(session.advisor), domain, "*")
+    same._comply[COMPLY_LEVELS + 3 :] = [-1.0, 0.0, 0.0, 0.0, -1.0, 0.0]  # type: ignore[attr-defined]
+    moves = walk(domain, int(domain.domain.start), 20, np.random.default_rng(4))
+    got, want = old.observe_batch(*moves), same.observe_batch(*moves)
+    assert got.advise.tolist() == want.advise.tolist() and got.kl.tolist() == want.kl.tolist()
