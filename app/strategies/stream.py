@@ -26,7 +26,7 @@ import numpy.typing as npt
 from app import kernels
 from app.advice.advisor import Advisor, Decision, DecisionBatch, resync_period
 from app.advice.goals import GoalAwareAdvisor
-from app.advice.guide import COMPLY_LEVELS, GuideAdvisor, GuideParams, kernel_params
+from app.advice.guide import GuideAdvisor, GuideParams, compliance_state, kernel_params
 from app.advice.models import AdviceTables
 from app.advice.rules import RuleAdvisor
 from app.arrays import BoolArray, FloatArray, IntArray
@@ -420,9 +420,9 @@ class StreamGuide(GuideAdvisor):
     def footprint(self) -> int:
         """Bytes the session's state can take at most: no window, but a sum per model (4 + 3G
         Python floats in a list, 32 bytes each), a flag per destination (a list) and the
-        compliance evidence (COMPLY_LEVELS + 3 floats)."""
+        compliance evidence (:func:`compliance_state`'s floats)."""
         g = self.guide.n_goals
-        return (4 + 3 * g + COMPLY_LEVELS + 3) * 32 + g * 8 + 4 * 8
+        return (4 + 3 * g + len(compliance_state())) * 32 + g * 8 + 4 * 8
 
     def batch_slice(self) -> int:
         return max(64, 5_000 // (self.guide.n_goals + 1))  # compiled: 0.35 us a destination
