@@ -642,10 +642,13 @@ def guide_observe_compliance(
     moves, the run is forgotten)."""
     fade, ignored, sure, release = params[6], params[7], params[8], params[9]
     n = params[11]
-    best = 0
-    for b in range(4):
-        if advice[b] > advice[best]:
-            best = b
+    took = False  # the advised move, if advice was given
+    if advised:
+        best = 0
+        for b in range(4):
+            if advice[b] > advice[best]:
+                best = b
+        took = a == best
     if comply[n + 7] >= 0.0:
         if s != int(comply[n + 7]):
             comply[n + 8] = 1.0
@@ -653,7 +656,7 @@ def guide_observe_compliance(
             comply[n + 6] = 0.0  # it circles here rather than goes its own way
             comply[n + 7] = -1.0
             comply[n + 8] = 0.0
-    if advised and a == best and to != s:  # a piece taken
+    if took and to != s:  # a piece taken
         if comply[n + 3] < 0.0 or comply[n + 5] > 0.0:  # the first of a chain
             comply[n + 3] = float(s)
             comply[n + 4] = 1.0
@@ -678,7 +681,7 @@ def guide_observe_compliance(
     chance = min(max(comply[n], params[12]), params[13])
     for j in range(n):
         c = (j + 0.5) / n
-        lik = c + (1.0 - c) * chance if a == best else (1.0 - c) * (1.0 - chance)
+        lik = c + (1.0 - c) * chance if took else (1.0 - c) * (1.0 - chance)
         comply[j] = fade * comply[j] + math.log(lik)
     low = guide_compliance_below(comply[:n], ignored)
     if low >= sure:  # it ignores advice: hold it back
@@ -690,7 +693,8 @@ def guide_observe_compliance(
 @njit(cache=True)
 def guide_compliance_state(params: GuideParams) -> FloatArray:  # pragma: no cover - compiled
     """``compliance_state``: no advice yet (``COMPLY_LEVELS`` levels, chance 1/2, ``BACKOFF``
-    decisions since the last piece, not held back, no piece taken awaiting its next move)."""
+    decisions since the last piece, not held back, no chain of taken pieces open, no run of
+    undone chains)."""
     n = params[11]
     comply = np.zeros(n + 9)
     comply[n] = 0.5

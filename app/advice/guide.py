@@ -428,7 +428,9 @@ def compliance_state() -> list[float]:
 def upgraded_compliance(comply: list[float]) -> list[float]:
     """A session's compliance evidence as written by a version without the slots of undone
     advice (``COMPLY_LEVELS + 3`` values), with them (none taken, none undone)."""
-    return [*comply, -1.0, 0.0, 0.0, 0.0, -1.0, 0.0] if len(comply) == COMPLY_LEVELS + 3 else comply
+    if len(comply) != COMPLY_LEVELS + 3:
+        return comply
+    return [*comply, *compliance_state()[COMPLY_LEVELS + 3 :]]
 
 
 def compliance_below(levels: list[float], bound: float) -> float:
@@ -571,10 +573,13 @@ class GuideAdvisor(Advisor):
         k): did its own moves after them undo them (lead back to where the chain began
         within k moves)?"""
         comply = self._comply
-        best = 0
-        for a in range(N_ACTIONS):
-            if self._last_advice[a] > self._last_advice[best]:
-                best = a
+        took = False  # the advised move, if advice was given
+        if advised:
+            best = 0
+            for a in range(N_ACTIONS):
+                if self._last_advice[a] > self._last_advice[best]:
+                    best = a
+            took = action == best
         to = int(self.guide.next_state[state, action])
         if comply[UNDONE_AT] >= 0.0:
             if state != int(comply[UNDONE_AT]):
@@ -583,7 +588,7 @@ class GuideAdvisor(Advisor):
                 comply[UNDONE] = 0.0  # it circles here rather than goes its own way
                 comply[UNDONE_AT] = -1.0
                 comply[AWAY] = 0.0
-        if advised and action == best and to != state:  # a piece taken
+        if took and to != state:  # a piece taken
             if comply[CHAIN_FROM] < 0.0 or comply[OWN] > 0.0:  # the first of a chain
                 comply[CHAIN_FROM] = float(state)
                 comply[CHAIN_LEN] = 1.0
@@ -609,7 +614,7 @@ class GuideAdvisor(Advisor):
         chance = min(max(comply[CHANCE], CHANCE_MIN), CHANCE_MAX)
         for j in range(n):
             c = (j + 0.5) / n
-            lik = c + (1.0 - c) * chance if action == best else (1.0 - c) * (1.0 - chance)
+            lik = c + (1.0 - c) * chance if took else (1.0 - c) * (1.0 - chance)
             comply[j] = COMPLY_FADE * comply[j] + math.log(lik)
         low = compliance_below(comply[:n], IGNORED)
         if low >= SURE:  # it ignores advice: hold it back
@@ -720,8 +725,7 @@ class GuideAdvisor(Advisor):
             theta[a] = (1.0 - spread) * (1.0 if a == best else 0.0) + spread / 4.0
         row = (theta[0], theta[1], theta[2], theta[3])
         # an explorer that ignores advice is left in peace, but for a piece now and then
-        held = self._comply[HELD] != 0.0 or self._comply[UNDONE] >= UNDO_RUN
-        allowed = not held or self._comply[SINCE] >= BACKOFF
+        allowed = not self.holding_back or self._comply[SINCE] >= BACKOFF
         allowed = allowed and any(self.alive)  # none left: it is bound elsewhere
         advise = kl >= self.kappa and self.advice_count < self.cap and allowed
         self._last = state if advise else -1

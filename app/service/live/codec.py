@@ -145,7 +145,7 @@ def restore_advisor(state: dict[str, Any], domain: DomainState, table_key: str) 
     adv = entry.service_advisor(domain.data(table_key), settings)
     for name, v in slots.items():
         setattr(adv, name, _unvalue(v))
-    if isinstance(adv, GuideAdvisor):  # written before a taken piece awaited its next move
+    if isinstance(adv, GuideAdvisor):  # written before undone advice was followed
         adv._comply = upgraded_compliance(adv._comply)
     if isinstance(adv, KeyedWindow):
         try:
