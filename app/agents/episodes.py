@@ -23,6 +23,7 @@ from app.advice.advisor import Advisor, Decision
 from app.agents.explorers import FixedPolicyExplorer, in_sight, read_position
 from app.agents.qlearning import GOAL_REWARD, QLearningExplorer
 from app.domain.grid import GridDomain
+from app.domain.paths import walked_cells
 
 
 @dataclass
@@ -104,6 +105,62 @@ def run_episode(
         s_next = read_position(domain, x_next, noise, readings)
         decision = advisor.observe(s, a, s_next)
         s, x = s_next, x_next
+    return rec
+
+
+def run_walked_episode(
+    domain: GridDomain,
+    explorer: FixedPolicyExplorer,
+    advisor: Advisor,
+    goal: int,
+    rng: np.random.Generator,
+    seen_rng: np.random.Generator,
+    *,
+    advised: bool = True,
+    max_steps: int = 5000,
+    compliance: float = 1.0,
+    noise: float = 0.0,
+    jump: int = 1,
+    sight: int = 0,
+    max_walk: int = 8,
+) -> EpisodeRecord:
+    """One episode of a visitor whose positions the advisor is fed as the service's
+    ``/positions`` endpoint feeds them: after each of the explorer's moves its cell is read
+    (:func:`read_position`, up to ``jump`` moves off with probability ``noise``) and walked
+    from the last reading (:func:`app.domain.paths.walked_cells`), one decision per cell
+    walked and none for a reading in the same cell; the explorer acts on the last decision.
+    A reading more than ``max_walk`` moves from the last one (the service's ``max_jump``)
+    is dropped, as a refused batch is. ``rec.decisions`` holds the decision each move was
+    acted on; the advisor's ``advice_count`` counts every decision walked."""
+    explorer.reset(goal, rng)
+    advisor.reset()
+    rec = EpisodeRecord()
+    x = domain.start
+    s = read_position(domain, x, noise, seen_rng, jump)
+    decision = advisor.decide(s)
+    for _ in range(max_steps):
+        rec.states.append(x)
+        rec.decisions.append(decision)
+        advice = np.asarray(decision.advice) if advised and decision.advice is not None else None
+        seen = in_sight(domain, x, goal, sight) if sight > 0 else None
+        if seen is not None:
+            a = seen
+        else:
+            if advice is not None and compliance < 1.0 and rng.random() >= compliance:
+                advice = None
+            a = explorer.act(x, rng, advice)
+        x_next = int(domain.next_state[x, a])
+        rec.actions.append(a)
+        explorer.observe(x, a, x_next)
+        if x_next == goal:
+            rec.success = True
+            break
+        s_next = read_position(domain, x_next, noise, seen_rng, jump)
+        for cell in walked_cells(domain, s, s_next, max_walk) or ():
+            move = int(np.argmax(domain.next_state[s] == cell))
+            decision = advisor.observe(s, move, cell)
+            s = cell
+        x = x_next
     return rec
 
 

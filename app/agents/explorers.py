@@ -297,20 +297,30 @@ def in_sight(domain: GridDomain, state: int, goal: int, reach: int) -> int | Non
     return None
 
 
-def read_position(domain: GridDomain, state: int, noise: float, rng: np.random.Generator) -> int:
+def read_position(
+    domain: GridDomain, state: int, noise: float, rng: np.random.Generator, jump: int = 1
+) -> int:
     """The cell an advisor reads for an explorer at ``state``: with probability ``noise``
     (one draw) a uniformly drawn open neighbour (a second draw), else ``state``; no draw
-    at all when ``noise`` is 0."""
+    at all when ``noise`` is 0. With ``jump`` J > 1 a wrong reading is a walk of k random
+    open moves, k drawn from 1 to J first (so up to J moves off; it may come back)."""
     if noise <= 0.0:
         return state
     open_moves = domain.open_moves[state]
     if rng.random() >= noise or not open_moves.any():
         return state
-    return int(domain.next_state[state, uniform_choice(open_moves, rng.random())])
+    k = 1 if jump <= 1 else 1 + min(int(rng.random() * jump), jump - 1)
+    for _ in range(k):
+        move = uniform_choice(domain.open_moves[state], rng.random())
+        state = int(domain.next_state[state, move])
+    return state
 
 
 #: where a visitor's goal is drawn from: the map's destinations, or any free cell
 GOAL_SETS: tuple[str, ...] = ("destinations", "anywhere")
+#: how the advisor is fed: events (the cell as read and the visitor's action), or positions
+#: (the readings walked as the service's /positions endpoint walks them)
+FEEDS: tuple[str, ...] = ("events", "positions")
 
 
 @dataclass(frozen=True)
@@ -320,10 +330,14 @@ class Visitor:
     Written as a spec: the walker, then any of ``p=P`` (compliance, 0 to 1: takes a piece of
     advice with probability P), ``q=Q`` (position noise, 0 to 1: each cell is read one cell
     off with probability Q), ``r=R`` (sight, an integer >= 0: walks to its goal once it is in
-    a straight line of free cells within R moves; 0 off) and ``anywhere`` (bound for any free
-    cell, not only the map's destinations). ``"random p=0.5"``, ``"optimal anywhere"``,
-    ``"corridor q=0.1"``, ``"random r=8"``. Defaults: p=1, q=0, r=0, destinations, which is
-    the paper's explorer.
+    a straight line of free cells within R moves; 0 off), ``anywhere`` (bound for any free
+    cell, not only the map's destinations), ``positions`` (the advisor is fed the readings as
+    the service's ``/positions`` endpoint walks them: one decision per cell of the shortest
+    path from the last reading, none for a reading in the same cell; the visitor acts on the
+    last decision) and ``j=J`` (a wrong reading is up to J moves off, an integer >= 1).
+    ``"random p=0.5"``, ``"optimal anywhere"``, ``"corridor q=0.1"``, ``"random r=8"``,
+    ``"random q=0.1 j=2 positions"``. Defaults: p=1, q=0, r=0, destinations, events, j=1,
+    which is the paper's explorer.
     """
 
     walker: str
@@ -331,6 +345,8 @@ class Visitor:
     noise: float = 0.0
     sight: int = 0
     goals: str = "destinations"
+    feed: str = "events"
+    jump: int = 1
 
     def __post_init__(self) -> None:
         if self.walker not in WALKERS:
@@ -342,6 +358,10 @@ class Visitor:
             raise ValueError(f"r (sight) must be an integer >= 0, got {self.sight}")
         if self.goals not in GOAL_SETS:
             raise ValueError(f"goals must be one of {', '.join(GOAL_SETS)}, got {self.goals!r}")
+        if self.feed not in FEEDS:
+            raise ValueError(f"feed must be one of {', '.join(FEEDS)}, got {self.feed!r}")
+        if not (isinstance(self.jump, int) and self.jump >= 1):
+            raise ValueError(f"j (jump) must be an integer >= 1, got {self.jump}")
 
     @classmethod
     def parse(cls, spec: str) -> Visitor:
@@ -354,17 +374,23 @@ class Visitor:
             key, eq, value = word.partition("=")
             if not eq and word in GOAL_SETS:
                 key, value = "goals", word
+            elif not eq and word in FEEDS:
+                key, value = "feed", word
             elif key not in _SPEC_KEYS or not eq:
                 raise ValueError(
-                    f"visitor {spec!r}: {word!r} is not one of p=P, q=Q, r=R, "
-                    f"{', '.join(GOAL_SETS)}"
+                    f"visitor {spec!r}: {word!r} is not one of p=P, q=Q, r=R, j=J, "
+                    f"{', '.join(GOAL_SETS + FEEDS)}"
                 )
-            field_name = _SPEC_KEYS.get(key, "goals")
+            field_name = _SPEC_KEYS[key]
             if field_name in given:
                 raise ValueError(f"visitor {spec!r}: {key} given twice")
             try:
                 given[field_name] = (
-                    value if field_name == "goals" else int(value) if key == "r" else float(value)
+                    value
+                    if key in ("goals", "feed")
+                    else int(value)
+                    if key in ("r", "j")
+                    else float(value)
                 )
             except ValueError:
                 raise ValueError(f"visitor {spec!r}: {word!r} is not a number") from None
@@ -380,8 +406,12 @@ class Visitor:
             parts.append(f"q={self.noise:g}")
         if self.sight:
             parts.append(f"r={self.sight}")
+        if self.jump != 1:
+            parts.append(f"j={self.jump}")
         if self.goals != "destinations":
             parts.append(self.goals)
+        if self.feed != "events":
+            parts.append(self.feed)
         return " ".join(parts)
 
     @property
@@ -389,4 +419,6 @@ class Visitor:
         return self.goals == "anywhere"
 
 
-_SPEC_KEYS = {"p": "compliance", "q": "noise", "r": "sight", "goals": "goals"}
+_SPEC_KEYS = {
+    "p": "compliance", "q": "noise", "r": "sight", "j": "jump", "goals": "goals", "feed": "feed",
+}  # fmt: skip

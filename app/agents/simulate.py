@@ -25,8 +25,8 @@ from app.advice.guide import GuideError, GuideMap, GuideParams, kernel_params
 from app.advice.models import AdviceTables
 from app.advice.params import StrategyParams
 from app.advice.priors import GoalPriors
-from app.agents.episodes import run_episode
-from app.agents.explorers import WALKERS, make_explorer
+from app.agents.episodes import run_episode, run_walked_episode
+from app.agents.explorers import FEEDS, WALKERS, make_explorer
 from app.agents.qlearning import TIE_RULES
 from app.arrays import BoolArray, FloatArray, IntArray
 from app.domain.grid import GridDomain
@@ -212,6 +212,8 @@ class Simulator:
         noise: float = 0.0,
         sight: int = 0,
         seen_rng: np.random.Generator | None = None,
+        feed: str = "events",
+        jump: int = 1,
     ) -> FixedRun:
         """One task of ``explorer`` (a name in WALKERS) from the start cell to ``goal`` (any
         free cell but the start), watched by the advisor of ``strategy``. ``rule_rng`` is the
@@ -219,7 +221,9 @@ class Simulator:
         advisor seeds its own). A visitor (:class:`app.agents.explorers.Visitor`): takes a
         piece of advice with probability ``compliance``; is read one cell off with probability
         ``noise`` (drawn from ``seen_rng``, needed then); walks to its goal once it is in sight
-        within ``sight`` cells (0: never)."""
+        within ``sight`` cells (0: never). ``feed="positions"`` feeds the readings (up to
+        ``jump`` moves off) as the service's /positions walks them: the reference loop
+        (:func:`app.agents.episodes.run_walked_episode`) with the service's advisor."""
         if explorer not in WALKERS:
             raise ValueError(f"unknown explorer {explorer!r}: use {', '.join(WALKERS)}")
         entry, settings = self.settings(strategy, kappa, window, params)
@@ -234,8 +238,14 @@ class Simulator:
             raise ValueError(f"sight must be >= 0, got {sight}")
         if noise > 0.0 and seen_rng is None:
             raise ValueError("position noise needs seen_rng, the readings' generator")
+        if feed not in FEEDS or jump < 1:
+            raise ValueError(f"feed must be one of {', '.join(FEEDS)} and jump >= 1")
         visitor = (float(compliance), float(noise), int(sight))
         readings = _UNREAD_RNG if seen_rng is None else seen_rng
+        if feed == "positions":
+            return self._walked(
+                entry, settings, explorer, goal, rng, advised, max_steps, visitor, readings, jump
+            )
         if entry.kernel is None:
             return self._fixed_readable(
                 entry, settings, explorer, goal, rng, advised, max_steps, visitor, readings
@@ -292,6 +302,26 @@ class Simulator:
             sum(out for _, _, out in beliefs), np.array(rec.states, dtype=np.int64),
             np.array([d.p_normal for d in rec.decisions]),
             np.array([d.advise for d in rec.decisions], dtype=np.bool_),
+        )  # fmt: skip
+
+    def _walked(
+        self, entry: Strategy, settings: AdvisorSettings, explorer: str, goal: int,
+        rng: np.random.Generator, advised: bool, max_steps: int,
+        visitor: kernels.VisitorParams, readings: np.random.Generator, jump: int,
+    ) -> FixedRun:  # fmt: skip
+        """:meth:`fixed` fed positions: the walked loop, with the advisor the service runs."""
+        advisor = entry.service_advisor(self.data, settings)
+        walker = make_explorer(explorer, self.domain)
+        compliance, noise, sight = visitor
+        rec = run_walked_episode(
+            self.domain, walker, advisor, goal, rng, readings, advised=advised,
+            max_steps=max_steps, compliance=compliance, noise=noise, jump=jump, sight=sight,
+        )  # fmt: skip
+        beliefs = advisor.goal_beliefs() or []
+        return FixedRun(
+            rec.success, rec.steps, advisor.advice_count, advisor.benefit,
+            sum(out for _, _, out in beliefs), np.array(rec.states, dtype=np.int64),
+            np.zeros(0), np.array([d.advise for d in rec.decisions], dtype=np.bool_),
         )  # fmt: skip
 
     def learning(

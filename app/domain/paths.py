@@ -104,6 +104,20 @@ def expert_trajectories(
     return out
 
 
+def walked_cells(domain: GridDomain, here: int, target: int, limit: int) -> list[int] | None:
+    """The cells a reading at ``target`` walks from ``here``, ``here`` excluded: none for the
+    same cell, the cell itself for a neighbour, else the rest of :func:`path_within`'s
+    shortest path; ``None`` when ``target`` is more than ``limit`` moves away. How the
+    service walks positions in metres (``/positions``) and how ``experiment visitors`` feeds
+    a ``positions`` visitor's readings."""
+    if target == here:
+        return []
+    if target in domain.next_state[here]:
+        return [target]
+    path = path_within(domain, here, target, limit)
+    return None if path is None else path[1:]
+
+
 def path_within(domain: GridDomain, source: int, target: int, limit: int) -> list[int] | None:
     """A shortest path ``[source, ..., target]`` of at most ``limit`` moves, or ``None`` if
     ``target`` is farther. Breadth-first from ``source``, moves tried in the order N, E, S, W

@@ -7,7 +7,10 @@ A visitor (``--visitors``, one spec each, :class:`app.agents.explorers.Visitor`)
 (random, random-avoid, left, bug, optimal, corridor, straight) with any of: ``p=P``, takes a
 piece of advice with probability P (else its own move); ``q=Q``, the advisor reads its cell
 one cell off with probability Q and decides on what it reads, while the visitor moves from
-its true cell; ``r=R``, walks straight to its goal once it is in a straight line of free
+its true cell (``j=J``: up to J moves off); ``positions``, the advisor is fed the readings
+as the service's ``/positions`` endpoint walks them (one decision per cell of the shortest
+path from the last reading; run in the reference loop with the service's advisor, slower);
+``r=R``, walks straight to its goal once it is in a straight line of free
 cells within R moves, whatever the advice; ``anywhere``, bound for any free cell (drawn
 uniformly, the start excepted), not only the map's destinations.
 
@@ -96,7 +99,8 @@ class Args(CommonArgs, StrategyOptions):  # type: ignore[valid-type,misc]
     """More maps of the suite: map files in the project's text format (``maze import``)."""
     visitors: tuple[str, ...] = DEFAULT_VISITORS
     """Visitor models, one spec each: a walker, then any of p=P (compliance), q=Q (position
-    read one cell off), r=R (sight), anywhere (any free cell as the goal)."""
+    read one cell off), j=J (a wrong reading up to J moves off), r=R (sight), anywhere (any
+    free cell as the goal), positions (readings walked as /positions walks them)."""
     workers: int = 2
     """Processes (1: run in this process)."""
 
@@ -232,6 +236,7 @@ def run_job(args: Args, spec: MapSpec, spec_text: str) -> dict[str, dict[str, Fl
                 params=c.params, max_steps=args.steps, record_p=False,
                 compliance=v.compliance, noise=v.noise, sight=v.sight,
                 seen_rng=rng_for(args.seed, "visitors-seen", spec.index, v.name, i),
+                feed=v.feed, jump=v.jump,
             )  # fmt: skip
             m["success"][i] = run.success
             m["steps"][i] = run.steps
@@ -347,6 +352,7 @@ def rows(results: Results, floor: dict[str, dict[str, Any]]) -> list[dict[str, A
                 out.append({
                     "map": scope, "visitor": v.name, "walker": v.walker,
                     "compliance": v.compliance, "noise": v.noise, "sight": v.sight,
+                    "jump": v.jump, "feed": v.feed,
                     "goals": v.goals, "curve": c.curve, "kappa": c.kappa, "key": c.key,
                     "default": c.default, **measures(m),
                     "change_success": ds[0], "change_success_ci_low": ds[1],
@@ -369,7 +375,7 @@ def noise_rows(results: Results) -> list[dict[str, Any]]:
     success of both and the paired change (the same tasks, the same walker's draws)."""
     out = []
     for v in results.visitors:
-        exact = replace(v, noise=0.0).name
+        exact = replace(v, noise=0.0, jump=1).name
         if v.noise == 0.0 or exact not in results.runs:
             continue
         for c in results.configs:
@@ -508,7 +514,8 @@ def markdown(table: list[dict[str, Any]], maps: list[dict[str, Any]], results: R
         lines += [
             "## Positions read one cell off against exact positions", "",
             "The same tasks and walker draws with exact positions and with each cell read one "
-            "cell off with probability q; success of both and the paired change [95%].", "",
+            "cell off with probability q (up to J moves off with j=J; a positions visitor's "
+            "twin is fed exact positions too); success of both and the paired change [95%].", "",
             markdown_table(
                 ["visitor", "map", "advised by", "exact", "read off", "change [95%]"],
                 [[r["visitor"], r["map"], r["key"], f"{r['success_exact']:.0%}",

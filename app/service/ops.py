@@ -22,7 +22,7 @@ from app.advice.params import StrategyParams
 from app.advice.priors import GoalPriors
 from app.arrays import IntArray
 from app.domain.grid import ACTIONS, GridDomain, MapError
-from app.domain.paths import expert_trajectories, path_within
+from app.domain.paths import expert_trajectories, walked_cells
 from app.service.data.domains import DomainNotFound, DomainState, compiled_searches, needed
 from app.service.data.ingest import parse_trajectories, to_trajectories
 from app.service.data.store import POOLED, Trajectory
@@ -257,27 +257,21 @@ def position_moves(
     limit, most = state.settings.max_jump, state.settings.max_batch_events
     here = session.position
     visited: list[int] = [here]
-    neighbours = grid.next_state
     for i, (x, y) in enumerate(body.positions):
         try:
             target = grid.state_at(x, y)
         except ValueError as exc:
             raise BadInput(f"positions[{i}]: {exc}") from None
-        if target == here:
-            continue
-        if target in neighbours[here]:
-            visited.append(target)
-        else:
-            path = path_within(grid, here, target, limit)
-            if path is None:
-                r, c = grid.cell(target)
-                r0, c0 = grid.cell(here)
-                raise BadInput(
-                    f"positions[{i}]: ({x:g}, {y:g}) m is cell [{r}, {c}], more than {limit} "
-                    f"moves from the last cell [{r0}, {c0}]: a jump this far is refused "
-                    "(send the readings in between, or start a new session)"
-                )
-            visited.extend(path[1:])
+        walk = walked_cells(grid, here, target, limit)
+        if walk is None:
+            r, c = grid.cell(target)
+            r0, c0 = grid.cell(here)
+            raise BadInput(
+                f"positions[{i}]: ({x:g}, {y:g}) m is cell [{r}, {c}], more than {limit} "
+                f"moves from the last cell [{r0}, {c0}]: a jump this far is refused "
+                "(send the readings in between, or start a new session)"
+            )
+        visited.extend(walk)
         here = target
         if len(visited) - 1 > most:
             raise BadInput(f"too many moves: the positions walk more than {most} in one batch", 413)

@@ -19,7 +19,13 @@ from app.advice.params import StrategyParams
 from app.advice.priors import GoalPriors
 from app.agents.episodes import run_episode, run_learning
 from app.agents.experts import train_goal_priors, train_prior
-from app.agents.explorers import FIXED_EXPLORERS, WALKERS, Visitor, make_explorer
+from app.agents.explorers import (
+    FIXED_EXPLORERS,
+    WALKERS,
+    Visitor,
+    make_explorer,
+    read_position,
+)
 from app.agents.qlearning import QLearningExplorer
 from app.agents.simulate import EXPLORER_CODES, QParams, Simulator
 from app.domain.generate import generate_domain
@@ -157,6 +163,40 @@ def test_compiled_visitor_follows_the_reference_loop(
         assert fast.p_normal.tolist() == [dec.p_normal for dec in ref.decisions]
 
 
+@settings(max_examples=20, deadline=None)
+@given(st.integers(0, 10_000), st.sampled_from(["random-avoid", "optimal", "corridor"]))
+def test_exact_positions_walk_each_move_as_its_event(seed: int, walker: str) -> None:
+    """Fed positions read exactly, a walker that never walks into a wall is walked one cell
+    a move, so the service's advisor decides as on its events: the walked loop makes the
+    reference loop's moves and decisions (guide, and the paper's rule)."""
+    d, tables, goal_priors = world(seed, 2 + seed % 2)
+    sim = Simulator(d, tables, goal_priors)
+    goal = d.goals[seed % len(d.goals)]
+    for strategy in ("guide", "paper"):
+        walked = sim.fixed(
+            walker, goal, np.random.default_rng(seed), advised=False, strategy=strategy,
+            max_steps=400, feed="positions", seen_rng=np.random.default_rng(1),
+        )  # fmt: skip
+        ref = sim.fixed(
+            walker, goal, np.random.default_rng(seed), advised=False, strategy=strategy,
+            max_steps=400,
+        )  # fmt: skip
+        assert (walked.success, walked.steps) == (ref.success, ref.steps)
+        assert walked.states.tolist() == ref.states.tolist()
+        assert walked.advise.tolist() == ref.advise.tolist()
+        assert walked.advice_count == ref.advice_count
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 10_000), st.integers(1, 4))
+def test_a_reading_jumps_at_most_j_moves(seed: int, jump: int) -> None:
+    d = world(seed, 2)[0]
+    rng = np.random.default_rng(seed)
+    for x in rng.integers(0, d.n_states, 30).tolist():
+        seen = read_position(d, x, 1.0, rng, jump)
+        assert 0 <= d.distances_to(x)[seen] <= jump
+
+
 def test_a_full_compliance_visitor_is_the_paper_s_explorer() -> None:
     """p = 1, q = 0, r = 0 make the draws of today's explorer (no compliance draw, no
     reading drawn): the same run whatever the readings' generator."""
@@ -192,7 +232,14 @@ def test_visitor_specs() -> None:
     assert (v.walker, v.compliance, v.noise, v.sight, v.anywhere) == ("corridor", 0.5, 0.1, 8, True)
     assert v.name == "corridor p=0.5 q=0.1 r=8 anywhere"
     assert Visitor.parse("random destinations").name == "random"
+    w = Visitor.parse("random positions j=3 q=0.1")
+    assert (w.feed, w.jump, w.noise) == ("positions", 3, 0.1)
+    assert w.name == "random q=0.1 j=3 positions" and Visitor.parse(w.name) == w
+    assert Visitor.parse("random events").name == "random"
     for bad, says in (
+        ("random j=0", "j \\(jump\\)"),
+        ("random j=1.5", "not a number"),
+        ("random metres", "is not one of"),
         ("", "empty"),
         ("teleport", "unknown walker"),
         ("random p=2", "from 0 to 1"),

@@ -21,6 +21,7 @@ from app.experiments.output import RunDir
 
 VISITORS = (
     "random", "corridor p=0.5", "optimal q=0.2", "random anywhere", "straight r=5", "optimal",
+    "random-avoid positions", "random-avoid q=0.2 j=2 positions",
 )  # fmt: skip
 TINY: dict[str, Any] = {
     "tasks": 3, "buildings": (24,), "steps": 300, "workers": 1, "progress": False,
@@ -68,13 +69,14 @@ def test_writes_every_file_and_a_row_per_map_visitor_and_config(
     for m in result["maps"]:
         assert m["floor"] is not None and m["floor_on_tasks"] is not None
         assert sorted(m["order"]) == list(range(m["goals"]))
-    # positions read off against exact ones: only "optimal q=0.2" has its exact twin here
+    # positions read off against exact ones: "optimal q=0.2" and the positions visitor that
+    # jumps have their exact twins here
     assert "## Positions read one cell off against exact positions" in text
     noise = result["noise"]
     scopes = [m["name"] for m in result["maps"]] + ["suite"]
     assert [(r["visitor"], r["exact"], r["map"]) for r in noise] == [
         ("optimal q=0.2", "optimal", m) for m in scopes
-    ]
+    ] + [("random-avoid q=0.2 j=2 positions", "random-avoid positions", m) for m in scopes]
     for r in noise:
         row = find_row(result["rows"], r["map"], r["visitor"])
         exact = find_row(result["rows"], r["map"], r["exact"])
