@@ -581,8 +581,8 @@ def guide_compass_route(
 @njit(cache=True)
 def guide_append(
     gmap: GuideArrays, params: GuideParams, goals: IntArray, ll: FloatArray, alive: BoolArray,
-    s: int, a: int, advised: bool, advice: FloatArray, heading: int, pi: FloatArray,
-    rows: FloatArray, known: bool, comply: FloatArray, came: int,
+    doubt: IntArray, s: int, a: int, advised: bool, advice: FloatArray, heading: int,
+    pi: FloatArray, rows: FloatArray, known: bool, comply: FloatArray, came: int,
 ) -> tuple[int, int]:  # pragma: no cover - compiled  # fmt: skip
     """``GuideAdvisor.append``: fade the evidence, add log P(a | s, k), rule out a destination
     the explorer stood on. ``goals`` holds each destination's state; ``advised``: the last
@@ -592,7 +592,8 @@ def guide_append(
     decision for ``s`` came just before), else they are made here. ``comply``
     (:func:`guide_observe_compliance`) learns whether the explorer took the advice. ``came``:
     where the last move led on the map (-1: none); a destination is ruled out only where it
-    can have led. Returns (the heading, where this move leads)."""
+    can have led, or set aside (``doubt``, :func:`guide_rule_out`). Returns (the heading,
+    where this move leads)."""
     lam, _, slack, _, bump, _, _, _, _, _, _, _, _, _, _ = params
     next_state = gmap[0]
     n_goals = alive.shape[0]
@@ -620,10 +621,31 @@ def guide_append(
         ll[k + 1] = lam * ll[k + 1] + math.log((1.0 - slack) * pa + slack * lo)
         ll[k + 2] = lam * ll[k + 2] + math.log((1.0 - slack) * ca + slack * lo)
     gi = gmap[4][s]
-    if gi >= 0 and (came < 0 or came == s):  # a reading one cell off rules nothing out
-        alive[gi] = False  # once it passed every one, it is bound elsewhere
     to = next_state[s, a]
+    if gi >= 0 and (came < 0 or came == s):  # a reading one cell off rules nothing out
+        back = heading >= 0 and to != s and to == next_state[s, (heading + 2) % 4]
+        guide_rule_out(alive, doubt, gi, back)
     return (a if to != s else heading), to
+
+
+@njit(cache=True)
+def guide_rule_out(alive: BoolArray, doubt: IntArray, gi: int, back: bool) -> None:
+    """``GuideAdvisor._rule_out``: destination ``gi`` stood on and left, straight back the
+    way the explorer came when ``back``; doubt 1 set aside, 2 brought back."""
+    if alive[gi]:
+        alive[gi] = False
+        if back and doubt[gi] == 0:
+            doubt[gi] = 1
+    elif doubt[gi] == 1:
+        doubt[gi] = 0  # seen on it a second time: ruled out
+    any_alive = False
+    for g in range(alive.shape[0]):
+        any_alive = any_alive or alive[g]
+    if not any_alive:  # once it passed every one, it is bound elsewhere
+        for g in range(alive.shape[0]):
+            if doubt[g] == 1:
+                alive[g] = True
+                doubt[g] = 2
 
 
 @njit(cache=True)
@@ -959,6 +981,7 @@ def guide_stream(
     goals: IntArray,
     ll: FloatArray,
     alive: BoolArray,
+    doubt: IntArray,
     target: int,
     last: int,
     heading: int,
@@ -986,8 +1009,8 @@ def guide_stream(
     for i in range(states.shape[0]):
         known = i > 0 and states[i] == next_states[i - 1]  # decided there just before
         heading, came = guide_append(
-            gmap, params, goals, ll, alive, states[i], actions[i], last == states[i], advice,
-            heading, pi, rows, known, comply, came,
+            gmap, params, goals, ll, alive, doubt, states[i], actions[i], last == states[i],
+            advice, heading, pi, rows, known, comply, came,
         )  # fmt: skip
         kl, p0, target, allowed = guide_decide(
             gmap, params, goals, ll, alive, target, heading, next_states[i], theta, scratch,
@@ -1287,6 +1310,7 @@ def episode(
     n_dest = g_goals.shape[0] if rule == GUIDE else 0
     g_ll = np.zeros(4 + 3 * n_dest)
     g_alive = np.ones(n_dest, dtype=np.bool_)
+    g_doubt = np.zeros(n_dest, dtype=np.int64)
     g_target = -1
     g_heading = -1
     g_comply = guide_compliance_state(gparams)
@@ -1366,8 +1390,8 @@ def episode(
                         goal_ll[g] = fsum(goal_ring[g])
         if rule == GUIDE:  # guide keeps its own evidence, not the paper's window
             g_heading, g_came = guide_append(  # the decision for s came just before
-                gmap, gparams, g_goals, g_ll, g_alive, s, a, advise, theta_w, g_heading, g_pi,
-                g_rows, True, g_comply, g_came,
+                gmap, gparams, g_goals, g_ll, g_alive, g_doubt, s, a, advise, theta_w,
+                g_heading, g_pi, g_rows, True, g_comply, g_came,
             )  # fmt: skip
         else:
             pos = push(ring, loglik, pos, t + 1, period, log_probs, s, a)
@@ -1421,6 +1445,7 @@ def q_learning(
     n_dest = g_goals.shape[0] if rule == GUIDE else 0
     g_ll = np.zeros(4 + 3 * n_dest)
     g_alive = np.ones(n_dest, dtype=np.bool_)
+    g_doubt = np.zeros(n_dest, dtype=np.int64)
     g_target = -1
     g_heading = -1
     g_comply = guide_compliance_state(gparams)
@@ -1436,6 +1461,7 @@ def q_learning(
             appended = 0
             g_ll[:] = 0.0
             g_alive[:] = True
+            g_doubt[:] = 0
             g_target = -1
             g_heading = -1
             g_comply[:] = guide_compliance_state(gparams)
@@ -1487,8 +1513,8 @@ def q_learning(
             appended += 1
             if rule == GUIDE:
                 g_heading, g_came = guide_append(  # the decision for s came just before
-                    gmap, gparams, g_goals, g_ll, g_alive, s, a, advise, theta_w, g_heading,
-                    g_pi, g_rows, True, g_comply, g_came,
+                    gmap, gparams, g_goals, g_ll, g_alive, g_doubt, s, a, advise, theta_w,
+                    g_heading, g_pi, g_rows, True, g_comply, g_came,
                 )  # fmt: skip
             else:
                 pos = push(ring, loglik, pos, appended, period, log_probs, s, a)

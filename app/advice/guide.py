@@ -35,8 +35,12 @@ The evidence fades with time constant W, the session's window::
 
 A destination is ruled out once the explorer stood on it and went on (its task would have
 ended there), if the last move can have led there: a position read one cell off, which the
-last move cannot have led to, rules nothing out. Once every one is, the explorer is bound
-somewhere else (it passed every destination): nothing more is advised. A lost explorer is
+last move cannot have led to, rules nothing out. A visit of one reading, straight back to
+the cell it came from, is what a position read one cell off looks like when positions are
+walked (``/positions``): such a destination is only *set aside* (out like the others) and
+comes back once every other one is ruled out; seen on it again, it is ruled out. Once every
+one is ruled out, the explorer is bound somewhere else (it passed every destination):
+nothing more is advised. A lost explorer is
 led to a *target* T: the first destination of the shortest walk from where it is through
 every destination not ruled out (it could be going to any of them), planned again when T is
 ruled out. With P(lost | H) the sum over L4, LO, WL, WR::
@@ -132,6 +136,10 @@ BACKOFF = 25
 UNDO_RUN = 4
 #: the chance that an explorer's own move is the advised one, kept within these bounds
 CHANCE_MIN, CHANCE_MAX = 0.01, 0.99
+#: a destination's doubt (``GuideAdvisor.doubt``): set aside after one visit straight back
+#: the way the explorer came (as a reading one cell off, walked, looks), or brought back once
+#: every other one was ruled out; 0: neither (alive, or ruled out)
+SET_ASIDE, BROUGHT_BACK = 1, 2
 
 
 #: (next_state (S, 4), cells (S, 2), destinations) -> (distances (G, S), detours (G, S))
@@ -467,7 +475,7 @@ class GuideAdvisor(Advisor):
 
     __slots__ = (
         "_came", "_comply", "_heading", "_lam", "_last", "_last_advice", "_target", "alive",
-        "guide", "p_lost", "slack", "spread",
+        "doubt", "guide", "p_lost", "slack", "spread",
     )  # fmt: skip
 
     def __init__(
@@ -508,6 +516,7 @@ class GuideAdvisor(Advisor):
         self.benefit = 0.0
         self._loglik = [0.0] * (N_LOST + 3 * self.guide.n_goals)
         self.alive = [True] * self.guide.n_goals
+        self.doubt = [0] * self.guide.n_goals  # SET_ASIDE, BROUGHT_BACK or 0 (see rule_out)
         self._target = -1
         self._last = -1  # the state the last decision advised (-1: it did not advise)
         self._last_advice = (0.25, 0.25, 0.25, 0.25)
@@ -561,11 +570,32 @@ class GuideAdvisor(Advisor):
         if gi >= 0 and (self._came < 0 or self._came == state):
             # it stood on this destination and went on: not its destination (a reading that
             # the last move cannot have led to, one cell off, say, rules nothing out)
-            self.alive[gi] = False  # once it passed every one, it is bound elsewhere
+            self._rule_out(gi, state, action)
         self._came = int(g.next_state[state, action])
         if self._came != state:
             self._heading = action
         self.steps += 1
+
+    def _rule_out(self, gi: int, state: int, action: int) -> None:
+        """Destination ``gi``, at ``state``, was stood on and left by ``action``. Left straight
+        back to where the explorer came from (the move opposite its heading), at its first
+        visit: set aside (a position read one cell off and walked looks so); else, or seen on
+        it again: ruled out. Once none is left, those set aside are brought back, once."""
+        g = self.guide
+        to = int(g.next_state[state, action])
+        if self.alive[gi]:
+            self.alive[gi] = False
+            h = self._heading
+            back = h >= 0 and to != state and to == int(g.next_state[state, (h + 2) % N_ACTIONS])
+            if back and self.doubt[gi] == 0:
+                self.doubt[gi] = SET_ASIDE
+        elif self.doubt[gi] == SET_ASIDE:
+            self.doubt[gi] = 0  # seen on it a second time: ruled out
+        if not any(self.alive):  # once it passed every one, it is bound elsewhere
+            for i, d in enumerate(self.doubt):
+                if d == SET_ASIDE:
+                    self.alive[i] = True
+                    self.doubt[i] = BROUGHT_BACK
 
     def _observe_compliance(self, state: int, advised: bool, action: int) -> None:
         """After a piece of advice: did the explorer take it? Weighed against the chance

@@ -131,14 +131,15 @@ def run_walked_episode(
     walked and none for a reading in the same cell; the explorer acts on the last decision.
     A reading more than ``max_walk`` moves from the last one (the service's ``max_jump``)
     is dropped, as a refused batch is. ``rec.decisions`` holds the decision each move was
-    acted on; the advisor's ``advice_count`` counts every decision walked."""
+    acted on; the advisor's ``advice_count`` counts every decision walked (none is made
+    after the last move)."""
     explorer.reset(goal, rng)
     advisor.reset()
     rec = EpisodeRecord()
     x = domain.start
     s = read_position(domain, x, noise, seen_rng, jump)
     decision = advisor.decide(s)
-    for _ in range(max_steps):
+    for t in range(max_steps):
         rec.states.append(x)
         rec.decisions.append(decision)
         advice = np.asarray(decision.advice) if advised and decision.advice is not None else None
@@ -155,6 +156,8 @@ def run_walked_episode(
         if x_next == goal:
             rec.success = True
             break
+        if t + 1 == max_steps:
+            break  # no decision after the last move (as the compiled episodes)
         s_next = read_position(domain, x_next, noise, seen_rng, jump)
         for cell in walked_cells(domain, s, s_next, max_walk) or ():
             move = int(np.argmax(domain.next_state[s] == cell))

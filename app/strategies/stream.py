@@ -420,9 +420,10 @@ class StreamGuide(GuideAdvisor):
     def footprint(self) -> int:
         """Bytes the session's state can take at most: no window, but a sum per model (4 + 3G
         Python floats in a list, 32 bytes each), a flag per destination (a list) and the
-        compliance evidence (:func:`compliance_state`'s floats)."""
+        compliance evidence (:func:`compliance_state`'s floats) and a doubt per destination
+        (a list of small ints)."""
         g = self.guide.n_goals
-        return (4 + 3 * g + len(compliance_state())) * 32 + g * 8 + 4 * 8
+        return (4 + 3 * g + len(compliance_state())) * 32 + g * 8 * 2 + 4 * 8
 
     def batch_slice(self) -> int:
         return max(64, 5_000 // (self.guide.n_goals + 1))  # compiled: 0.35 us a destination
@@ -435,19 +436,21 @@ class StreamGuide(GuideAdvisor):
         g = self.guide
         ll = np.array(self._loglik, dtype=np.float64)
         alive = np.array(self.alive, dtype=np.bool_)
+        doubt = np.array(self.doubt, dtype=np.int64)
         last_advice = np.array(self._last_advice, dtype=np.float64)
         comply = np.array(self._comply, dtype=np.float64)
         out, rows = columns(n), np.empty((n, N_ACTIONS))
         params = kernel_params(self.window, GuideParams(self.p_lost, self.slack, self.spread))
         got = kernels.guide_stream(
-            g.arrays, params, g.goal_states, ll, alive, self._target, self._last, self._heading,
-            self._came, last_advice, comply, self.kappa, count_before, benefit_before, self.cap,
-            (states, actions, next_states), (*out, rows),
+            g.arrays, params, g.goal_states, ll, alive, doubt, self._target, self._last,
+            self._heading, self._came, last_advice, comply, self.kappa, count_before,
+            benefit_before, self.cap, (states, actions, next_states), (*out, rows),
         )  # fmt: skip
         self._comply = comply.tolist()
         self._target, self._last, self._heading, self._came, self.advice_count, self.benefit = got
         self._loglik = ll.tolist()
         self.alive = alive.tolist()
+        self.doubt = doubt.tolist()
         a = last_advice.tolist()
         self._last_advice = (a[0], a[1], a[2], a[3])
         return decided(self, next_states, out, rows[out[2]], (count_before, benefit_before), None)

@@ -332,17 +332,28 @@ def test_a_visitor_that_passed_every_destination_is_left_alone() -> None:
                        StrategyParams(), goal_priors, gm)  # fmt: skip
     s = d.start
     adv.start(s)
-    for g in gm.goals:  # along shortest paths through every destination, and one move on
-        while s != g:
-            a = next(a for a in range(4) if gm.dist[gm.goals.index(g), d.next_state[s, a]]
-                     == gm.dist[gm.goals.index(g), s] - 1)  # fmt: skip
-            s2 = int(d.next_state[s, a])
-            adv.observe(s, a, s2)
-            s = s2
-    a = next(a for a in range(4) if int(d.next_state[s, a]) != s)
-    s2 = int(d.next_state[s, a])
-    adv.observe(s, a, s2)
-    s = s2
+
+    def walk_to(g: int) -> int:
+        here = s
+        while here != g:
+            a = next(a for a in range(4) if gm.dist[gm.goals.index(g), d.next_state[here, a]]
+                     == gm.dist[gm.goals.index(g), here] - 1)  # fmt: skip
+            s2 = int(d.next_state[here, a])
+            adv.observe(here, a, s2)
+            here = s2
+        a = next(a for a in range(4) if int(d.next_state[here, a]) != here)  # one move on
+        s2 = int(d.next_state[here, a])
+        adv.observe(here, a, s2)
+        return s2
+
+    for g in gm.goals:  # along shortest paths through every destination
+        s = walk_to(g)
+    # one it left straight back the way it came was set aside and comes back: a second visit
+    # rules it out
+    for _ in gm.goals:
+        if not any(adv.alive):  # type: ignore[attr-defined]
+            break
+        s = walk_to(gm.goals[adv.alive.index(True)])  # type: ignore[attr-defined]
     assert not any(adv.alive)  # type: ignore[attr-defined]
     rng = np.random.default_rng(1)
     advised = 0

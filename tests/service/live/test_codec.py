@@ -299,3 +299,26 @@ def test_a_guide_session_saved_before_undone_advice_was_counted_loads(
     moves = walk(domain, int(domain.domain.start), 20, np.random.default_rng(4))
     got, want = old.observe_batch(*moves), same.observe_batch(*moves)
     assert got.advise.tolist() == want.advise.tolist() and got.kl.tolist() == want.kl.tolist()
+
+
+def test_a_guide_session_saved_before_destinations_were_set_aside_loads(
+    domain: DomainState,
+) -> None:
+    """A guide session written without the destinations' doubt (the version before a visit
+    straight back set one aside) loads with none set aside, and decides as the same session
+    whose doubts are all 0."""
+    reg = SessionRegistry(Limits(100), 3600.0, replay_steps=32)
+    session, _ = reg.create(domain, SessionSettings.of("guide", 0.5, 40, params_for("guide")))
+    reg.observe_batch(session, walk(domain, domain.domain.start, 30, np.random.default_rng(3)))
+    state = advisor_state(session.advisor)
+    assert "doubt" in state["slots"]
+    del state["slots"]["doubt"]
+    old = restore_advisor(state, domain, "*")
+    n_goals = len(domain.domain.goals)
+    assert old.doubt == [0] * n_goals  # type: ignore[attr-defined]
+    same = restore_advisor(advisor_state(session.advisor), domain, "*")
+    same.doubt = [0] * n_goals  # type: ignore[attr-defined]
+    moves = walk(domain, int(domain.domain.start), 40, np.random.default_rng(5))
+    got, want = old.observe_batch(*moves), same.observe_batch(*moves)
+    assert got.advise.tolist() == want.advise.tolist() and got.kl.tolist() == want.kl.tolist()
+    assert old.alive == same.alive and old.doubt == same.doubt  # type: ignore[attr-defined]
