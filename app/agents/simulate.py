@@ -223,7 +223,9 @@ class Simulator:
         ``noise`` (drawn from ``seen_rng``, needed then); walks to its goal once it is in sight
         within ``sight`` cells (0: never). ``feed="positions"`` feeds the readings (up to
         ``jump`` moves off) as the service's /positions walks them: the reference loop
-        (:func:`app.agents.episodes.run_walked_episode`) with the service's advisor."""
+        (:func:`app.agents.episodes.run_walked_episode`) with the service's advisor; without
+        ``advised`` the compiled run (the explorer's moves and draws are the same, the
+        advisor's watching is not reported)."""
         if explorer not in WALKERS:
             raise ValueError(f"unknown explorer {explorer!r}: use {', '.join(WALKERS)}")
         entry, settings = self.settings(strategy, kappa, window, params)
@@ -242,7 +244,7 @@ class Simulator:
             raise ValueError(f"feed must be one of {', '.join(FEEDS)} and jump >= 1")
         visitor = (float(compliance), float(noise), int(sight))
         readings = _UNREAD_RNG if seen_rng is None else seen_rng
-        if feed == "positions":
+        if feed == "positions" and advised:  # unadvised, what the advisor is fed changes nothing
             return self._walked(
                 entry, settings, explorer, goal, rng, advised, max_steps, visitor, readings, jump
             )

@@ -164,27 +164,34 @@ def test_compiled_visitor_follows_the_reference_loop(
 
 
 @settings(max_examples=20, deadline=None)
-@given(st.integers(0, 10_000), st.sampled_from(["random-avoid", "optimal", "corridor"]))
-def test_exact_positions_walk_each_move_as_its_event(seed: int, walker: str) -> None:
-    """Fed positions read exactly, a walker that never walks into a wall is walked one cell
-    a move, so the service's advisor decides as on its events: the walked loop makes the
-    reference loop's moves and decisions (guide, and the paper's rule)."""
+@given(
+    st.integers(0, 10_000),
+    st.sampled_from(["random-avoid", "optimal", "corridor"]),
+    st.sampled_from([0.0, 0.5]),
+)
+def test_exact_positions_walk_each_move_as_its_event(seed: int, walker: str, kappa: float) -> None:
+    """Fed positions read exactly, a walker that never walks into a wall (and ignores the
+    advice, which may point into one) is walked one cell a move, so the service's advisor
+    decides as on its events: the walked loop makes the compiled loop's moves, draws and
+    decisions (guide, and the paper's rule)."""
     d, tables, goal_priors = world(seed, 2 + seed % 2)
     sim = Simulator(d, tables, goal_priors)
     goal = d.goals[seed % len(d.goals)]
     for strategy in ("guide", "paper"):
         walked = sim.fixed(
-            walker, goal, np.random.default_rng(seed), advised=False, strategy=strategy,
-            max_steps=400, feed="positions", seen_rng=np.random.default_rng(1),
+            walker, goal, np.random.default_rng(seed), advised=True, strategy=strategy,
+            kappa=kappa, max_steps=400, feed="positions", seen_rng=np.random.default_rng(1),
+            compliance=0.0,
         )  # fmt: skip
         ref = sim.fixed(
-            walker, goal, np.random.default_rng(seed), advised=False, strategy=strategy,
-            max_steps=400,
+            walker, goal, np.random.default_rng(seed), advised=True, strategy=strategy,
+            kappa=kappa, max_steps=400, compliance=0.0,
         )  # fmt: skip
         assert (walked.success, walked.steps) == (ref.success, ref.steps)
         assert walked.states.tolist() == ref.states.tolist()
         assert walked.advise.tolist() == ref.advise.tolist()
         assert walked.advice_count == ref.advice_count
+        assert walked.advice_count > 0 or kappa > 0.0
 
 
 @settings(max_examples=30, deadline=None)
