@@ -621,20 +621,19 @@ def guide_append(
         ll[k + 1] = lam * ll[k + 1] + math.log((1.0 - slack) * pa + slack * lo)
         ll[k + 2] = lam * ll[k + 2] + math.log((1.0 - slack) * ca + slack * lo)
     gi = gmap[4][s]
-    to = next_state[s, a]
     if gi >= 0 and (came < 0 or came == s):  # a reading one cell off rules nothing out
-        back = heading >= 0 and to != s and to == next_state[s, (heading + 2) % 4]
-        guide_rule_out(alive, doubt, gi, back)
+        guide_rule_out(alive, doubt, gi)
+    to = next_state[s, a]
     return (a if to != s else heading), to
 
 
 @njit(cache=True)
-def guide_rule_out(alive: BoolArray, doubt: IntArray, gi: int, back: bool) -> None:
-    """``GuideAdvisor._rule_out``: destination ``gi`` stood on and left, straight back the
-    way the explorer came when ``back``; doubt 1 set aside, 2 brought back."""
+def guide_rule_out(alive: BoolArray, doubt: IntArray, gi: int) -> None:
+    """``GuideAdvisor._rule_out``: destination ``gi`` stood on and left; doubt 1 set aside,
+    2 brought back."""
     if alive[gi]:
         alive[gi] = False
-        if back and doubt[gi] == 0:
+        if doubt[gi] == 0:
             doubt[gi] = 1
     elif doubt[gi] == 1:
         doubt[gi] = 0  # seen on it a second time: ruled out

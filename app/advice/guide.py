@@ -35,15 +35,14 @@ The evidence fades with time constant W, the session's window::
 
 A destination is ruled out once the explorer stood on it and went on (its task would have
 ended there), if the last move can have led there: a position read one cell off, which the
-last move cannot have led to, rules nothing out. A visit of one reading, straight back to
-the cell it came from, is what a position read one cell off looks like when positions are
-walked (``/positions``): such a destination is only *set aside* (out like the others) and
-comes back once every other one is ruled out; seen on it again, it is ruled out. Once every
-one is ruled out, the explorer is bound somewhere else (it passed every destination):
-nothing more is advised. A lost explorer is
-led to a *target* T: the first destination of the shortest walk from where it is through
-every destination not ruled out (it could be going to any of them), planned again when T is
-ruled out. With P(lost | H) the sum over L4, LO, WL, WR::
+last move cannot have led to, rules nothing out. When positions are walked
+(``/positions``), a position read off onto a destination is walked as a visit, so a first
+visit only *sets a destination aside* (out like a ruled-out one); once none is left, those
+set aside come back, and a second visit rules one out. Once every one is ruled out, the
+explorer is bound somewhere else (it passed every destination): nothing more is advised.
+A lost explorer is led to a *target* T: the first destination of the shortest walk from
+where it is through every destination not ruled out (it could be going to any of them),
+planned again when T is ruled out. With P(lost | H) the sum over L4, LO, WL, WR::
 
     theta_s     = P(lost | H) r_T(s) + sum_g [P(D4_g | H) + P(DO_g | H)] pi_g(s)
                                      + sum_g P(C_g | H) pc_g(s)
@@ -136,9 +135,9 @@ BACKOFF = 25
 UNDO_RUN = 4
 #: the chance that an explorer's own move is the advised one, kept within these bounds
 CHANCE_MIN, CHANCE_MAX = 0.01, 0.99
-#: a destination's doubt (``GuideAdvisor.doubt``): set aside after one visit straight back
-#: the way the explorer came (as a reading one cell off, walked, looks), or brought back once
-#: every other one was ruled out; 0: neither (alive, or ruled out)
+#: a destination's doubt (``GuideAdvisor.doubt``): set aside after its first visit (a
+#: position read off, walked, is a visit), or brought back once every other one was out;
+#: 0: neither (alive, or ruled out)
 SET_ASIDE, BROUGHT_BACK = 1, 2
 
 
@@ -570,24 +569,19 @@ class GuideAdvisor(Advisor):
         if gi >= 0 and (self._came < 0 or self._came == state):
             # it stood on this destination and went on: not its destination (a reading that
             # the last move cannot have led to, one cell off, say, rules nothing out)
-            self._rule_out(gi, state, action)
+            self._rule_out(gi)
         self._came = int(g.next_state[state, action])
         if self._came != state:
             self._heading = action
         self.steps += 1
 
-    def _rule_out(self, gi: int, state: int, action: int) -> None:
-        """Destination ``gi``, at ``state``, was stood on and left by ``action``. Left straight
-        back to where the explorer came from (the move opposite its heading), at its first
-        visit: set aside (a position read one cell off and walked looks so); else, or seen on
-        it again: ruled out. Once none is left, those set aside are brought back, once."""
-        g = self.guide
-        to = int(g.next_state[state, action])
+    def _rule_out(self, gi: int) -> None:
+        """Destination ``gi`` was stood on and left. At its first visit it is set aside (a
+        position read off and walked looks so); seen on it again, or once brought back, it
+        is ruled out. Once none is left, those set aside are brought back, once."""
         if self.alive[gi]:
             self.alive[gi] = False
-            h = self._heading
-            back = h >= 0 and to != state and to == int(g.next_state[state, (h + 2) % N_ACTIONS])
-            if back and self.doubt[gi] == 0:
+            if self.doubt[gi] == 0:
                 self.doubt[gi] = SET_ASIDE
         elif self.doubt[gi] == SET_ASIDE:
             self.doubt[gi] = 0  # seen on it a second time: ruled out

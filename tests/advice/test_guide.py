@@ -348,8 +348,8 @@ def test_a_visitor_that_passed_every_destination_is_left_alone() -> None:
 
     for g in gm.goals:  # along shortest paths through every destination
         s = walk_to(g)
-    # one it left straight back the way it came was set aside and comes back: a second visit
-    # rules it out
+    # a first visit only sets a destination aside: once none is left they come back, and a
+    # second visit rules each out
     for _ in gm.goals:
         if not any(adv.alive):  # type: ignore[attr-defined]
             break

@@ -170,8 +170,8 @@ def test_one_reading_off_by_a_cell_through_positions_sets_a_destination_aside(
 ) -> None:
     """A guide session fed positions in metres: a visitor walks up the right-hand corridor
     towards the destination [1, 5] and one reading, next to it, is seen on it. Walked, that
-    is a step onto it and straight back: [1, 5] is set aside, not lost. Once the visitor has
-    passed the other destination, it is back (and a second visit would rule it out)."""
+    is a step onto it and back: [1, 5] is set aside, not ruled out. Once the visitor has
+    passed the other destination too, both come back; a second visit rules one out."""
     put(client, admin, **FRAME)
     sid, auth, _ = open_session(client, "tiny", strategy="guide")
     walk = [(5, 2), (5, 3), (5, 4), (5, 5), (4, 5), (3, 5), (2, 5)]
@@ -185,11 +185,17 @@ def test_one_reading_off_by_a_cell_through_positions_sets_a_destination_aside(
         return got
 
     assert goals()[1]["ruled_out"] and not goals()[0]["ruled_out"]  # set aside
-    # down, across and up to [1, 1], over it and on (south, not back the way it came)
+    # down, across and up to [1, 1], over it and on: set aside too, so both come back
     walk = [(3, 5), (4, 5), (4, 4), (4, 3), (3, 3), (2, 3), (1, 3), (1, 2), (1, 1), (2, 1)]
     r = client.post(f"/sessions/{sid}/positions", json={"positions": [centre(*c) for c in walk]},
                     headers=auth)  # fmt: skip
     assert r.status_code == 200, r.text
+    assert not any(g["ruled_out"] for g in goals())
+    # over [1, 1] a second time: ruled out, and [1, 5] is where the visitor is bound
+    walk = [(1, 1), (1, 2)]
+    r = client.post(f"/sessions/{sid}/positions", json={"positions": [centre(*c) for c in walk]},
+                    headers=auth)  # fmt: skip
+    assert r.status_code == 200, r.text
     now = goals()
-    assert now[0]["ruled_out"] and not now[1]["ruled_out"]  # [1, 5] is back
+    assert now[0]["ruled_out"] and not now[1]["ruled_out"]
     assert now[1]["p"] == pytest.approx(1.0)
