@@ -48,6 +48,30 @@ class EpisodeRecord:
         return sum(d.advise for d in self.decisions)
 
 
+def visitor_act(
+    domain: GridDomain,
+    explorer: FixedPolicyExplorer | QLearningExplorer,
+    x: int,
+    goal: int,
+    decision: Decision,
+    rng: np.random.Generator,
+    advised: bool,
+    compliance: float,
+    sight: int,
+) -> int:
+    """The explorer's move from ``x`` after ``decision``: to its goal when in sight (whatever
+    the advice), else its own, sampling the advice (if advised) unless one draw says it
+    keeps to its own way this time (only when ``compliance`` < 1)."""
+    # the advisor's payload: theta_s for the paper's rule, theta^w_s for goal-aware advice
+    advice = np.asarray(decision.advice) if advised and decision.advice is not None else None
+    seen = in_sight(domain, x, goal, sight) if sight > 0 else None
+    if seen is not None:  # its goal in sight: it walks there, whatever the advice
+        return seen
+    if advice is not None and compliance < 1.0 and rng.random() >= compliance:
+        advice = None  # it keeps to its own way this time
+    return explorer.act(x, rng, advice)
+
+
 def run_episode(
     domain: GridDomain,
     explorer: FixedPolicyExplorer | QLearningExplorer,
@@ -63,12 +87,23 @@ def run_episode(
     noise: float = 0.0,
     sight: int = 0,
     seen_rng: np.random.Generator | None = None,
+    positions: bool = False,
+    jump: int = 1,
+    max_walk: int = 8,
 ) -> EpisodeRecord:
     """One episode from the start cell; the Q-learner also learns from every move.
 
     ``new_task`` calls ``explorer.reset`` (a Q-learner forgets its table); ``new_history``
     starts a new advisor session (empty window, cost zero). ``seen_rng`` draws the readings
     of the explorer's cell (needed when ``noise`` > 0).
+
+    With ``positions`` the advisor is fed as the service's ``/positions`` endpoint feeds it:
+    after each move the cell is read (up to ``jump`` moves off with probability ``noise``)
+    and walked from the last reading (:func:`app.domain.paths.walked_cells`), one decision
+    per cell walked and none for a reading in the same cell; the explorer acts on the last
+    decision. A reading more than ``max_walk`` moves from the last (the service's
+    ``max_jump``) is dropped, as a refused batch is. ``rec.decisions`` holds the decision
+    each move was acted on; no decision is made after the last move.
     """
     if noise > 0.0 and seen_rng is None:
         raise ValueError("position noise needs seen_rng, the readings' generator")
@@ -79,20 +114,12 @@ def run_episode(
         advisor.reset()
     rec = EpisodeRecord()
     x = domain.start  # where the explorer is
-    s = read_position(domain, x, noise, readings)  # where the advisor sees it
+    s = read_position(domain, x, noise, readings, jump)  # where the advisor sees it
     decision = advisor.decide(s)
-    for _ in range(max_steps):
+    for t in range(max_steps):
         rec.states.append(x)
         rec.decisions.append(decision)
-        # the advisor's payload: theta_s for the paper's rule, theta^w_s for goal-aware advice
-        advice = np.asarray(decision.advice) if advised and decision.advice is not None else None
-        seen = in_sight(domain, x, goal, sight) if sight > 0 else None
-        if seen is not None:  # its goal in sight: it walks there, whatever the advice
-            a = seen
-        else:
-            if advice is not None and compliance < 1.0 and rng.random() >= compliance:
-                advice = None  # it keeps to its own way this time
-            a = explorer.act(x, rng, advice)
+        a = visitor_act(domain, explorer, x, goal, decision, rng, advised, compliance, sight)
         x_next = int(domain.next_state[x, a])
         rec.actions.append(a)
         if isinstance(explorer, QLearningExplorer):
@@ -102,63 +129,14 @@ def run_episode(
         if x_next == goal:
             rec.success = True
             break
-        s_next = read_position(domain, x_next, noise, readings)
-        decision = advisor.observe(s, a, s_next)
-        s, x = s_next, x_next
-    return rec
-
-
-def run_walked_episode(
-    domain: GridDomain,
-    explorer: FixedPolicyExplorer,
-    advisor: Advisor,
-    goal: int,
-    rng: np.random.Generator,
-    seen_rng: np.random.Generator,
-    *,
-    advised: bool = True,
-    max_steps: int = 5000,
-    compliance: float = 1.0,
-    noise: float = 0.0,
-    jump: int = 1,
-    sight: int = 0,
-    max_walk: int = 8,
-) -> EpisodeRecord:
-    """One episode of a visitor whose positions the advisor is fed as the service's
-    ``/positions`` endpoint feeds them: after each of the explorer's moves its cell is read
-    (:func:`read_position`, up to ``jump`` moves off with probability ``noise``) and walked
-    from the last reading (:func:`app.domain.paths.walked_cells`), one decision per cell
-    walked and none for a reading in the same cell; the explorer acts on the last decision.
-    A reading more than ``max_walk`` moves from the last one (the service's ``max_jump``)
-    is dropped, as a refused batch is. ``rec.decisions`` holds the decision each move was
-    acted on; the advisor's ``advice_count`` counts every decision walked (none is made
-    after the last move)."""
-    explorer.reset(goal, rng)
-    advisor.reset()
-    rec = EpisodeRecord()
-    x = domain.start
-    s = read_position(domain, x, noise, seen_rng, jump)
-    decision = advisor.decide(s)
-    for t in range(max_steps):
-        rec.states.append(x)
-        rec.decisions.append(decision)
-        advice = np.asarray(decision.advice) if advised and decision.advice is not None else None
-        seen = in_sight(domain, x, goal, sight) if sight > 0 else None
-        if seen is not None:
-            a = seen
-        else:
-            if advice is not None and compliance < 1.0 and rng.random() >= compliance:
-                advice = None
-            a = explorer.act(x, rng, advice)
-        x_next = int(domain.next_state[x, a])
-        rec.actions.append(a)
-        explorer.observe(x, a, x_next)
-        if x_next == goal:
-            rec.success = True
-            break
+        if not positions:
+            s_next = read_position(domain, x_next, noise, readings)
+            decision = advisor.observe(s, a, s_next)
+            s, x = s_next, x_next
+            continue
         if t + 1 == max_steps:
             break  # no decision after the last move (as the compiled episodes)
-        s_next = read_position(domain, x_next, noise, seen_rng, jump)
+        s_next = read_position(domain, x_next, noise, readings, jump)
         for cell in walked_cells(domain, s, s_next, max_walk) or ():
             move = int(np.argmax(domain.next_state[s] == cell))
             decision = advisor.observe(s, move, cell)

@@ -362,6 +362,8 @@ class Visitor:
             raise ValueError(f"feed must be one of {', '.join(FEEDS)}, got {self.feed!r}")
         if not (isinstance(self.jump, int) and self.jump >= 1):
             raise ValueError(f"j (jump) must be an integer >= 1, got {self.jump}")
+        if self.jump > 1 and self.feed != "positions":
+            raise ValueError("j (jump) > 1 is for a visitor fed positions: add 'positions'")
 
     @classmethod
     def parse(cls, spec: str) -> Visitor:

@@ -25,7 +25,7 @@ from app.advice.guide import GuideError, GuideMap, GuideParams, kernel_params
 from app.advice.models import AdviceTables
 from app.advice.params import StrategyParams
 from app.advice.priors import GoalPriors
-from app.agents.episodes import run_episode, run_walked_episode
+from app.agents.episodes import run_episode
 from app.agents.explorers import FEEDS, WALKERS, make_explorer
 from app.agents.qlearning import TIE_RULES
 from app.arrays import BoolArray, FloatArray, IntArray
@@ -223,9 +223,9 @@ class Simulator:
         ``noise`` (drawn from ``seen_rng``, needed then); walks to its goal once it is in sight
         within ``sight`` cells (0: never). ``feed="positions"`` feeds the readings (up to
         ``jump`` moves off) as the service's /positions walks them: the reference loop
-        (:func:`app.agents.episodes.run_walked_episode`) with the service's advisor; without
-        ``advised`` the compiled run (the explorer's moves and draws are the same, the
-        advisor's watching is not reported)."""
+        (:func:`app.agents.episodes.run_episode` with ``positions``) with the service's
+        advisor; without ``advised`` the compiled run (the explorer's moves and draws are the
+        same, the advisor's watching is not reported)."""
         if explorer not in WALKERS:
             raise ValueError(f"unknown explorer {explorer!r}: use {', '.join(WALKERS)}")
         entry, settings = self.settings(strategy, kappa, window, params)
@@ -240,8 +240,10 @@ class Simulator:
             raise ValueError(f"sight must be >= 0, got {sight}")
         if noise > 0.0 and seen_rng is None:
             raise ValueError("position noise needs seen_rng, the readings' generator")
-        if feed not in FEEDS or jump < 1:
-            raise ValueError(f"feed must be one of {', '.join(FEEDS)} and jump >= 1")
+        if feed not in FEEDS or jump < 1 or (jump > 1 and feed != "positions"):
+            raise ValueError(
+                f"feed must be one of {', '.join(FEEDS)}, and jump >= 1 (> 1 with positions only)"
+            )
         visitor = (float(compliance), float(noise), int(sight))
         readings = _UNREAD_RNG if seen_rng is None else seen_rng
         if feed == "positions" and advised:  # unadvised, what the advisor is fed changes nothing
@@ -315,9 +317,10 @@ class Simulator:
         advisor = entry.service_advisor(self.data, settings)
         walker = make_explorer(explorer, self.domain)
         compliance, noise, sight = visitor
-        rec = run_walked_episode(
-            self.domain, walker, advisor, goal, rng, readings, advised=advised,
-            max_steps=max_steps, compliance=compliance, noise=noise, jump=jump, sight=sight,
+        rec = run_episode(
+            self.domain, walker, advisor, goal, rng, advised=advised, max_steps=max_steps,
+            compliance=compliance, noise=noise, sight=sight, seen_rng=readings, positions=True,
+            jump=jump,
         )  # fmt: skip
         beliefs = advisor.goal_beliefs() or []
         return FixedRun(

@@ -245,6 +245,7 @@ def test_visitor_specs() -> None:
     assert Visitor.parse("random events").name == "random"
     for bad, says in (
         ("random j=0", "j \\(jump\\)"),
+        ("random q=0.1 j=3", "add 'positions'"),
         ("random j=1.5", "not a number"),
         ("random metres", "is not one of"),
         ("", "empty"),
