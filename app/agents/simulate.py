@@ -247,8 +247,18 @@ class Simulator:
         visitor = (float(compliance), float(noise), int(sight))
         readings = _UNREAD_RNG if seen_rng is None else seen_rng
         if feed == "positions" and advised:  # unadvised, what the advisor is fed changes nothing
-            return self._walked(
-                entry, settings, explorer, goal, rng, advised, max_steps, visitor, readings, jump
+            return self._fixed_readable(
+                entry,
+                settings,
+                explorer,
+                goal,
+                rng,
+                advised,
+                max_steps,
+                visitor,
+                readings,
+                positions=True,
+                jump=jump,
             )
         if entry.kernel is None:
             return self._fixed_readable(
@@ -291,14 +301,17 @@ class Simulator:
         self, entry: Strategy, settings: AdvisorSettings, explorer: str, goal: int,
         rng: np.random.Generator, advised: bool, max_steps: int,
         visitor: kernels.VisitorParams, readings: np.random.Generator,
+        positions: bool = False, jump: int = 1,
     ) -> FixedRun:  # fmt: skip
-        """:meth:`fixed` for a strategy without a compiled form: the reference loop."""
-        advisor = entry.advisor(self.data, settings)
+        """:meth:`fixed` in the reference loop: for a strategy without a compiled form, or
+        fed ``positions`` (walked, with the advisor the service runs)."""
+        make = entry.service_advisor if positions else entry.advisor
+        advisor = make(self.data, settings)
         compliance, noise, sight = visitor
         rec = run_episode(
             self.domain, make_explorer(explorer, self.domain), advisor, goal, rng,
             advised=advised, max_steps=max_steps, compliance=compliance, noise=noise,
-            sight=sight, seen_rng=readings,
+            sight=sight, seen_rng=readings, positions=positions, jump=jump,
         )  # fmt: skip
         beliefs = advisor.goal_beliefs() or []
         return FixedRun(
@@ -306,27 +319,6 @@ class Simulator:
             sum(out for _, _, out in beliefs), np.array(rec.states, dtype=np.int64),
             np.array([d.p_normal for d in rec.decisions]),
             np.array([d.advise for d in rec.decisions], dtype=np.bool_),
-        )  # fmt: skip
-
-    def _walked(
-        self, entry: Strategy, settings: AdvisorSettings, explorer: str, goal: int,
-        rng: np.random.Generator, advised: bool, max_steps: int,
-        visitor: kernels.VisitorParams, readings: np.random.Generator, jump: int,
-    ) -> FixedRun:  # fmt: skip
-        """:meth:`fixed` fed positions: the walked loop, with the advisor the service runs."""
-        advisor = entry.service_advisor(self.data, settings)
-        walker = make_explorer(explorer, self.domain)
-        compliance, noise, sight = visitor
-        rec = run_episode(
-            self.domain, walker, advisor, goal, rng, advised=advised, max_steps=max_steps,
-            compliance=compliance, noise=noise, sight=sight, seen_rng=readings, positions=True,
-            jump=jump,
-        )  # fmt: skip
-        beliefs = advisor.goal_beliefs() or []
-        return FixedRun(
-            rec.success, rec.steps, advisor.advice_count, advisor.benefit,
-            sum(out for _, _, out in beliefs), np.array(rec.states, dtype=np.int64),
-            np.zeros(0), np.array([d.advise for d in rec.decisions], dtype=np.bool_),
         )  # fmt: skip
 
     def learning(

@@ -407,10 +407,9 @@ class GoalBelief(BaseModel):
     goal: Cell
     p: float = Field(description="P(goal | H), the weight of this goal's prior in the advice.")
     ruled_out: bool = Field(
-        description="The explorer stood on this goal and went on. guide: a first visit "
-        "straight back the way it came (what a position read one cell off looks like) only "
-        "sets it aside; it is reported ruled out until every other goal is, then it comes "
-        "back, and a second visit rules it out."
+        description="The explorer stood on this goal and went on. guide: a first visit (what "
+        "a position read off and walked looks like) only sets it aside; it is reported ruled "
+        "out until every goal is out, then it comes back, and a second visit rules it out."
     )
 
 

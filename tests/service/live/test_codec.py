@@ -305,7 +305,7 @@ def test_a_guide_session_saved_before_destinations_were_set_aside_loads(
     domain: DomainState,
 ) -> None:
     """A guide session written without the destinations' doubt (the version before a visit
-    straight back set one aside) loads with none set aside, and decides as the same session
+    set one aside) loads with none set aside, and decides as the same session
     whose doubts are all 0."""
     reg = SessionRegistry(Limits(100), 3600.0, replay_steps=32)
     session, _ = reg.create(domain, SessionSettings.of("guide", 0.5, 40, params_for("guide")))
