@@ -476,10 +476,15 @@ def goal_stream(
 
 
 # ---- guide: leading lost explorers to a destination ---------------------------------------------
+# A compiled call that takes arrays pays a reference count on each (twice), which costs more
+# than a destination's arithmetic: the loops over destinations read the arrays in one function,
+# their helpers take scalars, and the per-decision functions are inlined into their callers
+# (numba's inline="always"). benchmarks/bench_guide.py measures it.
 @njit(cache=True)
-def guide_open(gmap: GuideArrays, s: int, out: FloatArray) -> None:  # pragma: no cover
+def guide_open(
+    next_state: IntArray, n_open: IntArray, s: int, out: FloatArray
+) -> None:  # pragma: no cover - compiled
     """``GuideMap.open_policy``: uniform over the open moves of ``s`` into ``out`` (4,)."""
-    next_state, n_open = gmap[0], gmap[1]
     n = n_open[s]
     for a in range(4):
         if n == 0:
@@ -491,36 +496,31 @@ def guide_open(gmap: GuideArrays, s: int, out: FloatArray) -> None:  # pragma: n
 
 
 @njit(cache=True)
-def guide_policy(gmap: GuideArrays, g: int, s: int, out: FloatArray) -> None:  # pragma: no cover
-    """``GuideMap.policy``: pi_g(. | s) into ``out`` (4,)."""
-    next_state, _, _, dist, _, counts, _ = gmap
-    d = dist[g, s]
-    if d > 0:
-        tot = 0.0
-        for a in range(4):
-            if dist[g, next_state[s, a]] == d - 1:
-                out[a] = 1.0 + counts[g, s * 4 + a]
-                tot += out[a]
-            else:
-                out[a] = 0.0
-        for a in range(4):
-            out[a] = out[a] / tot
-    else:
-        guide_open(gmap, s, out)
+def guide_open_moves(next_state: IntArray, s: int) -> int:  # pragma: no cover - compiled
+    """The open moves of ``s`` as bits (bit a: move a leaves ``s``)."""
+    mask = 0
+    for a in range(4):
+        if next_state[s, a] != s:
+            mask |= 1 << a
+    return mask
 
 
 @njit(cache=True)
-def guide_own_moves(
-    next_state: IntArray, cells: IntArray, goal: int, s: int
-) -> tuple[int, int]:  # pragma: no cover
-    """``GuideMap.compass_moves``: up to two moves (-1: none) of someone at ``s`` heading for
-    the destination in state ``goal`` as the crow flies."""
-    dr = cells[goal, 0] - cells[s, 0]
-    dc = cells[goal, 1] - cells[s, 1]
+def guide_open_share(n: int, mask: int, a: int) -> float:  # pragma: no cover - compiled
+    """``GuideMap.open_policy`` of move ``a`` at a state with ``n`` open moves, ``mask``."""
+    return 0.25 if n == 0 else (1.0 / n if (mask >> a) & 1 == 1 else 0.0)
+
+
+@njit(cache=True)
+def guide_own_moves(dr: int, dc: int, mask: int) -> tuple[int, int]:  # pragma: no cover
+    """``GuideMap.compass_moves``: up to two moves (-1: none) of someone heading ``dr`` rows
+    and ``dc`` columns away as the crow flies, from a state whose open moves are ``mask``
+    (:func:`guide_open_moves`). Scalars only, so the loops over destinations that call it
+    stay one compiled loop."""
     vert = 0 if dr < 0 else 2
     horiz = 1 if dc > 0 else 3
-    v_ok = dr != 0 and next_state[s, vert] != s
-    h_ok = dc != 0 and next_state[s, horiz] != s
+    v_ok = dr != 0 and (mask >> vert) & 1 == 1
+    h_ok = dc != 0 and (mask >> horiz) & 1 == 1
     if abs(dr) == abs(dc):
         if v_ok:
             return vert, (horiz if h_ok else -1)
@@ -530,55 +530,89 @@ def guide_own_moves(
     return (horiz if h_ok else (vert if v_ok else -1)), -1
 
 
-@njit(cache=True)
-def guide_compass(
-    gmap: GuideArrays, goal: int, s: int, out: FloatArray
-) -> None:  # pragma: no cover
-    """``GuideMap.compass``: c_g(. | s) for the destination in state ``goal``, into ``out``."""
-    m0, m1 = guide_own_moves(gmap[0], gmap[2], goal, s)
-    if m0 < 0:
-        guide_open(gmap, s, out)
-        return
-    n = 1 if m1 < 0 else 2
-    for a in range(4):
-        out[a] = 1.0 / n if a in (m0, m1) else 0.0
-
-
-@njit(cache=True)
-def guide_compass_route(
-    gmap: GuideArrays, g: int, goal: int, s: int, out: FloatArray
-) -> None:  # pragma: no cover
-    """``GuideMap.compass_route``: pc_g(. | s) for destination ``g`` (in state ``goal``)."""
-    next_state, _, cells, _, _, _, detour = gmap
-    if s == goal or detour[g, s] < 0:
-        guide_open(gmap, s, out)
-        return
-    m0, m1 = guide_own_moves(next_state, cells, goal, s)
-    best = -1
-    for a in range(4):  # out[a]: moves it would not make, counting this one (-1: shut)
-        out[a] = -1.0
-        t = next_state[s, a]
-        if t != s:
-            own = a in (m0, m1)
-            cost = detour[g, t] + (0 if own else 1)
-            out[a] = cost + (0.0 if own else 0.5)  # .5 marks a move it would not make
-            if best < 0 or cost < best:
-                best = cost
-    n_own = 0
-    n_any = 0
-    for a in range(4):
-        if out[a] >= 0.0 and math.floor(out[a]) == best:
-            n_any += 1
-            if out[a] == best:
-                n_own += 1
-    for a in range(4):
-        if out[a] >= 0.0 and math.floor(out[a]) == best and (n_own == 0 or out[a] == best):
-            out[a] = 1.0 / (n_own if n_own > 0 else n_any)
+@njit(cache=True, inline="always")
+def guide_fill_rows(
+    gmap: GuideArrays, goals: IntArray, s: int, rows: FloatArray
+) -> None:  # pragma: no cover - compiled  # fmt: skip
+    """Fill ``rows`` (2 G, 4) with every destination's pi_g(. | s) (``GuideMap.policy``),
+    then its c_g(. | s) (``GuideMap.compass``). One loop, the arrays read in it (a compiled
+    call per destination that takes arrays costs more than the arithmetic)."""
+    next_state, n_open, cells, dist, _, counts, _ = gmap
+    n_goals = goals.shape[0]
+    n = n_open[s]
+    mask = guide_open_moves(next_state, s)
+    for g in range(n_goals):
+        d = dist[g, s]  # pi_g: the shortest moves, weighted 1 + the experts' count
+        if d > 0:
+            tot = 0.0
+            for a in range(4):
+                if dist[g, next_state[s, a]] == d - 1:
+                    rows[g, a] = 1.0 + counts[g, s * 4 + a]
+                    tot += rows[g, a]
+                else:
+                    rows[g, a] = 0.0
+            for a in range(4):
+                rows[g, a] = rows[g, a] / tot
         else:
-            out[a] = 0.0
+            for a in range(4):
+                rows[g, a] = guide_open_share(n, mask, a)
+        goal = goals[g]  # c_g: uniform over its own moves, the open moves where it has none
+        m0, m1 = guide_own_moves(cells[goal, 0] - cells[s, 0], cells[goal, 1] - cells[s, 1], mask)
+        r = n_goals + g
+        for a in range(4):
+            if m0 < 0:
+                rows[r, a] = guide_open_share(n, mask, a)
+            else:
+                rows[r, a] = (1.0 / (1 if m1 < 0 else 2)) if a in (m0, m1) else 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
+def guide_route_rows(
+    gmap: GuideArrays, goals: IntArray, alive: BoolArray, any_alive: bool, s: int,
+    pcs: FloatArray,
+) -> None:  # pragma: no cover - compiled  # fmt: skip
+    """``GuideMap.compass_route``: pc_g(. | s) into ``pcs[g]`` for every destination g not
+    ruled out (every one when none is left): the open moves after which the fewest moves it
+    would not make by itself remain, its own moves first (at g, or where g cannot be
+    reached, the open moves)."""
+    next_state, n_open, cells, _, _, _, detour = gmap
+    n = n_open[s]
+    mask = guide_open_moves(next_state, s)
+    for g in range(goals.shape[0]):
+        if not (alive[g] or not any_alive):
+            continue
+        goal = goals[g]
+        if s == goal or detour[g, s] < 0:
+            for a in range(4):
+                pcs[g, a] = guide_open_share(n, mask, a)
+            continue
+        m0, m1 = guide_own_moves(cells[goal, 0] - cells[s, 0], cells[goal, 1] - cells[s, 1], mask)
+        best = -1
+        for a in range(4):  # pcs[g, a]: moves it would not make, counting this one (-1: shut)
+            pcs[g, a] = -1.0
+            t = next_state[s, a]
+            if t != s:
+                own = a in (m0, m1)
+                cost = detour[g, t] + (0 if own else 1)
+                pcs[g, a] = cost + (0.0 if own else 0.5)  # .5 marks a move it would not make
+                if best < 0 or cost < best:
+                    best = cost
+        n_own = 0
+        n_any = 0
+        for a in range(4):
+            if pcs[g, a] >= 0.0 and math.floor(pcs[g, a]) == best:
+                n_any += 1
+                if pcs[g, a] == best:
+                    n_own += 1
+        for a in range(4):
+            c = pcs[g, a]
+            if c >= 0.0 and math.floor(c) == best and (n_own == 0 or c == best):
+                pcs[g, a] = 1.0 / (n_own if n_own > 0 else n_any)
+            else:
+                pcs[g, a] = 0.0
+
+
+@njit(cache=True, inline="always")
 def guide_append(
     gmap: GuideArrays, params: GuideParams, goals: IntArray, ll: FloatArray, alive: BoolArray,
     doubt: IntArray, s: int, a: int, advised: bool, advice: FloatArray, heading: int,
@@ -600,7 +634,7 @@ def guide_append(
     guide_observe_compliance(params, comply, advised, advice, a, s, next_state[s, a])
     if not known:
         guide_fill_rows(gmap, goals, s, rows)
-    guide_open(gmap, s, pi)
+    guide_open(next_state, gmap[1], s, pi)
     lo = (1.0 - bump) * pi[a] + bump / 4.0
     ll[0] = lam * ll[0] + math.log(0.25)
     ll[1] = lam * ll[1] + math.log(lo)
@@ -647,7 +681,7 @@ def guide_rule_out(alive: BoolArray, doubt: IntArray, gi: int) -> None:
                 doubt[g] = 2
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def guide_observe_compliance(
     params: GuideParams, comply: FloatArray, advised: bool, advice: FloatArray, a: int,
     s: int, to: int,
@@ -831,7 +865,7 @@ def guide_first_of_tour(
     return first
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def guide_decide(
     gmap: GuideArrays, params: GuideParams, goals: IntArray, ll: FloatArray, alive: BoolArray,
     target: int, heading: int, s: int, theta: FloatArray, scratch: FloatArray,
@@ -884,9 +918,7 @@ def guide_decide(
     guide_fill_rows(gmap, goals, s, rows)
     pis, cs = rows[:n_goals], rows[n_goals:]
     pcs = scratch[n_models + 8 * n_goals : n_models + 12 * n_goals].reshape((n_goals, 4))
-    for g in range(n_goals):
-        if alive[g] or not any_alive:
-            guide_compass_route(gmap, g, goals[g], s, pcs[g])
+    guide_route_rows(gmap, goals, alive, any_alive, s, pcs)
     if target < 0 or not (alive[target] or not any_alive):
         target = guide_first_of_tour(dist, goals, alive, any_alive, s, max_tour)
     pi_t = scratch[n_models + 12 * n_goals :]
@@ -902,9 +934,9 @@ def guide_decide(
         for a in range(4):
             pi_t[a] = 1.0 if a == pick else 0.0
     else:
-        guide_open(gmap, s, pi_t)
+        guide_open(gmap[0], gmap[1], s, pi_t)
     op = theta  # the open moves' policy, read before theta is written in its place
-    guide_open(gmap, s, op)
+    guide_open(gmap[0], gmap[1], s, op)
     wl = guide_wall(gmap[0], s, heading, 0)
     wr = guide_wall(gmap[0], s, heading, 1)
     kl = 0.0
@@ -960,17 +992,6 @@ def guide_rows(scratch: FloatArray, n_goals: int) -> FloatArray:  # pragma: no c
     c_g, at the state of the last decision: (2 G, 4), what :func:`guide_append` reads."""
     start = 4 + 3 * n_goals
     return scratch[start : start + 8 * n_goals].reshape((2 * n_goals, 4))
-
-
-@njit(cache=True)
-def guide_fill_rows(
-    gmap: GuideArrays, goals: IntArray, s: int, rows: FloatArray
-) -> None:  # pragma: no cover - compiled  # fmt: skip
-    """Fill ``rows`` (2 G, 4) with every destination's pi_g(. | s), then its c_g(. | s)."""
-    n_goals = goals.shape[0]
-    for g in range(n_goals):
-        guide_policy(gmap, g, s, rows[g])
-        guide_compass(gmap, goals[g], s, rows[n_goals + g])
 
 
 @njit(cache=True)
@@ -1095,7 +1116,8 @@ def guide_detours(
                 if u == v or done[u]:
                     continue
                 back = (a + 2) % 4  # u's move into v
-                m0, m1 = guide_own_moves(next_state, cells, t, u)
+                dr, dc = cells[t, 0] - cells[u, 0], cells[t, 1] - cells[u, 1]
+                m0, m1 = guide_own_moves(dr, dc, guide_open_moves(next_state, u))
                 cost = 0 if (m0 == back or m1 == back) else 1
                 if best[v] + cost < best[u]:
                     best[u] = best[v] + cost
