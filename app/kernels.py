@@ -46,7 +46,7 @@ GuideArrays = tuple[IntArray, IntArray, IntArray, IntArray, IntArray, FloatArray
 #: (lam, p_lost, slack, spread, bump, the most destinations a tour is planned through)
 GuideParams = tuple[
     float, float, float, float, float, int, float, float, float, float, float, int, float, float,
-    float,
+    float, int, int, int, int,
 ]  # fmt: skip
 
 #: explorer kinds, in the order of app.agents.explorers.WALKERS (the paper's five first)
@@ -628,7 +628,7 @@ def guide_append(
     where the last move led on the map (-1: none); a destination is ruled out only where it
     can have led, or set aside (``doubt``, :func:`guide_rule_out`). Returns (the heading,
     where this move leads)."""
-    lam, _, slack, _, bump, _, _, _, _, _, _, _, _, _, _ = params
+    lam, slack, bump = params[0], params[2], params[4]
     next_state = gmap[0]
     n_goals = alive.shape[0]
     guide_observe_compliance(params, comply, advised, advice, a, s, next_state[s, a])
@@ -869,15 +869,18 @@ def guide_first_of_tour(
 def guide_decide(
     gmap: GuideArrays, params: GuideParams, goals: IntArray, ll: FloatArray, alive: BoolArray,
     target: int, heading: int, s: int, theta: FloatArray, scratch: FloatArray,
-    comply: FloatArray,
+    comply: FloatArray, run: IntArray, fresh: bool,
 ) -> tuple[float, float, int, bool]:  # pragma: no cover - compiled  # fmt: skip
     """``GuideAdvisor.decide``: fills ``theta`` (4,) with the advice; returns (the value
     compared with kappa, 1 - P(lost | H), the target, whether advice may be given at all: not
     to an explorer that ignores it, advice held back, within ``BACKOFF`` decisions of the
     last piece).
     ``heading``: the last move that moved (-1: none). ``scratch`` is (4 + 3 G + 12 G + 4,);
-    ``comply`` as :func:`guide_observe_compliance` keeps it."""
-    _, p_lost, slack, spread, bump, max_tour, _, _, _, _, backoff, _, _, _, _ = params
+    ``comply`` as :func:`guide_observe_compliance` keeps it; ``run`` (:func:`guide_run_push`)
+    the states decided for since the last piece of advice, ``s`` added here; ``fresh``: no
+    advice yet this session. A caller that advises restarts ``run`` (:func:`guide_run_restart`)."""
+    p_lost, slack, spread, bump, max_tour = params[1], params[2], params[3], params[4], params[5]
+    backoff = params[10]
     dist = gmap[3]
     n_goals = alive.shape[0]
     n_models = 4 + 3 * n_goals
@@ -974,7 +977,73 @@ def guide_decide(
     held = comply[n_levels + 2] != 0.0 or comply[n_levels + 6] >= params[14]
     allowed = not held or comply[n_levels + 1] >= backoff
     allowed = allowed and any_alive  # none left: it is bound elsewhere
+    guide_run_push(run, s)
+    purpose = guide_purposeful(gmap[2], dist, run, fresh, params)
+    allowed = allowed and not purpose  # it walks a way of its own
     return kl, 1.0 - lost, target, allowed
+
+
+@njit(cache=True, inline="always")
+def guide_run_push(run: IntArray, s: int) -> None:  # pragma: no cover - compiled
+    """Add ``s`` to ``run``: ``GuideAdvisor._run`` as a ring (how many, the newest's slot,
+    then PURPOSE_LONG + 1 slots), the oldest dropped once it is full."""
+    size = run.shape[0] - 2
+    newest = (run[1] + 1) % size
+    run[2 + newest] = s
+    run[1] = newest
+    if run[0] < size:
+        run[0] += 1
+
+
+@njit(cache=True)
+def guide_run_new(params: GuideParams) -> IntArray:  # pragma: no cover - compiled
+    """An empty ``run`` of :func:`guide_run_push` (PURPOSE_LONG, ``params[17]``)."""
+    run = np.zeros(params[17] + 3, dtype=np.int64)
+    run[1] = params[17]  # the first goes to slot 0
+    return run
+
+
+@njit(cache=True)
+def guide_run_restart(run: IntArray, s: int) -> None:  # pragma: no cover - compiled
+    """Advice was given at ``s``: ``run`` starts again there."""
+    run[0] = 1
+    run[1] = 0
+    run[2] = s
+
+
+@njit(cache=True)
+def guide_apart(cells: IntArray, dist: IntArray, u: int, v: int) -> int:  # pragma: no cover
+    """``GuideMap.apart``: a lower bound on the moves from ``u`` to ``v``."""
+    far = int(abs(cells[u, 0] - cells[v, 0]) + abs(cells[u, 1] - cells[v, 1]))
+    for g in range(dist.shape[0]):
+        du, dv = dist[g, u], dist[g, v]
+        if du >= 0 and dv >= 0 and abs(du - dv) > far:
+            far = int(abs(du - dv))
+    return far
+
+
+@njit(cache=True, inline="always")
+def guide_purposeful(
+    cells: IntArray, dist: IntArray, run: IntArray, fresh: bool, params: GuideParams
+) -> bool:  # pragma: no cover - compiled
+    """``GuideAdvisor.purposeful``: ``run`` holds at least PURPOSE_RUN moves (``params[15]``)
+    unless ``fresh``; its last PURPOSE_RUN moves were a shortest path give or take
+    PURPOSE_SLACK (``params[16]``), and all of them give or take PURPOSE_LONG_SLACK
+    (``params[18]``), as far as :func:`guide_apart` can tell."""
+    k_run, k_slack, long_slack = params[15], params[16], params[18]
+    m = run[0]
+    if m == 0 or (m <= k_run and not fresh):
+        return False
+    size = run.shape[0] - 2
+    newest = run[1]
+    n = m - 1
+    k = min(k_run, n)
+    now = run[2 + newest]
+    short = guide_apart(cells, dist, run[2 + (newest - k + size) % size], now)
+    if not k - k_slack <= short <= k:
+        return False
+    apart = guide_apart(cells, dist, run[2 + (newest - n + size) % size], now)
+    return bool(n - long_slack <= apart <= n)
 
 
 @njit(cache=True)
@@ -1008,6 +1077,7 @@ def guide_stream(
     came: int,
     advice: FloatArray,
     comply: FloatArray,
+    run: IntArray,
     kappa: float,
     count: int,
     benefit: float,
@@ -1018,7 +1088,8 @@ def guide_stream(
     """A batch of ``GuideAdvisor.observe``; ``last`` is the state the last decision advised
     (-1 if it did not), ``advice`` (4,) that advice, updated in place, ``heading`` the last
     move that moved, ``came`` where the last move led on the map (-1: none), ``comply`` the
-    compliance evidence (:func:`guide_observe_compliance`), updated in place. Fills ``out``
+    compliance evidence (:func:`guide_observe_compliance`) and ``run`` the states decided for
+    since the last piece of advice (:func:`guide_run_push`), updated in place. Fills ``out``
     (kl, p_normal, advise, count, benefit, advice (n, 4)); returns (target, last, heading,
     came, advice count, benefit)."""
     states, actions, next_states = moves
@@ -1034,13 +1105,14 @@ def guide_stream(
         )  # fmt: skip
         kl, p0, target, allowed = guide_decide(
             gmap, params, goals, ll, alive, target, heading, next_states[i], theta, scratch,
-            comply,
+            comply, run, count == 0,
         )  # fmt: skip
         if kl >= kappa and count < cap and allowed:
             count += 1
             benefit += kl
             advise_out[i] = True
             last = next_states[i]
+            guide_run_restart(run, last)
             for a in range(4):
                 advice[a] = theta[a]
         else:
@@ -1338,6 +1410,7 @@ def episode(
     g_came = -1
     g_scratch, g_pi, _ = guide_buffers(n_dest)
     g_rows = guide_rows(g_scratch, n_dest)
+    g_run = guide_run_new(gparams)
     heading = 0
     has_heading = kind in (LEFT, CORRIDOR, STRAIGHT)
     if has_heading:
@@ -1358,9 +1431,11 @@ def episode(
         elif rule == GUIDE:
             kl, p, g_target, allowed = guide_decide(
                 gmap, gparams, g_goals, g_ll, g_alive, g_target, g_heading, s, theta_w,
-                g_scratch, g_comply,
+                g_scratch, g_comply, g_run, advice_count == 0,
             )  # fmt: skip
             advise = kl >= kappa and allowed
+            if advise:
+                guide_run_restart(g_run, s)
         else:
             says = rule == PAPER or rule_says(
                 rule, t, s, last_s, last_a, rule_params, tables, rule_rng
@@ -1473,6 +1548,8 @@ def q_learning(
     g_came = -1
     g_scratch, g_pi, theta_w = guide_buffers(n_dest)
     g_rows = guide_rows(g_scratch, n_dest)
+    g_run = guide_run_new(gparams)
+    g_given = 0  # advice in this advisor session
     total_steps = 0
     for e in range(episodes):
         if not keep_history:
@@ -1487,6 +1564,8 @@ def q_learning(
             g_heading = -1
             g_comply[:] = guide_compliance_state(gparams)
             g_came = -1
+            g_run[:] = guide_run_new(gparams)
+            g_given = 0
         s = start
         n_advice = 0
         p_sum = 0.0
@@ -1496,8 +1575,11 @@ def q_learning(
             if rule == GUIDE:
                 kl, p, g_target, allowed = guide_decide(
                     gmap, gparams, g_goals, g_ll, g_alive, g_target, g_heading, s, theta_w,
-                    g_scratch, g_comply,
+                    g_scratch, g_comply, g_run, g_given == 0,
                 )  # fmt: skip
+                if kl >= kappa and allowed:
+                    guide_run_restart(g_run, s)
+                    g_given += 1
                 row = theta_w
             else:
                 kl, p = decide(loglik, tables, s, z)

@@ -85,6 +85,26 @@ walker undoes a chain only when its own moves happen to retrace it: four one-pie
 in a row come to one in 256 in the open, one in 16 in a corridor for one that never bumps
 into walls.
 
+A visitor bound for a place that is not a listed destination fits no destination's model,
+and the lost models would lead it; but it walks with a purpose, and a lost one does not:
+lost walkers dither (a step back), bump into walls and circle. So a visitor is left alone
+while its last ``PURPOSE_RUN`` (24) moves were a shortest path give or take
+``PURPOSE_SLACK`` (2) moves, and its last ``PURPOSE_LONG`` (48) give or take
+``PURPOSE_LONG_SLACK`` (6): one that goes straight until a wall and turns there (a lost
+"straight" walker) passes the first test for a while and fails the second once it comes
+back. Which walks are shortest paths the map tells without a search per session: a walk of
+k moves from u to v is one when k is at most a lower bound on the moves between them
+(:meth:`GuideMap.apart`: the larger of the row plus column difference and, for each
+destination, the difference of their BFS distances to it); the bound can fall short of the
+true distance, more so over longer walks, hence the slacks. Before any advice the walk
+counts from the first decision (one walking its way from the start is not told
+otherwise); after a piece of advice only once ``PURPOSE_RUN`` moves were walked since, so a
+visitor being led is led on. The bug, heading for its destination as the crow flies, is
+left alone too while its way is straight, and shown the way once it circles in a pocket.
+(The constants were chosen on generated buildings other than the suite's, from how often
+each rule passes the walks of optimal visitors bound anywhere and of straight walkers: the
+first too seldom, the second as seldom as can be; docs/RESULTS.md has the suite's figures.)
+
 A competent explorer is explained by some D_g, so the prediction already is what it should do
 and nothing is said; a lost one is explained by a lost model and is led, most insistently
 where a random move costs most; one that heads for its destination by the compass is explained
@@ -135,6 +155,20 @@ BACKOFF = 25
 UNDO_RUN = 4
 #: the chance that an explorer's own move is the advised one, kept within these bounds
 CHANCE_MIN, CHANCE_MAX = 0.01, 0.99
+#: an explorer whose last PURPOSE_RUN moves since the last piece of advice were a shortest
+#: path, as far as the map can tell (:meth:`GuideMap.apart`), walks with a purpose: it is not
+#: advised (lost explorers dither, bump and circle); before any advice fewer count, after a
+#: piece it is judged once it walked PURPOSE_RUN moves (one being led is led on)
+PURPOSE_RUN = 24
+#: ... give or take PURPOSE_SLACK moves: the map's bound (:meth:`GuideMap.apart`) can fall
+#: short of a shortest path's length, and a lost explorer's run falls shorter (one step back
+#: costs two)
+PURPOSE_SLACK = 2
+#: ... and its last PURPOSE_LONG moves (all, if fewer) one give or take PURPOSE_LONG_SLACK:
+#: a lost walker can go straight for a while and turn only at walls, but over longer it
+#: comes back (the bound is looser over longer walks, hence the larger slack)
+PURPOSE_LONG = 48
+PURPOSE_LONG_SLACK = 6
 #: a destination's doubt (``GuideAdvisor.doubt``): set aside after its first visit (a
 #: position read off, walked, is a visit), or brought back once every other one was out;
 #: 0: neither (alive, or ruled out)
@@ -304,6 +338,18 @@ class GuideMap:
             pick = [a for a in range(N_ACTIONS) if cost[a] == best]
         return [1.0 / len(pick) if a in pick else 0.0 for a in range(N_ACTIONS)]
 
+    def apart(self, u: int, v: int) -> int:
+        """A lower bound on the moves from ``u`` to ``v``: the larger of their row plus column
+        difference and, over the destinations that both reach, the difference of their
+        distances to it. A walk of that many moves between them is a shortest path."""
+        far = abs(int(self.cells[u, 0]) - int(self.cells[v, 0]))
+        far += abs(int(self.cells[u, 1]) - int(self.cells[v, 1]))
+        for g in range(self.n_goals):
+            du, dv = int(self.dist[g, u]), int(self.dist[g, v])
+            if du >= 0 and dv >= 0 and abs(du - dv) > far:
+                far = abs(du - dv)
+        return far
+
     def drift(self, t: int, s: int) -> float:
         """delta_t(s): the mean change of the BFS distance to destination t over the open
         moves of s (0 at t, where t cannot be reached, or with no open move)."""
@@ -397,16 +443,34 @@ def kernel_params(
     window: int, p: GuideParams
 ) -> tuple[
     float, float, float, float, float, int, float, float, float, float, float, int, float, float,
-    float,
+    float, int, int, int, int,
 ]:  # fmt: skip
     """The parameters as app/kernels.py reads them: (lam, p_lost, slack, spread, bump,
     MAX_TOUR, COMPLY_FADE, IGNORED, SURE, RELEASE, BACKOFF, COMPLY_LEVELS, CHANCE_MIN,
-    CHANCE_MAX, UNDO_RUN), with lam = 1 - 1/W the evidence's fading."""
+    CHANCE_MAX, UNDO_RUN, PURPOSE_RUN, PURPOSE_SLACK, PURPOSE_LONG, PURPOSE_LONG_SLACK), with
+    lam = 1 - 1/W the evidence's fading."""
     return (
         1.0 - 1.0 / window, float(p.p_lost), float(p.slack), float(p.spread), LOST_BUMP,
         MAX_TOUR, COMPLY_FADE, IGNORED, SURE, RELEASE, float(BACKOFF), COMPLY_LEVELS,
-        CHANCE_MIN, CHANCE_MAX, float(UNDO_RUN),
+        CHANCE_MIN, CHANCE_MAX, float(UNDO_RUN), PURPOSE_RUN, PURPOSE_SLACK, PURPOSE_LONG,
+        PURPOSE_LONG_SLACK,
     )  # fmt: skip
+
+
+def run_ring(run: list[int]) -> IntArray:
+    """``GuideAdvisor._run`` as app/kernels.py keeps it: (how many, the newest's slot, then
+    :data:`PURPOSE_LONG` + 1 slots of a ring)."""
+    out = np.zeros(PURPOSE_LONG + 3, dtype=np.int64)
+    out[0] = len(run)
+    out[1] = len(run) - 1 if run else PURPOSE_LONG  # the next one goes to slot 0
+    out[2 : 2 + len(run)] = run
+    return out
+
+
+def run_list(ring: IntArray) -> list[int]:
+    """The inverse of :func:`run_ring`: the states, oldest first."""
+    m, newest, size = int(ring[0]), int(ring[1]), ring.shape[0] - 2
+    return [int(ring[2 + (newest - m + 1 + i) % size]) for i in range(m)]
 
 
 #: where :func:`compliance_state` keeps, after the levels' log-likelihoods: the chance that
@@ -473,8 +537,8 @@ class GuideAdvisor(Advisor):
     own_advice = True
 
     __slots__ = (
-        "_came", "_comply", "_heading", "_lam", "_last", "_last_advice", "_target", "alive",
-        "doubt", "guide", "p_lost", "slack", "spread",
+        "_came", "_comply", "_heading", "_lam", "_last", "_last_advice", "_run", "_target",
+        "alive", "doubt", "guide", "p_lost", "slack", "spread",
     )  # fmt: skip
 
     def __init__(
@@ -522,6 +586,9 @@ class GuideAdvisor(Advisor):
         self._heading = -1  # the last move that moved (-1: none yet)
         self._came = -1  # where the last move led on the map (-1: no move yet)
         self._comply = compliance_state()
+        # where it was decided for since the last piece of advice, oldest first (the last
+        # PURPOSE_LONG + 1)
+        self._run: list[int] = []
 
     @property
     def compliance(self) -> float:
@@ -533,6 +600,22 @@ class GuideAdvisor(Advisor):
         """Whether advice is held back: the explorer is taken to ignore it (one piece every
         :data:`BACKOFF` decisions at most)."""
         return self._comply[HELD] != 0.0 or self._comply[UNDONE] >= UNDO_RUN
+
+    @property
+    def purposeful(self) -> bool:
+        """Whether the explorer walks with a purpose: since the last piece of advice (since
+        the first decision while it has had none; after a piece, once it walked
+        :data:`PURPOSE_RUN` moves), its last :data:`PURPOSE_RUN` moves were a shortest path
+        give or take :data:`PURPOSE_SLACK` moves, and its last :data:`PURPOSE_LONG` give or
+        take :data:`PURPOSE_LONG_SLACK`, as far as the map can tell
+        (:meth:`GuideMap.apart`). It is then not advised."""
+        run = self._run
+        if not run or (len(run) <= PURPOSE_RUN and self.advice_count > 0):
+            return False
+        g, n = self.guide, len(run) - 1
+        k = min(PURPOSE_RUN, n)
+        short = k - PURPOSE_SLACK <= g.apart(run[-1 - k], run[-1]) <= k
+        return short and n - PURPOSE_LONG_SLACK <= g.apart(run[0], run[-1]) <= n
 
     @property
     def target(self) -> int:
@@ -751,8 +834,13 @@ class GuideAdvisor(Advisor):
         # an explorer that ignores advice is left in peace, but for a piece now and then
         allowed = not self.holding_back or self._comply[SINCE] >= BACKOFF
         allowed = allowed and any(self.alive)  # none left: it is bound elsewhere
+        self._run.append(state)
+        if len(self._run) > PURPOSE_LONG + 1:
+            del self._run[0]
+        allowed = allowed and not self.purposeful  # it walks a way of its own
         advise = kl >= self.kappa and self.advice_count < self.cap and allowed
         self._last = state if advise else -1
         if advise:
             self._last_advice = row
+            self._run = [state]
         return self.record(state, advise, row, kl, 1.0 - lost)

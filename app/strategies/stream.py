@@ -26,7 +26,15 @@ import numpy.typing as npt
 from app import kernels
 from app.advice.advisor import Advisor, Decision, DecisionBatch, resync_period
 from app.advice.goals import GoalAwareAdvisor
-from app.advice.guide import GuideAdvisor, GuideParams, compliance_state, kernel_params
+from app.advice.guide import (
+    PURPOSE_LONG,
+    GuideAdvisor,
+    GuideParams,
+    compliance_state,
+    kernel_params,
+    run_list,
+    run_ring,
+)
 from app.advice.models import AdviceTables
 from app.advice.rules import RuleAdvisor
 from app.arrays import BoolArray, FloatArray, IntArray
@@ -421,9 +429,11 @@ class StreamGuide(GuideAdvisor):
         """Bytes the session's state can take at most: no window, but a sum per model (4 + 3G
         Python floats in a list, 32 bytes each), a flag per destination (a list) and the
         compliance evidence (:func:`compliance_state`'s floats) and a doubt per destination
-        (a list of small ints)."""
+        (a list of small ints), and the states decided for since the last piece of advice (a
+        list of up to PURPOSE_LONG + 1 ints, 32 bytes each)."""
         g = self.guide.n_goals
-        return (4 + 3 * g + len(compliance_state())) * 32 + g * 8 * 2 + 4 * 8
+        run = (PURPOSE_LONG + 1) * 32
+        return (4 + 3 * g + len(compliance_state())) * 32 + g * 8 * 2 + 4 * 8 + run
 
     def batch_slice(self) -> int:
         # compiled: about 0.45 us a decision and 0.06 us more a destination (bench_guide.py),
@@ -441,14 +451,16 @@ class StreamGuide(GuideAdvisor):
         doubt = np.array(self.doubt, dtype=np.int64)
         last_advice = np.array(self._last_advice, dtype=np.float64)
         comply = np.array(self._comply, dtype=np.float64)
+        run = run_ring(self._run)
         out, rows = columns(n), np.empty((n, N_ACTIONS))
         params = kernel_params(self.window, GuideParams(self.p_lost, self.slack, self.spread))
         got = kernels.guide_stream(
             g.arrays, params, g.goal_states, ll, alive, doubt, self._target, self._last,
-            self._heading, self._came, last_advice, comply, self.kappa, count_before,
+            self._heading, self._came, last_advice, comply, run, self.kappa, count_before,
             benefit_before, self.cap, (states, actions, next_states), (*out, rows),
         )  # fmt: skip
         self._comply = comply.tolist()
+        self._run = run_list(run)
         self._target, self._last, self._heading, self._came, self.advice_count, self.benefit = got
         self._loglik = ll.tolist()
         self.alive = alive.tolist()

@@ -364,3 +364,105 @@ def test_a_visitor_that_passed_every_destination_is_left_alone() -> None:
         s = s2
     assert advised == 0
     assert all(out for _, _, out in adv.goal_beliefs() or [])
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 10_000), st.booleans(), st.integers(0, 10_000))
+def test_apart_never_exceeds_the_moves_between_two_cells(
+    seed: int, building: bool, pick: int
+) -> None:
+    """``GuideMap.apart`` is a lower bound on the moves between two cells (so a walk of that
+    many moves is a shortest path), and it is exact along a straight line of free cells."""
+    d = world(seed, building)[0]
+    gm = GuideMap.of(d)
+    rng = np.random.default_rng(pick)
+    for v in rng.integers(0, d.n_states, 5).tolist():
+        dist = d.distances_to(v)
+        for u in rng.integers(0, d.n_states, 20).tolist():
+            assert 0 <= gm.apart(u, v) <= dist[u] or dist[u] < 0
+            assert gm.apart(u, v) == gm.apart(v, u)
+        for a in range(4):  # a straight line from v
+            u, n = v, 0
+            while int(d.next_state[u, a]) != u:
+                u, n = int(d.next_state[u, a]), n + 1
+                assert gm.apart(v, u) == n
+
+
+@given(st.lists(st.integers(0, 10**6), max_size=guide.PURPOSE_LONG + 1), st.integers(0, 200))
+def test_the_run_as_a_ring_is_the_run(run: list[int], more: int) -> None:
+    """``run_ring`` / ``run_list``: the compiled form of the states decided for since the last
+    piece of advice, and back, as states are added (the oldest dropped once it is full)."""
+    from app import kernels
+
+    ring = guide.run_ring(run)
+    assert guide.run_list(ring) == run
+    want = list(run)
+    for s in range(more):
+        kernels.guide_run_push(ring, s)
+        want = [*want, s][-(guide.PURPOSE_LONG + 1) :]
+        assert guide.run_list(ring) == want
+
+
+def _walk_shortest(gm: GuideMap, d: GridDomain, s: int, target: int) -> list[tuple[int, int]]:
+    """(state, move) along a shortest path from ``s`` to ``target``, the first such move."""
+    dist = d.distances_to(target)
+    out = []
+    while s != target:
+        a = next(a for a in range(4) if dist[d.next_state[s, a]] == dist[s] - 1)
+        out.append((s, a))
+        s = int(d.next_state[s, a])
+    return out
+
+
+def test_a_visitor_walking_its_own_way_is_left_alone_until_it_dithers() -> None:
+    """A visitor bound for a cell that is not a destination, seen walking a shortest path
+    there, is not advised (guide's lost models would lead it: it fits no destination), and
+    is advised once it dithers (back and forth: no shortest path any more)."""
+    d = generate_building_domain(64, 64, 693612370)
+    prior, goal_priors = train_goal_priors(d, np.random.default_rng(0), "start", 10, 1.0)
+    gm = GuideMap.of(d, goal_priors)
+    far = d.distances_to(d.start)
+    elsewhere = [s for s in np.argsort(-far).tolist() if s not in d.goals][:40]
+    for target in elsewhere[::8]:
+        adv = make_advisor("guide", AdviceTables.paper(prior.theta()), 0.1, 300,
+                           StrategyParams(), goal_priors, gm)  # fmt: skip
+        assert not adv.start(d.start).advise
+        path = _walk_shortest(gm, d, d.start, target)
+        said = [adv.observe(s, a, int(d.next_state[s, a])).advise for s, a in path]
+        assert not any(said) and adv.purposeful  # type: ignore[attr-defined]
+        s = target
+        a = next(a for a in range(4) if int(d.next_state[s, a]) != s)
+        dither = []
+        for _ in range(20):  # back and forth between two cells
+            s2 = int(d.next_state[s, a])
+            dither.append(adv.observe(s, a, s2).advise)
+            s, a = s2, (a + 2) % 4
+        assert any(dither) and not adv.purposeful  # type: ignore[attr-defined]
+
+
+def test_a_visitor_being_led_is_not_taken_for_one_with_a_purpose() -> None:
+    """After a piece of advice the visitor's moves count as a purpose only once it walked
+    ``PURPOSE_RUN`` moves since: one that takes each piece, led along a shortest path, is
+    led on (the rule does not stop the lead it follows)."""
+    d = generate_building_domain(64, 64, 693612370)
+    prior, goal_priors = train_goal_priors(d, np.random.default_rng(0), "start", 10, 1.0)
+    gm = GuideMap.of(d, goal_priors)
+    adv = make_advisor("guide", AdviceTables.paper(prior.theta()), 0.1, 300,
+                       StrategyParams(), goal_priors, gm)  # fmt: skip
+    dec = adv.start(d.start)
+    rng = np.random.default_rng(2)
+    s, pieces, run = d.start, 0, 0
+    for _ in range(400):
+        if dec.advise:
+            a = int(np.argmax(dec.advice))
+            pieces += 1
+            run = 0
+        else:
+            a = int(rng.integers(4))  # lost: its own moves are random
+        run += 1
+        s2 = int(d.next_state[s, a])
+        dec = adv.observe(s, a, s2)
+        if pieces and adv.purposeful:  # type: ignore[attr-defined]
+            assert run >= guide.PURPOSE_RUN
+        s = s2
+    assert pieces > 20

@@ -191,7 +191,8 @@ def test_exact_positions_walk_each_move_as_its_event(seed: int, walker: str, kap
         assert walked.states.tolist() == ref.states.tolist()
         assert walked.advise.tolist() == ref.advise.tolist()
         assert walked.advice_count == ref.advice_count
-        assert walked.advice_count > 0 or kappa > 0.0
+        # (guide may leave a walker alone: one that walked a shortest path so far has a purpose)
+        assert walked.advice_count > 0 or kappa > 0.0 or strategy == "guide"
 
 
 @settings(max_examples=30, deadline=None)

@@ -322,3 +322,25 @@ def test_a_guide_session_saved_before_destinations_were_set_aside_loads(
     got, want = old.observe_batch(*moves), same.observe_batch(*moves)
     assert got.advise.tolist() == want.advise.tolist() and got.kl.tolist() == want.kl.tolist()
     assert old.alive == same.alive and old.doubt == same.doubt  # type: ignore[attr-defined]
+
+
+def test_a_guide_session_saved_before_purposeful_walks_were_left_alone_loads(
+    domain: DomainState,
+) -> None:
+    """A guide session written without the states decided for since the last piece of
+    advice (the version before a visitor walking a shortest path of its own was left alone)
+    loads with none, and decides as the same session whose run is empty."""
+    reg = SessionRegistry(Limits(100), 3600.0, replay_steps=32)
+    session, _ = reg.create(domain, SessionSettings.of("guide", 0.5, 40, params_for("guide")))
+    reg.observe_batch(session, walk(domain, domain.domain.start, 30, np.random.default_rng(3)))
+    state = advisor_state(session.advisor)
+    assert "_run" in state["slots"] and state["slots"]["_run"]
+    del state["slots"]["_run"]
+    old = restore_advisor(state, domain, "*")
+    assert old._run == []  # type: ignore[attr-defined]
+    same = restore_advisor(advisor_state(session.advisor), domain, "*")
+    same._run = []  # type: ignore[attr-defined]
+    moves = walk(domain, int(domain.domain.start), 40, np.random.default_rng(5))
+    got, want = old.observe_batch(*moves), same.observe_batch(*moves)
+    assert got.advise.tolist() == want.advise.tolist() and got.kl.tolist() == want.kl.tolist()
+    assert old._run == same._run  # type: ignore[attr-defined]

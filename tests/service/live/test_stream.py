@@ -132,15 +132,18 @@ def test_every_form_reads_the_same_log_weights() -> None:
     follow=st.booleans(),
     batches=st.lists(st.integers(0, 300), min_size=1, max_size=6),
     taking=st.sampled_from([0.0, 0.5, 1.0]),
+    straight=st.booleans(),
 )
 def test_guide_batches_equal_the_core_guide(
     seed: int, building: bool, window: int, kappa: float, follow: bool, batches: list[int],
-    taking: float,
+    taking: float, straight: bool,
 ) -> None:  # fmt: skip
     """StreamGuide's compiled batches against GuideAdvisor.observe, on moves that follow the
     map (and, with ``follow`` off, jump anywhere, as a client's reports may), by explorers
     that take a piece of advice with probability ``taking`` (the compliance they learn), with
-    new expert counts mid-session, mixed with single events."""
+    new expert counts mid-session, mixed with single events. With ``straight`` their own
+    moves go straight on while they can (often a shortest path: the runs guide leaves
+    alone)."""
     rng = np.random.default_rng(seed)
     if building:
         d = generate_building_domain(20, 24, seed % 1000, n_goals=1 + seed % 6)
@@ -163,8 +166,12 @@ def test_guide_batches_equal_the_core_guide(
         _maybe_cap(rng, core, fast)
         states, actions, nexts = [], [], []
         decided: list[Decision] = []
+        heading = int(rng.integers(4))
         for _ in range(n):
             a = int(rng.integers(4))
+            if straight and int(d.next_state[s, heading]) != s:
+                a = heading
+            heading = a
             last = decided[-1] if decided else None
             if last is not None and last.advise and rng.random() < taking:  # takes the advice
                 a = max(range(4), key=lambda b: (last.advice[b], -b))  # type: ignore[index]
@@ -183,7 +190,7 @@ def test_guide_batches_equal_the_core_guide(
         )  # fmt: skip
         assert got.decisions() == decided
         assert fast._loglik == core._loglik and fast.alive == core.alive
-        assert fast.doubt == core.doubt
+        assert fast.doubt == core.doubt and fast._run == core._run
         assert fast._comply == core._comply and fast.compliance == core.compliance
         assert fast._came == core._came
         # the memory it is charged for counts every float it keeps
