@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import json
 import multiprocessing as mp
+import os
 import statistics
 import subprocess
 import sys
@@ -186,7 +187,9 @@ def bench_experiment(maps_dir: Path | None, keep: Path | None) -> dict[str, Any]
         where = keep.resolve() if keep else Path(tmp)
         where.mkdir(parents=True, exist_ok=True)
         t0 = time.perf_counter()
-        subprocess.run(cmd, cwd=where, check=True, stdout=subprocess.DEVNULL)
+        # this tree's app, not whichever one the environment has installed (cwd is elsewhere)
+        env = os.environ | {"PYTHONPATH": str(ROOT)}
+        subprocess.run(cmd, cwd=where, env=env, check=True, stdout=subprocess.DEVNULL)
         took = time.perf_counter() - t0
     return {"seconds": took, "files": [f.stem for f in files]}
 
