@@ -453,7 +453,7 @@ def test_a_visitor_being_led_is_not_taken_for_one_with_a_purpose() -> None:
     rng = np.random.default_rng(2)
     s, pieces, run = d.start, 0, 0
     for _ in range(400):
-        if dec.advise:
+        if dec.advise and dec.advice is not None:
             a = int(np.argmax(dec.advice))
             pieces += 1
             run = 0
