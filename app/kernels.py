@@ -1029,7 +1029,8 @@ def guide_purposeful(
     """``GuideAdvisor.purposeful``: ``run`` holds at least PURPOSE_RUN moves (``params[15]``)
     unless ``fresh``; its last PURPOSE_RUN moves were a shortest path give or take
     PURPOSE_SLACK (``params[16]``), and all of them give or take PURPOSE_LONG_SLACK
-    (``params[18]``), as far as :func:`guide_apart` can tell."""
+    (``params[18]``), as far as :func:`guide_apart` can tell, without a move into a wall
+    (two states in a row the same)."""
     k_run, k_slack, long_slack = params[15], params[16], params[18]
     m = run[0]
     if m == 0 or (m <= k_run and not fresh):
@@ -1037,6 +1038,10 @@ def guide_purposeful(
     size = run.shape[0] - 2
     newest = run[1]
     n = m - 1
+    for i in range(n):  # a bump: no shortest path has one
+        j = (newest - i + size) % size
+        if run[2 + j] == run[2 + (j - 1 + size) % size]:
+            return False
     k = min(k_run, n)
     now = run[2 + newest]
     short = guide_apart(cells, dist, run[2 + (newest - k + size) % size], now)

@@ -90,7 +90,8 @@ and the lost models would lead it; but it walks with a purpose, and a lost one d
 lost walkers dither (a step back), bump into walls and circle. So a visitor is left alone
 while its last ``PURPOSE_RUN`` (24) moves were a shortest path give or take
 ``PURPOSE_SLACK`` (2) moves, and its last ``PURPOSE_LONG`` (48) give or take
-``PURPOSE_LONG_SLACK`` (6): one that goes straight until a wall and turns there (a lost
+``PURPOSE_LONG_SLACK`` (6), with no move into a wall among them (within the slack one would
+pass): one that goes straight until a wall and turns there (a lost
 "straight" walker) passes the first test for a while and fails the second once it comes
 back. Which walks are shortest paths the map tells without a search per session: a walk of
 k moves from u to v is one when k is at most a lower bound on the moves between them
@@ -119,6 +120,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from itertools import pairwise
 
 import numpy as np
 
@@ -608,9 +610,12 @@ class GuideAdvisor(Advisor):
         :data:`PURPOSE_RUN` moves), its last :data:`PURPOSE_RUN` moves were a shortest path
         give or take :data:`PURPOSE_SLACK` moves, and its last :data:`PURPOSE_LONG` give or
         take :data:`PURPOSE_LONG_SLACK`, as far as the map can tell
-        (:meth:`GuideMap.apart`). It is then not advised."""
+        (:meth:`GuideMap.apart`), without a move into a wall (no shortest path has one).
+        It is then not advised."""
         run = self._run
         if not run or (len(run) <= PURPOSE_RUN and self.advice_count > 0):
+            return False
+        if any(a == b for a, b in pairwise(run)):  # it bumped into a wall
             return False
         g, n = self.guide, len(run) - 1
         k = min(PURPOSE_RUN, n)

@@ -466,3 +466,23 @@ def test_a_visitor_being_led_is_not_taken_for_one_with_a_purpose() -> None:
             assert run >= guide.PURPOSE_RUN
         s = s2
     assert pieces > 20
+
+
+def test_a_move_into_a_wall_is_no_purpose() -> None:
+    """No shortest path walks into a wall: a visitor that bumps into one is not taken to walk
+    a way of its own while the bump is among its last moves (with a slack of two moves, one
+    bump would otherwise pass for a step of a shortest path)."""
+    d = generate_building_domain(24, 28, 3, n_goals=3)
+    prior, goal_priors = train_goal_priors(d, np.random.default_rng(0), "start", 2, 1.0)
+    gm = GuideMap.of(d, goal_priors)
+    adv = make_advisor("guide", AdviceTables.paper(prior.theta()), 0.1, 300,
+                       StrategyParams(), goal_priors, gm)  # fmt: skip
+    s = d.start
+    adv.start(s)
+    assert adv.purposeful  # type: ignore[attr-defined]  # nothing walked yet
+    wall = next(a for a in range(4) if int(d.next_state[s, a]) == s)
+    adv.observe(s, wall, s)
+    assert not adv.purposeful  # type: ignore[attr-defined]
+    a = next(a for a in range(4) if int(d.next_state[s, a]) != s)
+    adv.observe(s, a, int(d.next_state[s, a]))
+    assert not adv.purposeful  # type: ignore[attr-defined]  # the bump is still in its walk
