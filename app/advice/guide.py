@@ -103,8 +103,9 @@ otherwise); after a piece of advice only once ``PURPOSE_RUN`` moves were walked 
 visitor being led is led on. The bug, heading for its destination as the crow flies, is
 left alone too while its way is straight, and shown the way once it circles in a pocket.
 (The constants were chosen on generated buildings other than the suite's, from how often
-each rule passes the walks of optimal visitors bound anywhere and of straight walkers: the
-first too seldom, the second as seldom as can be; docs/RESULTS.md has the suite's figures.)
+the rule fails the walks of optimal visitors bound anywhere, about one step in a hundred,
+and passes those of straight walkers, as seldom as that allows; docs/RESULTS.md has the
+suite's figures.)
 
 A competent explorer is explained by some D_g, so the prediction already is what it should do
 and nothing is said; a lost one is explained by a lost model and is led, most insistently

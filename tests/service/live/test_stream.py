@@ -194,7 +194,7 @@ def test_guide_batches_equal_the_core_guide(
         assert fast._comply == core._comply and fast.compliance == core.compliance
         assert fast._came == core._came
         # the memory it is charged for counts every float it keeps
-        kept = len(fast._loglik) + len(fast._comply)
+        kept = len(fast._loglik) + len(fast._comply) + len(fast._run)
         assert fast.footprint() >= 32 * kept + 8 * (len(fast.alive) + len(fast.doubt))
         assert fast.target == core.target and fast.goal_beliefs() == core.goal_beliefs()
         a = int(rng.integers(4))  # a single event between batches
