@@ -46,7 +46,7 @@ GuideArrays = tuple[IntArray, IntArray, IntArray, IntArray, IntArray, FloatArray
 #: (lam, p_lost, slack, spread, bump, the most destinations a tour is planned through)
 GuideParams = tuple[
     float, float, float, float, float, int, float, float, float, float, float, int, float, float,
-    float, int, int, int, int,
+    float, int, int, int, int, int, int,
 ]  # fmt: skip
 
 #: explorer kinds, in the order of app.agents.explorers.WALKERS (the paper's five first)
@@ -978,7 +978,7 @@ def guide_decide(
     allowed = not held or comply[n_levels + 1] >= backoff
     allowed = allowed and any_alive  # none left: it is bound elsewhere
     guide_run_push(run, s)
-    purpose = guide_purposeful(gmap[2], dist, run, fresh, params)
+    purpose = guide_purposeful(gmap[2], dist, run, fresh, params, target)
     allowed = allowed and not purpose  # it walks a way of its own
     return kl, 1.0 - lost, target, allowed
 
@@ -986,7 +986,7 @@ def guide_decide(
 @njit(cache=True, inline="always")
 def guide_run_push(run: IntArray, s: int) -> None:  # pragma: no cover - compiled
     """Add ``s`` to ``run``: ``GuideAdvisor._run`` as a ring (how many, the newest's slot,
-    then PURPOSE_LONG + 1 slots), the oldest dropped once it is full."""
+    then PURPOSE_WALK + 1 slots), the oldest dropped once it is full."""
     size = run.shape[0] - 2
     newest = (run[1] + 1) % size
     run[2 + newest] = s
@@ -997,9 +997,9 @@ def guide_run_push(run: IntArray, s: int) -> None:  # pragma: no cover - compile
 
 @njit(cache=True)
 def guide_run_new(params: GuideParams) -> IntArray:  # pragma: no cover - compiled
-    """An empty ``run`` of :func:`guide_run_push` (PURPOSE_LONG, ``params[17]``)."""
-    run = np.zeros(params[17] + 3, dtype=np.int64)
-    run[1] = params[17]  # the first goes to slot 0
+    """An empty ``run`` of :func:`guide_run_push` (PURPOSE_WALK, ``params[19]``)."""
+    run = np.zeros(params[19] + 3, dtype=np.int64)
+    run[1] = params[19]  # the first goes to slot 0
     return run
 
 
@@ -1024,31 +1024,49 @@ def guide_apart(cells: IntArray, dist: IntArray, u: int, v: int) -> int:  # prag
 
 @njit(cache=True, inline="always")
 def guide_purposeful(
-    cells: IntArray, dist: IntArray, run: IntArray, fresh: bool, params: GuideParams
+    cells: IntArray,
+    dist: IntArray,
+    run: IntArray,
+    fresh: bool,
+    params: GuideParams,
+    target: int,
 ) -> bool:  # pragma: no cover - compiled
     """``GuideAdvisor.purposeful``: ``run`` holds at least PURPOSE_RUN moves (``params[15]``)
-    unless ``fresh``; its last PURPOSE_RUN moves were a shortest path give or take
-    PURPOSE_SLACK (``params[16]``), and all of them give or take PURPOSE_LONG_SLACK
-    (``params[18]``), as far as :func:`guide_apart` can tell, without a move into a wall
-    (two states in a row the same)."""
-    k_run, k_slack, long_slack = params[15], params[16], params[18]
+    unless ``fresh``; with no move into a wall (two states in a row the same) among its last
+    PURPOSE_LONG (``params[17]``), its last PURPOSE_RUN moves were a shortest path give or
+    take PURPOSE_SLACK (``params[16]``), its last PURPOSE_LONG give or take
+    PURPOSE_LONG_SLACK (``params[18]``), and all of them give or take a PURPOSE_WALK_PART-th
+    (``params[20]``) of their number, as far as :func:`guide_apart` can tell; and, unless
+    ``fresh``, not all the way along the way to destination ``target`` (-1: none)."""
+    k_run, k_slack, k_long, long_slack, part = (
+        params[15], params[16], params[17], params[18], params[20],
+    )  # fmt: skip
     m = run[0]
     if m == 0 or (m <= k_run and not fresh):
         return False
     size = run.shape[0] - 2
     newest = run[1]
     n = m - 1
-    for i in range(n):  # a bump: no shortest path has one
+    for i in range(min(n, k_long)):  # a bump: no shortest path has one
         j = (newest - i + size) % size
         if run[2 + j] == run[2 + (j - 1 + size) % size]:
             return False
-    k = min(k_run, n)
     now = run[2 + newest]
-    short = guide_apart(cells, dist, run[2 + (newest - k + size) % size], now)
-    if not k - k_slack <= short <= k:
+    began = run[2 + (newest - n + size) % size]
+    led = not fresh and n > 0 and target >= 0
+    if led and dist[target, began] - dist[target, now] == n:
+        return False  # after advice, it went the way it is led
+    k = min(k_run, n)
+    apart = guide_apart(cells, dist, run[2 + (newest - k + size) % size], now)
+    if not k - k_slack <= apart <= k:
         return False
-    apart = guide_apart(cells, dist, run[2 + (newest - n + size) % size], now)
-    return bool(n - long_slack <= apart <= n)
+    k = min(k_long, n)
+    apart = guide_apart(cells, dist, run[2 + (newest - k + size) % size], now)
+    if not k - long_slack <= apart <= k:
+        return False
+    slack = max(long_slack, n // part)
+    apart = guide_apart(cells, dist, began, now)
+    return bool(n - slack <= apart <= n)
 
 
 @njit(cache=True)

@@ -85,27 +85,27 @@ walker undoes a chain only when its own moves happen to retrace it: four one-pie
 in a row come to one in 256 in the open, one in 16 in a corridor for one that never bumps
 into walls.
 
-A visitor bound for a place that is not a listed destination fits no destination's model,
-and the lost models would lead it; but it walks with a purpose, and a lost one does not:
-lost walkers dither (a step back), bump into walls and circle. So a visitor is left alone
-while its last ``PURPOSE_RUN`` (24) moves were a shortest path give or take
-``PURPOSE_SLACK`` (2) moves, and its last ``PURPOSE_LONG`` (48) give or take
-``PURPOSE_LONG_SLACK`` (6), with no move into a wall among them (within the slack one would
-pass): one that goes straight until a wall and turns there (a lost
-"straight" walker) passes the first test for a while and fails the second once it comes
-back. Which walks are shortest paths the map tells without a search per session: a walk of
-k moves from u to v is one when k is at most a lower bound on the moves between them
+A visitor bound for a place that is not a listed destination fits no destination's model, and
+the lost models would lead it; but it walks with a purpose, and a lost one does not: lost
+walkers dither (a step back), bump into walls and circle. So a visitor is left alone while its
+last ``PURPOSE_RUN`` (24) moves were a shortest path give or take ``PURPOSE_SLACK`` (2) moves,
+its last ``PURPOSE_LONG`` (48) give or take ``PURPOSE_LONG_SLACK`` (6) and its last
+``PURPOSE_WALK`` (256) give or take a quarter of their number, with no move into a wall among
+the last 48 (within the slack one would pass): one that goes straight until a wall and turns
+there (a lost "straight" walker) passes the first test for a while and fails the longer ones
+once it comes back. Which walks are shortest paths the map tells without a search per session:
+a walk of k moves from u to v is one when k is at most a lower bound on the moves between them
 (:meth:`GuideMap.apart`: the larger of the row plus column difference and, for each
 destination, the difference of their BFS distances to it); the bound can fall short of the
-true distance, more so over longer walks, hence the slacks. Before any advice the walk
-counts from the first decision (one walking its way from the start is not told
-otherwise); after a piece of advice only once ``PURPOSE_RUN`` moves were walked since, so a
-visitor being led is led on. The bug, heading for its destination as the crow flies, is
-left alone too while its way is straight, and shown the way once it circles in a pocket.
-(The constants were chosen on generated buildings other than the suite's, from how often
-the rule fails the walks of optimal visitors bound anywhere, about one step in a hundred,
-and passes those of straight walkers, as seldom as that allows; docs/RESULTS.md has the
-suite's figures.)
+true distance, more so over longer walks, hence the slacks. Before any advice the walk counts
+from the first decision (one walking its way from the start is not told otherwise); after a
+piece of advice only once ``PURPOSE_RUN`` moves were walked since, and not while it walks all
+along the way to the target, so a visitor being led is led on. The bug, heading for its
+destination as the crow flies, is left alone too while its way is straight, and shown the way
+once it circles in a pocket. (The constants were chosen on maps that are not in the suite,
+from how often the rule fails the walks of optimal visitors bound anywhere, about one step in
+a hundred at most, and passes those of straight walkers, as seldom as that allows;
+docs/RESULTS.md has the suite's figures.)
 
 A competent explorer is explained by some D_g, so the prediction already is what it should do
 and nothing is said; a lost one is explained by a lost model and is led, most insistently
@@ -172,6 +172,11 @@ PURPOSE_SLACK = 2
 #: comes back (the bound is looser over longer walks, hence the larger slack)
 PURPOSE_LONG = 48
 PURPOSE_LONG_SLACK = 6
+#: ... and its whole walk (its last PURPOSE_WALK moves, all if fewer) give or take a
+#: PURPOSE_WALK_PART-th of its length (PURPOSE_LONG_SLACK at least): on streets and halls of
+#: a hundred cells a lost straight walker comes back only after many more than 48 moves
+PURPOSE_WALK = 256
+PURPOSE_WALK_PART = 4
 #: a destination's doubt (``GuideAdvisor.doubt``): set aside after its first visit (a
 #: position read off, walked, is a visit), or brought back once every other one was out;
 #: 0: neither (alive, or ruled out)
@@ -446,26 +451,26 @@ def kernel_params(
     window: int, p: GuideParams
 ) -> tuple[
     float, float, float, float, float, int, float, float, float, float, float, int, float, float,
-    float, int, int, int, int,
+    float, int, int, int, int, int, int,
 ]:  # fmt: skip
     """The parameters as app/kernels.py reads them: (lam, p_lost, slack, spread, bump,
     MAX_TOUR, COMPLY_FADE, IGNORED, SURE, RELEASE, BACKOFF, COMPLY_LEVELS, CHANCE_MIN,
-    CHANCE_MAX, UNDO_RUN, PURPOSE_RUN, PURPOSE_SLACK, PURPOSE_LONG, PURPOSE_LONG_SLACK), with
-    lam = 1 - 1/W the evidence's fading."""
+    CHANCE_MAX, UNDO_RUN, PURPOSE_RUN, PURPOSE_SLACK, PURPOSE_LONG, PURPOSE_LONG_SLACK,
+    PURPOSE_WALK, PURPOSE_WALK_PART), with lam = 1 - 1/W the evidence's fading."""
     return (
         1.0 - 1.0 / window, float(p.p_lost), float(p.slack), float(p.spread), LOST_BUMP,
         MAX_TOUR, COMPLY_FADE, IGNORED, SURE, RELEASE, float(BACKOFF), COMPLY_LEVELS,
         CHANCE_MIN, CHANCE_MAX, float(UNDO_RUN), PURPOSE_RUN, PURPOSE_SLACK, PURPOSE_LONG,
-        PURPOSE_LONG_SLACK,
+        PURPOSE_LONG_SLACK, PURPOSE_WALK, PURPOSE_WALK_PART,
     )  # fmt: skip
 
 
 def run_ring(run: list[int]) -> IntArray:
     """``GuideAdvisor._run`` as app/kernels.py keeps it: (how many, the newest's slot, then
-    :data:`PURPOSE_LONG` + 1 slots of a ring)."""
-    out = np.zeros(PURPOSE_LONG + 3, dtype=np.int64)
+    :data:`PURPOSE_WALK` + 1 slots of a ring)."""
+    out = np.zeros(PURPOSE_WALK + 3, dtype=np.int64)
     out[0] = len(run)
-    out[1] = len(run) - 1 if run else PURPOSE_LONG  # the next one goes to slot 0
+    out[1] = len(run) - 1 if run else PURPOSE_WALK  # the next one goes to slot 0
     out[2 : 2 + len(run)] = run
     return out
 
@@ -590,7 +595,7 @@ class GuideAdvisor(Advisor):
         self._came = -1  # where the last move led on the map (-1: no move yet)
         self._comply = compliance_state()
         # where it was decided for since the last piece of advice, oldest first (the last
-        # PURPOSE_LONG + 1)
+        # PURPOSE_WALK + 1)
         self._run: list[int] = []
 
     @property
@@ -609,19 +614,31 @@ class GuideAdvisor(Advisor):
         """Whether the explorer walks with a purpose: since the last piece of advice (since
         the first decision while it has had none; after a piece, once it walked
         :data:`PURPOSE_RUN` moves), its last :data:`PURPOSE_RUN` moves were a shortest path
-        give or take :data:`PURPOSE_SLACK` moves, and its last :data:`PURPOSE_LONG` give or
-        take :data:`PURPOSE_LONG_SLACK`, as far as the map can tell
-        (:meth:`GuideMap.apart`), without a move into a wall (no shortest path has one).
-        It is then not advised."""
+        give or take :data:`PURPOSE_SLACK` moves, its last :data:`PURPOSE_LONG` give or take
+        :data:`PURPOSE_LONG_SLACK`, and its last :data:`PURPOSE_WALK` give or take a
+        :data:`PURPOSE_WALK_PART`-th of their length, as far as the map can tell
+        (:meth:`GuideMap.apart`), with no move into a wall among its last
+        :data:`PURPOSE_LONG` (no shortest path has one), and, after advice, not all the way
+        along the way to the target (the way it is led: a visitor walking it is led on). It
+        is then not advised."""
         run = self._run
         if not run or (len(run) <= PURPOSE_RUN and self.advice_count > 0):
             return False
-        if any(a == b for a, b in pairwise(run)):  # it bumped into a wall
+        if any(a == b for a, b in pairwise(run[-1 - PURPOSE_LONG :])):  # it bumped
             return False
         g, n = self.guide, len(run) - 1
+        t = self._target
+        led = self.advice_count > 0 and n > 0 and t >= 0
+        if led and g.dist[t, run[0]] - g.dist[t, run[-1]] == n:
+            return False  # after advice, it went the way it is led
         k = min(PURPOSE_RUN, n)
-        short = k - PURPOSE_SLACK <= g.apart(run[-1 - k], run[-1]) <= k
-        return short and n - PURPOSE_LONG_SLACK <= g.apart(run[0], run[-1]) <= n
+        if not k - PURPOSE_SLACK <= g.apart(run[-1 - k], run[-1]) <= k:
+            return False
+        k = min(PURPOSE_LONG, n)
+        if not k - PURPOSE_LONG_SLACK <= g.apart(run[-1 - k], run[-1]) <= k:
+            return False
+        slack = max(PURPOSE_LONG_SLACK, n // PURPOSE_WALK_PART)
+        return n - slack <= g.apart(run[0], run[-1]) <= n
 
     @property
     def target(self) -> int:
@@ -841,7 +858,7 @@ class GuideAdvisor(Advisor):
         allowed = not self.holding_back or self._comply[SINCE] >= BACKOFF
         allowed = allowed and any(self.alive)  # none left: it is bound elsewhere
         self._run.append(state)
-        if len(self._run) > PURPOSE_LONG + 1:
+        if len(self._run) > PURPOSE_WALK + 1:
             del self._run[0]
         allowed = allowed and not self.purposeful  # it walks a way of its own
         advise = kl >= self.kappa and self.advice_count < self.cap and allowed

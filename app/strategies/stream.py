@@ -27,7 +27,7 @@ from app import kernels
 from app.advice.advisor import Advisor, Decision, DecisionBatch, resync_period
 from app.advice.goals import GoalAwareAdvisor
 from app.advice.guide import (
-    PURPOSE_LONG,
+    PURPOSE_WALK,
     GuideAdvisor,
     GuideParams,
     compliance_state,
@@ -430,9 +430,9 @@ class StreamGuide(GuideAdvisor):
         Python floats in a list, 32 bytes each), a flag per destination (a list) and the
         compliance evidence (:func:`compliance_state`'s floats) and a doubt per destination
         (a list of small ints), and the states decided for since the last piece of advice (a
-        list of up to PURPOSE_LONG + 1 ints, 32 bytes each)."""
+        list of up to PURPOSE_WALK + 1 ints, 32 bytes each)."""
         g = self.guide.n_goals
-        run = (PURPOSE_LONG + 1) * 32
+        run = (PURPOSE_WALK + 1) * 32
         return (4 + 3 * g + len(compliance_state())) * 32 + g * 8 * 2 + 4 * 8 + run
 
     def batch_slice(self) -> int:

@@ -388,7 +388,7 @@ def test_apart_never_exceeds_the_moves_between_two_cells(
                 assert gm.apart(v, u) == n
 
 
-@given(st.lists(st.integers(0, 10**6), max_size=guide.PURPOSE_LONG + 1), st.integers(0, 200))
+@given(st.lists(st.integers(0, 10**6), max_size=guide.PURPOSE_WALK + 1), st.integers(0, 600))
 def test_the_run_as_a_ring_is_the_run(run: list[int], more: int) -> None:
     """``run_ring`` / ``run_list``: the compiled form of the states decided for since the last
     piece of advice, and back, as states are added (the oldest dropped once it is full)."""
@@ -399,7 +399,7 @@ def test_the_run_as_a_ring_is_the_run(run: list[int], more: int) -> None:
     want = list(run)
     for s in range(more):
         kernels.guide_run_push(ring, s)
-        want = [*want, s][-(guide.PURPOSE_LONG + 1) :]
+        want = [*want, s][-(guide.PURPOSE_WALK + 1) :]
         assert guide.run_list(ring) == want
 
 
