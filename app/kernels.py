@@ -485,14 +485,9 @@ def guide_open(
     next_state: IntArray, n_open: IntArray, s: int, out: FloatArray
 ) -> None:  # pragma: no cover - compiled
     """``GuideMap.open_policy``: uniform over the open moves of ``s`` into ``out`` (4,)."""
-    n = n_open[s]
+    n, mask = n_open[s], guide_open_moves(next_state, s)
     for a in range(4):
-        if n == 0:
-            out[a] = 0.25
-        elif next_state[s, a] != s:
-            out[a] = 1.0 / n
-        else:
-            out[a] = 0.0
+        out[a] = guide_open_share(n, mask, a)
 
 
 @njit(cache=True)
@@ -1056,17 +1051,17 @@ def guide_purposeful(
     led = not fresh and n > 0 and target >= 0
     if led and dist[target, began] - dist[target, now] == n:
         return False  # after advice, it went the way it is led
-    k = min(k_run, n)
-    apart = guide_apart(cells, dist, run[2 + (newest - k + size) % size], now)
-    if not k - k_slack <= apart <= k:
-        return False
-    k = min(k_long, n)
-    apart = guide_apart(cells, dist, run[2 + (newest - k + size) % size], now)
-    if not k - long_slack <= apart <= k:
-        return False
-    slack = max(long_slack, n // part)
-    apart = guide_apart(cells, dist, began, now)
-    return bool(n - slack <= apart <= n)
+    for test in range(3):  # the last PURPOSE_RUN, PURPOSE_LONG and all of its moves
+        if test == 0:
+            k, slack = min(k_run, n), k_slack
+        elif test == 1:
+            k, slack = min(k_long, n), long_slack
+        else:
+            k, slack = n, max(long_slack, n // part)
+        apart = guide_apart(cells, dist, run[2 + (newest - k + size) % size], now)
+        if not k - slack <= apart <= k:
+            return False
+    return True
 
 
 @njit(cache=True)

@@ -631,14 +631,12 @@ class GuideAdvisor(Advisor):
         led = self.advice_count > 0 and n > 0 and t >= 0
         if led and g.dist[t, run[0]] - g.dist[t, run[-1]] == n:
             return False  # after advice, it went the way it is led
-        k = min(PURPOSE_RUN, n)
-        if not k - PURPOSE_SLACK <= g.apart(run[-1 - k], run[-1]) <= k:
-            return False
-        k = min(PURPOSE_LONG, n)
-        if not k - PURPOSE_LONG_SLACK <= g.apart(run[-1 - k], run[-1]) <= k:
-            return False
-        slack = max(PURPOSE_LONG_SLACK, n // PURPOSE_WALK_PART)
-        return n - slack <= g.apart(run[0], run[-1]) <= n
+        tests = (
+            (min(PURPOSE_RUN, n), PURPOSE_SLACK),
+            (min(PURPOSE_LONG, n), PURPOSE_LONG_SLACK),
+            (n, max(PURPOSE_LONG_SLACK, n // PURPOSE_WALK_PART)),
+        )
+        return all(k - slack <= g.apart(run[-1 - k], run[-1]) <= k for k, slack in tests)
 
     @property
     def target(self) -> int:

@@ -12,6 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from app.advice import guide
+from app.advice.advisor import Advisor
 from app.advice.guide import GuideError, GuideMap
 from app.advice.models import AdviceTables
 from app.advice.params import StrategyParams
@@ -321,15 +322,21 @@ def test_a_visitor_bound_elsewhere_is_not_held_in_an_advise_undo_cycle(
     assert len(led.states) <= most * len(alone.states)
 
 
+def guide_advisor(d: GridDomain, per_goal: int) -> tuple[GuideMap, Advisor]:
+    """guide at kappa 0.1 on ``d``, its experts ``per_goal`` from the start (seed 0)."""
+    prior, goal_priors = train_goal_priors(d, np.random.default_rng(0), "start", per_goal, 1.0)
+    gm = GuideMap.of(d, goal_priors)
+    adv = make_advisor("guide", AdviceTables.paper(prior.theta()), 0.1, 300,
+                       StrategyParams(), goal_priors, gm)  # fmt: skip
+    return gm, adv
+
+
 def test_a_visitor_that_passed_every_destination_is_left_alone() -> None:
     """Once the explorer has stood on every destination and gone on, it is bound somewhere
     else: guide gives no more advice (before, it led it round the destinations again), and
     its beliefs still report every destination ruled out."""
     d = generate_building_domain(24, 28, 3, n_goals=3)
-    prior, goal_priors = train_goal_priors(d, np.random.default_rng(0), "start", 2, 1.0)
-    gm = GuideMap.of(d, goal_priors)
-    adv = make_advisor("guide", AdviceTables.paper(prior.theta()), 0.1, 300,
-                       StrategyParams(), goal_priors, gm)  # fmt: skip
+    gm, adv = guide_advisor(d, 2)
     s = d.start
     adv.start(s)
 
@@ -419,14 +426,11 @@ def test_a_visitor_walking_its_own_way_is_left_alone_until_it_dithers() -> None:
     there, is not advised (guide's lost models would lead it: it fits no destination), and
     is advised once it dithers (back and forth: no shortest path any more)."""
     d = generate_building_domain(64, 64, 693612370)
-    prior, goal_priors = train_goal_priors(d, np.random.default_rng(0), "start", 10, 1.0)
-    gm = GuideMap.of(d, goal_priors)
     far = d.distances_to(d.start)
     elsewhere = [s for s in np.argsort(-far).tolist() if s not in d.goals][:40]
+    gm, adv = guide_advisor(d, 10)
     for target in elsewhere[::8]:
-        adv = make_advisor("guide", AdviceTables.paper(prior.theta()), 0.1, 300,
-                           StrategyParams(), goal_priors, gm)  # fmt: skip
-        assert not adv.start(d.start).advise
+        assert not adv.start(d.start).advise  # a new session: start forgets the last
         path = _walk_shortest(gm, d, d.start, target)
         said = [adv.observe(s, a, int(d.next_state[s, a])).advise for s, a in path]
         assert not any(said) and adv.purposeful  # type: ignore[attr-defined]
@@ -445,10 +449,7 @@ def test_a_visitor_being_led_is_not_taken_for_one_with_a_purpose() -> None:
     ``PURPOSE_RUN`` moves since: one that takes each piece, led along a shortest path, is
     led on (the rule does not stop the lead it follows)."""
     d = generate_building_domain(64, 64, 693612370)
-    prior, goal_priors = train_goal_priors(d, np.random.default_rng(0), "start", 10, 1.0)
-    gm = GuideMap.of(d, goal_priors)
-    adv = make_advisor("guide", AdviceTables.paper(prior.theta()), 0.1, 300,
-                       StrategyParams(), goal_priors, gm)  # fmt: skip
+    _, adv = guide_advisor(d, 10)
     dec = adv.start(d.start)
     rng = np.random.default_rng(2)
     s, pieces, run = d.start, 0, 0
@@ -473,10 +474,7 @@ def test_a_move_into_a_wall_is_no_purpose() -> None:
     a way of its own while the bump is among its last moves (with a slack of two moves, one
     bump would otherwise pass for a step of a shortest path)."""
     d = generate_building_domain(24, 28, 3, n_goals=3)
-    prior, goal_priors = train_goal_priors(d, np.random.default_rng(0), "start", 2, 1.0)
-    gm = GuideMap.of(d, goal_priors)
-    adv = make_advisor("guide", AdviceTables.paper(prior.theta()), 0.1, 300,
-                       StrategyParams(), goal_priors, gm)  # fmt: skip
+    _, adv = guide_advisor(d, 2)
     s = d.start
     adv.start(s)
     assert adv.purposeful  # type: ignore[attr-defined]  # nothing walked yet
