@@ -682,14 +682,15 @@ def guide_observe_compliance(
     s: int, to: int,
 ) -> None:  # pragma: no cover - compiled  # fmt: skip
     """``GuideAdvisor._observe_compliance`` of move ``a`` at ``s``, leading to ``to``.
-    ``comply`` (L + 9,): the log-likelihood of each compliance level (j + 1/2) / L, the
+    ``comply`` (L + 11,): the log-likelihood of each compliance level (j + 1/2) / L, the
     chance that the explorer's own move is the last decision's advice, the decisions since
     the last piece of advice, whether advice is held back (1.0: from P(compliance < IGNORED)
     >= SURE until it is below RELEASE); the last chain of pieces taken in a row (where it
     began, -1: none open; its length k; the explorer's own moves since: undone if they lead
     back there within k moves, else kept); how many chains in a row were undone, where the
     last began (-1: none) and whether the explorer has left it since (back there by its own
-    moves, the run is forgotten)."""
+    moves, the run is forgotten); the last decision's advice (theta's favourite move, -1:
+    none) and whether every move since the last piece was that of the decision before it."""
     fade, ignored, sure, release = params[6], params[7], params[8], params[9]
     n = params[11]
     took = False  # the advised move, if advice was given
@@ -699,6 +700,9 @@ def guide_observe_compliance(
             if advice[b] > advice[best]:
                 best = b
         took = a == best
+    # on the way it is led: it took the piece, or made the move the advice would have been
+    on = took if advised else comply[n + 10] != 0.0 and a == int(comply[n + 9])
+    comply[n + 10] = 1.0 if on else 0.0
     if comply[n + 7] >= 0.0:
         if s != int(comply[n + 7]):
             comply[n + 8] = 1.0
@@ -744,13 +748,14 @@ def guide_observe_compliance(
 def guide_compliance_state(params: GuideParams) -> FloatArray:  # pragma: no cover - compiled
     """``compliance_state``: no advice yet (``COMPLY_LEVELS`` levels, chance 1/2, ``BACKOFF``
     decisions since the last piece, not held back, no chain of taken pieces open, no run of
-    undone chains)."""
+    undone chains, no decision yet, not led)."""
     n = params[11]
-    comply = np.zeros(n + 9)
+    comply = np.zeros(n + 11)
     comply[n] = 0.5
     comply[n + 1] = params[10]
     comply[n + 3] = -1.0
     comply[n + 7] = -1.0
+    comply[n + 9] = -1.0
     return comply
 
 
@@ -966,6 +971,7 @@ def guide_decide(
             best = a
     n_levels = params[11]
     comply[n_levels] = chance[best]  # its own move would be the advice this often
+    comply[n_levels + 9] = float(best)
     for a in range(4):
         theta[a] = (1.0 - spread) * (1.0 if a == best else 0.0) + spread / 4.0
     # an explorer that ignores advice is left in peace, but for a piece now and then
@@ -973,7 +979,8 @@ def guide_decide(
     allowed = not held or comply[n_levels + 1] >= backoff
     allowed = allowed and any_alive  # none left: it is bound elsewhere
     guide_run_push(run, s)
-    purpose = guide_purposeful(gmap[2], dist, run, fresh, params, target)
+    on_lead = comply[n_levels + 10] != 0.0
+    purpose = guide_purposeful(gmap[2], dist, run, fresh, on_lead, params, target)
     allowed = allowed and not purpose  # it walks a way of its own
     return kl, 1.0 - lost, target, allowed
 
@@ -1023,6 +1030,7 @@ def guide_purposeful(
     dist: IntArray,
     run: IntArray,
     fresh: bool,
+    on_lead: bool,
     params: GuideParams,
     target: int,
 ) -> bool:  # pragma: no cover - compiled
@@ -1032,7 +1040,8 @@ def guide_purposeful(
     take PURPOSE_SLACK (``params[16]``), its last PURPOSE_LONG give or take
     PURPOSE_LONG_SLACK (``params[18]``), and all of them give or take a PURPOSE_WALK_PART-th
     (``params[20]``) of their number, as far as :func:`guide_apart` can tell; and, unless
-    ``fresh``, not all the way along the way to destination ``target`` (-1: none)."""
+    ``fresh``, neither all the way along the way to destination ``target`` (-1: none) nor
+    ``on_lead`` (each move since the last piece that of the advice of the decision before)."""
     k_run, k_slack, k_long, long_slack, part = (
         params[15], params[16], params[17], params[18], params[20],
     )  # fmt: skip
@@ -1049,7 +1058,7 @@ def guide_purposeful(
     now = run[2 + newest]
     began = run[2 + (newest - n + size) % size]
     led = not fresh and n > 0 and target >= 0
-    if led and dist[target, began] - dist[target, now] == n:
+    if led and (on_lead or dist[target, began] - dist[target, now] == n):
         return False  # after advice, it went the way it is led
     for test in range(3):  # the last PURPOSE_RUN, PURPOSE_LONG and all of its moves
         if test == 0:

@@ -100,7 +100,9 @@ destination, the difference of their BFS distances to it); the bound can fall sh
 true distance, more so over longer walks, hence the slacks. Before any advice the walk counts
 from the first decision (one walking its way from the start is not told otherwise); after a
 piece of advice only once ``PURPOSE_RUN`` moves were walked since, and not while it walks all
-along the way to the target, so a visitor being led is led on. The bug, heading for its
+along the way to the target, or while each of its moves since the piece was the one the
+advice would have been at the step before (given or not), so a visitor being led, or walking
+the way it would be led, is led on where the way turns. The bug, heading for its
 destination as the crow flies, is left alone too while its way is straight, and shown the way
 once it circles in a pocket. (The constants were chosen on maps that are not in the suite,
 from how often the rule fails the walks of optimal visitors bound anywhere, about one step in
@@ -486,9 +488,11 @@ def run_list(ring: IntArray) -> list[int]:
 #: whether advice is held back; the state where the last chain of pieces taken in a row
 #: began (-1: none open), how many it took, its own moves since; how many chains in a row
 #: its own moves undid (led back to where they began), where the last began (-1: none) and
-#: whether it has left that state since (1.0) or not (0.0)
-CHANCE, SINCE, HELD, CHAIN_FROM, CHAIN_LEN, OWN, UNDONE, UNDONE_AT, AWAY = range(
-    COMPLY_LEVELS, COMPLY_LEVELS + 9
+#: whether it has left that state since (1.0) or not (0.0); the last decision's advice (theta's
+#: favourite move, given or not; -1: none yet) and whether every move since the last piece was
+#: that of the decision before it (1.0: it walks the way it is led) or not (0.0)
+CHANCE, SINCE, HELD, CHAIN_FROM, CHAIN_LEN, OWN, UNDONE, UNDONE_AT, AWAY, MODE, ON_LEAD = range(
+    COMPLY_LEVELS, COMPLY_LEVELS + 11
 )
 
 
@@ -498,18 +502,22 @@ def compliance_state() -> list[float]:
     since the last piece of advice (:data:`BACKOFF`: none yet), whether advice is held
     back (1.0) or not (0.0), the last chain of pieces taken in a row (where it began, -1:
     none open; its length; the explorer's own moves since), how many chains in a row were
-    undone, where the last began (-1: none) and whether the explorer has left it since."""
+    undone, where the last began (-1: none) and whether the explorer has left it since; no
+    decision yet, not led."""
     return [
-        *[0.0] * COMPLY_LEVELS, 0.5, float(BACKOFF), 0.0, -1.0, 0.0, 0.0, 0.0, -1.0, 0.0,
+        *[0.0] * COMPLY_LEVELS, 0.5, float(BACKOFF), 0.0, -1.0, 0.0, 0.0, 0.0, -1.0, 0.0, -1.0,
+        0.0,
     ]  # fmt: skip
 
 
 def upgraded_compliance(comply: list[float]) -> list[float]:
-    """A session's compliance evidence as written by a version without the slots of undone
-    advice (``COMPLY_LEVELS + 3`` values), with them (none taken, none undone)."""
-    if len(comply) != COMPLY_LEVELS + 3:
+    """A session's compliance evidence as written by an earlier version, without the slots
+    of undone advice (``COMPLY_LEVELS + 3`` values) or of the way it is led (``+ 9``), with
+    them as a session starts them (none taken, none undone, no decision yet)."""
+    full = compliance_state()
+    if not COMPLY_LEVELS + 3 <= len(comply) < len(full):
         return comply
-    return [*comply, *compliance_state()[COMPLY_LEVELS + 3 :]]
+    return [*comply, *full[len(comply) :]]
 
 
 def compliance_below(levels: list[float], bound: float) -> float:
@@ -618,9 +626,9 @@ class GuideAdvisor(Advisor):
         :data:`PURPOSE_LONG_SLACK`, and its last :data:`PURPOSE_WALK` give or take a
         :data:`PURPOSE_WALK_PART`-th of their length, as far as the map can tell
         (:meth:`GuideMap.apart`), with no move into a wall among its last
-        :data:`PURPOSE_LONG` (no shortest path has one), and, after advice, not all the way
-        along the way to the target (the way it is led: a visitor walking it is led on). It
-        is then not advised."""
+        :data:`PURPOSE_LONG` (no shortest path has one), and, after advice, neither all the
+        way along the way to the target nor each move the advice of the decision before it
+        (the way it is led: a visitor walking it is led on). It is then not advised."""
         run = self._run
         if not run or (len(run) <= PURPOSE_RUN and self.advice_count > 0):
             return False
@@ -629,7 +637,7 @@ class GuideAdvisor(Advisor):
         g, n = self.guide, len(run) - 1
         t = self._target
         led = self.advice_count > 0 and n > 0 and t >= 0
-        if led and g.dist[t, run[0]] - g.dist[t, run[-1]] == n:
+        if led and (self._comply[ON_LEAD] != 0.0 or g.dist[t, run[0]] - g.dist[t, run[-1]] == n):
             return False  # after advice, it went the way it is led
         tests = (
             (min(PURPOSE_RUN, n), PURPOSE_SLACK),
@@ -709,6 +717,9 @@ class GuideAdvisor(Advisor):
                     best = a
             took = action == best
         to = int(self.guide.next_state[state, action])
+        # on the way it is led: it took the piece, or made the move the advice would have been
+        on = took if advised else comply[ON_LEAD] != 0.0 and action == int(comply[MODE])
+        comply[ON_LEAD] = 1.0 if on else 0.0
         if comply[UNDONE_AT] >= 0.0:
             if state != int(comply[UNDONE_AT]):
                 comply[AWAY] = 1.0
@@ -849,6 +860,7 @@ class GuideAdvisor(Advisor):
             if theta[a] > theta[best]:
                 best = a
         self._comply[CHANCE] = chance[best]  # its own move would be the advice this often
+        self._comply[MODE] = float(best)
         for a in range(N_ACTIONS):
             theta[a] = (1.0 - spread) * (1.0 if a == best else 0.0) + spread / 4.0
         row = (theta[0], theta[1], theta[2], theta[3])

@@ -484,3 +484,33 @@ def test_a_move_into_a_wall_is_no_purpose() -> None:
     a = next(a for a in range(4) if int(d.next_state[s, a]) != s)
     adv.observe(s, a, int(d.next_state[s, a]))
     assert not adv.purposeful  # type: ignore[attr-defined]  # the bump is still in its walk
+
+
+def test_a_visitor_walking_the_way_it_would_be_led_is_led_on() -> None:
+    """After a piece of advice, a visitor whose every move since was the one the advice
+    would have been (theta's favourite at the decision before, given or not) walks the way
+    it is led, wherever that way goes: it is not taken for one with a purpose of its own,
+    so where the way turns it is advised. A straight-ahead walker that takes advice, on a
+    128 x 128 building at kappa 0.5, walks so for long stretches, which were left alone
+    once PURPOSE_RUN moves long when they did not run all along the way to the target (the
+    rule's form before failed this on these two walks)."""
+    d = generate_building_domain(128, 128, 1060875548)
+    prior, goal_priors = train_goal_priors(d, np.random.default_rng(0), "start", 10, 1.0)
+    adv = make_advisor("guide", AdviceTables.paper(prior.theta()), 0.5, 300, StrategyParams(),
+                       goal_priors, GuideMap.of(d, goal_priors))  # fmt: skip
+    longest = 0
+    for seed in (2, 3):
+        rng = np.random.default_rng(seed)
+        walker = make_explorer("straight", d)
+        walker.reset(d.goals[seed], rng)
+        dec, s, on = adv.start(d.start), d.start, 0  # on: moves on the way it is led
+        for _ in range(3000):
+            mode = int(adv._comply[guide.MODE])  # type: ignore[attr-defined]
+            a = walker.act(s, rng, np.array(dec.advice) if dec.advise else None)
+            on = int(a == mode) if dec.advise else (on + 1 if on and a == mode else 0)
+            s2 = int(d.next_state[s, a])
+            dec = adv.observe(s, a, s2)
+            s = s2
+            longest = max(longest, on)
+            assert not (on and adv.purposeful)  # type: ignore[attr-defined]
+    assert longest > guide.PURPOSE_RUN

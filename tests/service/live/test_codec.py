@@ -278,24 +278,27 @@ def test_a_guide_session_saved_before_compliance_was_learned_loads_with_the_prio
     assert len(old.observe_batch(*moves)) == 20
 
 
-def test_a_guide_session_saved_before_undone_advice_was_counted_loads(
-    domain: DomainState,
+@pytest.mark.parametrize("kept", [COMPLY_LEVELS + 3, COMPLY_LEVELS + 9])
+def test_a_guide_session_saved_with_fewer_compliance_slots_loads(
+    domain: DomainState, kept: int
 ) -> None:
-    """A guide session whose compliance evidence was written without the slots of undone
-    advice (levels, chance, since, held; not where a piece was taken on the last move, the
-    run of undone pieces, where the last was undone and whether the explorer left it since)
-    loads with them (none) and decides as the same session with them does."""
+    """A guide session whose compliance evidence was written by an earlier version, without
+    the slots of undone advice (levels, chance, since, held only: ``COMPLY_LEVELS + 3``) or
+    without those of the way it is led (the last decision's advice, whether it walks it:
+    ``+ 9``), loads with them as a session starts them and decides as the same session with
+    them so does."""
     reg = SessionRegistry(Limits(100), 3600.0, replay_steps=32)
     session, _ = reg.create(domain, SessionSettings.of("guide", 0.5, 40, params_for("guide")))
     reg.observe_batch(session, walk(domain, domain.domain.start, 30, np.random.default_rng(3)))
     state = advisor_state(session.advisor)
     comply = list(state["slots"]["_comply"])
-    assert len(comply) == COMPLY_LEVELS + 9
-    state["slots"]["_comply"] = [*comply[: COMPLY_LEVELS + 3]]
+    fresh = compliance_state()
+    assert len(comply) == len(fresh) == COMPLY_LEVELS + 11
+    state["slots"]["_comply"] = [*comply[:kept]]
     old = restore_advisor(state, domain, "*")
-    assert old._comply == [*comply[: COMPLY_LEVELS + 3], -1.0, 0.0, 0.0, 0.0, -1.0, 0.0]  # type: ignore[attr-defined]
+    assert old._comply == [*comply[:kept], *fresh[kept:]]  # type: ignore[attr-defined]
     same = restore_advisor(advisor_state(session.advisor), domain, "*")
-    same._comply[COMPLY_LEVELS + 3 :] = [-1.0, 0.0, 0.0, 0.0, -1.0, 0.0]  # type: ignore[attr-defined]
+    same._comply[kept:] = fresh[kept:]  # type: ignore[attr-defined]
     moves = walk(domain, int(domain.domain.start), 20, np.random.default_rng(4))
     got, want = old.observe_batch(*moves), same.observe_batch(*moves)
     assert got.advise.tolist() == want.advise.tolist() and got.kl.tolist() == want.kl.tolist()
