@@ -42,7 +42,9 @@ GoalTables = tuple[IntArray, float, FloatArray, FloatArray, FloatArray]
 #: (next_state (S, 4), open moves per state (S,), cells (S, 2), distance to each destination
 #: (G, S), destination of each state (S,), the experts' goal counts (G, S * 4), the fewest moves
 #: against the compass on a way to each destination (G, S))
-GuideArrays = tuple[IntArray, IntArray, IntArray, IntArray, IntArray, FloatArray, IntArray]
+GuideArrays = tuple[
+    IntArray, IntArray, IntArray, IntArray, IntArray, FloatArray, IntArray, IntArray
+]
 #: (lam, p_lost, slack, spread, bump, the most destinations a tour is planned through)
 GuideParams = tuple[
     float, float, float, float, float, int, float, float, float, float, float, int, float, float,
@@ -532,7 +534,7 @@ def guide_fill_rows(
     """Fill ``rows`` (2 G, 4) with every destination's pi_g(. | s) (``GuideMap.policy``),
     then its c_g(. | s) (``GuideMap.compass``). One loop, the arrays read in it (a compiled
     call per destination that takes arrays costs more than the arithmetic)."""
-    next_state, n_open, cells, dist, _, counts, _ = gmap
+    next_state, n_open, cells, dist, _, counts, _, _ = gmap
     n_goals = goals.shape[0]
     n = n_open[s]
     mask = guide_open_moves(next_state, s)
@@ -570,7 +572,7 @@ def guide_route_rows(
     ruled out (every one when none is left): the open moves after which the fewest moves it
     would not make by itself remain, its own moves first (at g, or where g cannot be
     reached, the open moves)."""
-    next_state, n_open, cells, _, _, _, detour = gmap
+    next_state, n_open, cells, _, _, _, detour, _ = gmap
     n = n_open[s]
     mask = guide_open_moves(next_state, s)
     for g in range(goals.shape[0]):
@@ -980,7 +982,7 @@ def guide_decide(
     allowed = allowed and any_alive  # none left: it is bound elsewhere
     guide_run_push(run, s)
     on_lead = comply[n_levels + 10] != 0.0
-    purpose = guide_purposeful(gmap[2], dist, run, fresh, on_lead, params, target)
+    purpose = guide_purposeful(gmap[2], dist, gmap[7], run, fresh, on_lead, params, target)
     allowed = allowed and not purpose  # it walks a way of its own
     return kl, 1.0 - lost, target, allowed
 
@@ -1014,11 +1016,18 @@ def guide_run_restart(run: IntArray, s: int) -> None:  # pragma: no cover - comp
 
 
 @njit(cache=True)
-def guide_apart(cells: IntArray, dist: IntArray, u: int, v: int) -> int:  # pragma: no cover
-    """``GuideMap.apart``: a lower bound on the moves from ``u`` to ``v``."""
+def guide_apart(
+    cells: IntArray, dist: IntArray, marks: IntArray, u: int, v: int
+) -> int:  # pragma: no cover - compiled
+    """``GuideMap.apart``: a lower bound on the moves from ``u`` to ``v`` (the destinations'
+    distances ``dist``, then the landmarks' ``marks``)."""
     far = int(abs(cells[u, 0] - cells[v, 0]) + abs(cells[u, 1] - cells[v, 1]))
     for g in range(dist.shape[0]):
         du, dv = dist[g, u], dist[g, v]
+        if du >= 0 and dv >= 0 and abs(du - dv) > far:
+            far = int(abs(du - dv))
+    for g in range(marks.shape[0]):
+        du, dv = marks[g, u], marks[g, v]
         if du >= 0 and dv >= 0 and abs(du - dv) > far:
             far = int(abs(du - dv))
     return far
@@ -1028,6 +1037,7 @@ def guide_apart(cells: IntArray, dist: IntArray, u: int, v: int) -> int:  # prag
 def guide_purposeful(
     cells: IntArray,
     dist: IntArray,
+    marks: IntArray,
     run: IntArray,
     fresh: bool,
     on_lead: bool,
@@ -1067,7 +1077,7 @@ def guide_purposeful(
             k, slack = min(k_long, n), long_slack
         else:
             k, slack = n, max(long_slack, n // part)
-        apart = guide_apart(cells, dist, run[2 + (newest - k + size) % size], now)
+        apart = guide_apart(cells, dist, marks, run[2 + (newest - k + size) % size], now)
         if not k - slack <= apart <= k:
             return False
     return True

@@ -132,7 +132,7 @@ from app.advice.models import AdviceTables
 from app.advice.params import StrategyParams
 from app.advice.priors import GoalPriors
 from app.arrays import FloatArray, IntArray
-from app.domain.grid import N_ACTIONS, GridDomain, compass_detours_each
+from app.domain.grid import N_ACTIONS, GridDomain, bfs_distances_each, compass_detours_each
 
 #: probability mass the open-moves lost model gives to bumping into walls
 LOST_BUMP = 0.02
@@ -142,6 +142,10 @@ N_LOST = 4
 MAX_TOUR = 10
 #: most destinations x states a guide map holds (its distances and detours: 16 bytes each)
 MAX_GUIDE_CELLS = 16_777_216
+#: cells besides the destinations whose BFS distances tighten :meth:`GuideMap.apart`'s lower
+#: bound (landmarks: each the free cell farthest from the destinations and the ones before;
+#: 8 bytes a cell each)
+MARKS = 8
 #: how far the explorer takes advice, per session: a posterior over COMPLY_LEVELS compliance
 #: levels c_j = (j + 1/2) / COMPLY_LEVELS (uniform prior, mean 1/2), its evidence fading by
 #: COMPLY_FADE per piece of advice (about the last 30 pieces count)
@@ -187,6 +191,32 @@ SET_ASIDE, BROUGHT_BACK = 1, 2
 
 #: (next_state (S, 4), cells (S, 2), destinations) -> (distances (G, S), detours (G, S))
 Searches = Callable[[IntArray, IntArray, tuple[int, ...]], tuple[IntArray, IntArray]]
+#: (next_state (S, 4), targets) -> the BFS distance from every state to each target (k, S)
+Distances = Callable[[IntArray, IntArray], IntArray]
+
+
+def _bfs_each(next_state: IntArray, targets: IntArray) -> IntArray:
+    return bfs_distances_each(next_state, [int(t) for t in targets])
+
+
+def landmarks(next_state: IntArray, dist: IntArray, n: int, distances: Distances) -> IntArray:
+    """The BFS distances (k, S), k <= n, to ``n`` landmarks, chosen one at a time: the cell
+    farthest from the nearest of the destinations (``dist``, (G, S), -1: unreachable) and the
+    landmarks before (the lowest state on a tie), while one is farther than 0. Cells that no
+    destination reaches are never chosen."""
+    big = np.iinfo(np.int64).max
+    near = np.where(dist >= 0, dist, big).min(axis=0, initial=big)
+    near = np.where(near == big, -1, near)  # -1: no destination reaches it
+    out = []
+    for _ in range(n):
+        far = int(np.argmax(near))
+        if near[far] <= 0:
+            break
+        row = np.asarray(distances(next_state, np.array([far], dtype=np.int64)), dtype=np.int64)
+        out.append(row[0])
+        near = np.where(row[0] >= 0, np.minimum(near, row[0]), near)
+    shape = (len(out), next_state.shape[0])
+    return np.ascontiguousarray(np.array(out, dtype=np.int64).reshape(shape))
 
 
 class GuideError(ValueError):
@@ -206,17 +236,20 @@ class GuideMap:
     goal_of_state: IntArray  # (S,) destination index, -1 elsewhere
     counts: FloatArray  # (G, S * 4) experts' goal counts
     goals: tuple[int, ...]
+    marks: IntArray  # (L, S) distances to MARKS landmarks (:func:`landmarks`), -1: none
 
     @classmethod
     def of(
         cls, domain: GridDomain, goal_priors: GoalPriors | None = None,
-        searches: Searches | None = None,
+        searches: Searches | None = None, distances: Distances | None = None,
     ) -> GuideMap:  # fmt: skip
         """``domain``'s guide map (:class:`GuideError` first if it cannot have one), with the
         experts' counts of ``goal_priors``. ``searches(next_state, cells, goals)``: the
         distances and detours of every destination, (G, S) each, by another implementation
         of the same searches (the service's compiled ones); by default
-        :attr:`GridDomain.goal_distances` and :func:`compass_detours_each`."""
+        :attr:`GridDomain.goal_distances` and :func:`compass_detours_each`. ``distances``:
+        the searches of the landmarks (:func:`landmarks`), by default
+        :func:`~app.domain.grid.bfs_distances_each`."""
         goals = tuple(int(g) for g in domain.goals)
         if not goals:
             raise GuideError("guide advice needs the map's destinations: this map has no goal")
@@ -245,6 +278,7 @@ class GuideMap:
             of_state,
             np.zeros((len(goals), s * N_ACTIONS)),
             goals,
+            landmarks(domain.next_state, dist, MARKS, distances or _bfs_each),
         )
         return plain if goal_priors is None else plain.replace_counts(goal_priors)
 
@@ -259,11 +293,11 @@ class GuideMap:
     @property
     def arrays(
         self,
-    ) -> tuple[IntArray, IntArray, IntArray, IntArray, IntArray, FloatArray, IntArray]:
+    ) -> tuple[IntArray, IntArray, IntArray, IntArray, IntArray, FloatArray, IntArray, IntArray]:
         """As app/kernels.py reads it."""
         return (
             self.next_state, self.n_open, self.cells, self.dist, self.goal_of_state, self.counts,
-            self.detour,
+            self.detour, self.marks,
         )  # fmt: skip
 
     @property
@@ -285,7 +319,7 @@ class GuideMap:
                     counts[i] = goal_priors.goal_counts[gi].reshape(-1)
         return GuideMap(
             self.next_state, self.n_open, self.cells, self.dist, self.detour, self.goal_of_state,
-            counts, self.goals,
+            counts, self.goals, self.marks,
         )  # fmt: skip
 
     def policy(self, g: int, s: int) -> list[float]:
@@ -350,14 +384,16 @@ class GuideMap:
 
     def apart(self, u: int, v: int) -> int:
         """A lower bound on the moves from ``u`` to ``v``: the larger of their row plus column
-        difference and, over the destinations that both reach, the difference of their
-        distances to it. A walk of that many moves between them is a shortest path."""
+        difference and, over the destinations and the landmarks that both reach, the
+        difference of their distances to it. A walk of that many moves between them is a
+        shortest path."""
         far = abs(int(self.cells[u, 0]) - int(self.cells[v, 0]))
         far += abs(int(self.cells[u, 1]) - int(self.cells[v, 1]))
-        for g in range(self.n_goals):
-            du, dv = int(self.dist[g, u]), int(self.dist[g, v])
-            if du >= 0 and dv >= 0 and abs(du - dv) > far:
-                far = abs(du - dv)
+        for rows in (self.dist, self.marks):
+            for g in range(rows.shape[0]):
+                du, dv = int(rows[g, u]), int(rows[g, v])
+                if du >= 0 and dv >= 0 and abs(du - dv) > far:
+                    far = abs(du - dv)
         return far
 
     def drift(self, t: int, s: int) -> float:

@@ -14,7 +14,7 @@ import numpy as np
 import orjson
 from starlette.concurrency import run_in_threadpool
 
-from app import strategies
+from app import kernels, strategies
 from app.advice.advisor import Decision, DecisionBatch
 from app.advice.guide import GuideMap
 from app.advice.models import AdviceTables
@@ -439,7 +439,10 @@ def warm_up() -> None:
     def goals() -> GoalPriors:
         return GoalPriors(grid.n_states, grid.goals).add([np.array([[0, 1]])], [0])
 
-    data = DomainData(tables, goals(), GuideMap.of(grid, goals(), searches=compiled_searches))
+    data = DomainData(
+        tables, goals(),
+        GuideMap.of(grid, goals(), searches=compiled_searches, distances=kernels.guide_distances),
+    )  # fmt: skip
     for entry in strategies.STRATEGIES.values():
         # the per-goal window too where a strategy keeps one (goal_aware's beta > 0)
         half: list[dict[str, Any]] = [{p: 0.5} for p in entry.reads]

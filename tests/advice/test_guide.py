@@ -379,7 +379,10 @@ def test_apart_never_exceeds_the_moves_between_two_cells(
     seed: int, building: bool, pick: int
 ) -> None:
     """``GuideMap.apart`` is a lower bound on the moves between two cells (so a walk of that
-    many moves is a shortest path), and it is exact along a straight line of free cells."""
+    many moves is a shortest path), and it is exact along a straight line of free cells; the
+    compiled ``guide_apart`` gives the same numbers."""
+    from app import kernels
+
     d = world(seed, building)[0]
     gm = GuideMap.of(d)
     rng = np.random.default_rng(pick)
@@ -388,11 +391,38 @@ def test_apart_never_exceeds_the_moves_between_two_cells(
         for u in rng.integers(0, d.n_states, 20).tolist():
             assert 0 <= gm.apart(u, v) <= dist[u] or dist[u] < 0
             assert gm.apart(u, v) == gm.apart(v, u)
+            assert kernels.guide_apart(gm.cells, gm.dist, gm.marks, u, v) == gm.apart(u, v)
         for a in range(4):  # a straight line from v
             u, n = v, 0
             while int(d.next_state[u, a]) != u:
                 u, n = int(d.next_state[u, a]), n + 1
                 assert gm.apart(v, u) == n
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 10_000), st.booleans(), st.integers(0, 12))
+def test_landmarks_are_the_farthest_cells_one_at_a_time(seed: int, building: bool, n: int) -> None:
+    """``landmarks``: each row is the BFS distance to one cell, that cell the farthest from
+    the nearest of the destinations and the landmarks before it (the lowest state on a tie),
+    never one that no destination reaches; as many as asked while a cell is farther than 0;
+    the service's compiled searches choose the same ones."""
+    from app import kernels
+
+    d = world(seed, building)[0]
+    dist = d.goal_distances
+    got = guide.landmarks(d.next_state, dist, n, guide._bfs_each)
+    assert np.array_equal(got, guide.landmarks(d.next_state, dist, n, kernels.guide_distances))
+    assert got.shape[0] <= n and got.shape[1] == d.n_states
+    rows = [r for r in dist]
+    for row in got:
+        cell = int(np.flatnonzero(row == 0)[0])
+        assert np.array_equal(row, d.distances_to(cell))
+        near = [min(int(r[s]) for r in rows if r[s] >= 0) if any(r[s] >= 0 for r in rows)
+                else -1 for s in range(d.n_states)]  # fmt: skip
+        assert near[cell] == max(near) > 0 and near.index(max(near)) == cell
+        rows.append(row)
+    if got.shape[0] < n:  # no cell is farther than 0 from them all
+        assert all(any(r[s] == 0 for r in rows) for s in range(d.n_states) if dist[:, s].max() >= 0)
 
 
 @given(st.lists(st.integers(0, 10**6), max_size=guide.PURPOSE_WALK + 1), st.integers(0, 600))

@@ -40,10 +40,13 @@ def test_ingestion_goes_on_while_a_guide_map_is_built(
     building, release = threading.Event(), threading.Event()
     plain_of = GuideMap.of
 
-    def slow_of(domain: GridDomain, goal_priors: object = None, searches: Any = None) -> GuideMap:
+    def slow_of(
+        domain: GridDomain, goal_priors: object = None, searches: Any = None,
+        distances: Any = None,
+    ) -> GuideMap:  # fmt: skip
         building.set()
         assert release.wait(60), "the test never released the build"
-        return plain_of(domain, searches=searches)
+        return plain_of(domain, searches=searches, distances=distances)
 
     monkeypatch.setattr(GuideMap, "of", staticmethod(slow_of))
     built: list[GuideMap] = []

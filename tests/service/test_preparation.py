@@ -307,7 +307,7 @@ def test_the_memory_estimate_covers_what_is_built(
     assert goals is not None and gmap is not None
     arrays = goals.arrays()
     kept = [goals.goal_counts, goals.unknown_counts, arrays[0], arrays[4].base,
-            gmap.dist, gmap.detour, gmap.n_open, gmap.goal_of_state,
+            gmap.dist, gmap.detour, gmap.marks, gmap.n_open, gmap.goal_of_state,
             state.domain.open_moves]  # fmt: skip
     built = sum(a.nbytes for a in kept if a is not None)
     estimate = preparation_bytes(len(state.domain.goals), state.domain.n_states, needed())

@@ -27,7 +27,7 @@ from datetime import datetime
 import numpy as np
 
 from app import kernels, strategies
-from app.advice.guide import GuideMap
+from app.advice.guide import MARKS, GuideMap
 from app.advice.models import AdviceTables
 from app.advice.priors import ActionPrior, GoalPriors
 from app.arrays import IntArray
@@ -133,10 +133,11 @@ def preparation_bytes(n_goals: int, n_states: int, needs: Iterable[Need]) -> int
     """Bytes what ``needs`` keep of a domain of ``n_goals`` destinations and ``n_states`` free
     cells: the goal priors' counts and each goal's log theta (G x S x 4 float64 each), the
     counts of unknown goal (S x 4) and the goal of each state (S); a guide map's distances and
-    detours (G x S int64 each), its open moves (S int64, S x 4 booleans) and the destination
-    of each state (S); its counts are the goal priors' own."""
+    detours (G x S int64 each), its landmarks' distances (MARKS x S int64), its open moves (S
+    int64, S x 4 booleans) and the destination of each state (S); its counts are the goal
+    priors' own."""
     gs, s = n_goals * n_states, n_states
-    sizes = {Need.GOAL_PRIORS: 64 * gs + 40 * s, Need.GUIDE_MAP: 16 * gs + 20 * s}
+    sizes = {Need.GOAL_PRIORS: 64 * gs + 40 * s, Need.GUIDE_MAP: 16 * gs + (20 + 8 * MARKS) * s}
     return sum(sizes[n] for n in set(needs))
 
 
@@ -275,7 +276,9 @@ class DomainCatalog:
             plain = (
                 None
                 if state.guide_map is not None
-                else GuideMap.of(state.domain, searches=compiled_searches)
+                else GuideMap.of(
+                    state.domain, searches=compiled_searches, distances=kernels.guide_distances
+                )
             )
             with state.lock:  # the counts as they are now (ingestion may have added)
                 if state.guide_map is None:
