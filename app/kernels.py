@@ -705,13 +705,7 @@ def guide_observe_compliance(
     # on the way it is led: it took the piece, or made the move the advice would have been
     on = took if advised else comply[n + 10] != 0.0 and a == int(comply[n + 9])
     comply[n + 10] = 1.0 if on else 0.0
-    if comply[n + 7] >= 0.0:
-        if s != int(comply[n + 7]):
-            comply[n + 8] = 1.0
-        elif comply[n + 8] != 0.0:  # back where it undid advice, by its own moves:
-            comply[n + 6] = 0.0  # it circles here rather than goes its own way
-            comply[n + 7] = -1.0
-            comply[n + 8] = 0.0
+    undid = False
     if took and to != s:  # a piece taken
         if comply[n + 3] < 0.0 or comply[n + 5] > 0.0:  # the first of a chain
             comply[n + 3] = float(s)
@@ -726,10 +720,20 @@ def guide_observe_compliance(
             comply[n + 7] = comply[n + 3]
             comply[n + 8] = 0.0
             comply[n + 3] = -1.0
+            undid = True
         elif comply[n + 5] >= comply[n + 4]:  # as many moves as it took: kept
             comply[n + 6] = 0.0
             comply[n + 7] = -1.0
             comply[n + 3] = -1.0
+    if comply[n + 7] >= 0.0:  # where it undid the last: does it circle there?
+        if took:
+            comply[n + 8] = 0.0  # led: no way of its own since
+        elif not undid and to != int(comply[n + 7]):
+            comply[n + 8] = 1.0  # its own move away from there
+        elif not undid and comply[n + 8] != 0.0:  # and its own moves back there: it
+            comply[n + 6] = 0.0  # circles rather than goes its own way
+            comply[n + 7] = -1.0
+            comply[n + 8] = 0.0
     if not advised:
         comply[n + 1] += 1.0
         return

@@ -77,8 +77,10 @@ could not show that it takes it (docs/RESULTS.md, "Advice that is not taken").
 Pieces taken in a row (a chain of k) are followed further: if the explorer's own moves
 after them lead back to where the chain began within k moves, they undid it; after k own
 moves elsewhere it is kept. An explorer that undid ``UNDO_RUN`` (4) chains in a row is held
-back the same way until it keeps one, or until its own moves bring it back to where it
-undid the last (it circles there, as a bug in a pocket does, rather than goes its own way).
+back the same way until it keeps one, or until its own moves, none of them undoing a chain
+and no piece taken since it left, bring it back to where it undid the last (it circles
+there, as a bug in a pocket does, rather than goes its own way; one led away and back, or
+undoing the next detour there, does not circle).
 One bound for a place of its own, taken for one bound for a listed destination, that takes
 the advice and goes back to its way, is not advised the same detour again and again. A lost
 walker undoes a chain only when its own moves happen to retrace it: four one-piece chains
@@ -524,7 +526,8 @@ def run_list(ring: IntArray) -> list[int]:
 #: whether advice is held back; the state where the last chain of pieces taken in a row
 #: began (-1: none open), how many it took, its own moves since; how many chains in a row
 #: its own moves undid (led back to where they began), where the last began (-1: none) and
-#: whether it has left that state since (1.0) or not (0.0); the last decision's advice (theta's
+#: whether it has left that state by its own moves, no piece taken since (1.0) or not (0.0);
+#: the last decision's advice (theta's
 #: favourite move, given or not; -1: none yet) and whether every move since the last piece was
 #: that of the decision before it (1.0: it walks the way it is led) or not (0.0)
 CHANCE, SINCE, HELD, CHAIN_FROM, CHAIN_LEN, OWN, UNDONE, UNDONE_AT, AWAY, MODE, ON_LEAD = range(
@@ -756,13 +759,7 @@ class GuideAdvisor(Advisor):
         # on the way it is led: it took the piece, or made the move the advice would have been
         on = took if advised else comply[ON_LEAD] != 0.0 and action == int(comply[MODE])
         comply[ON_LEAD] = 1.0 if on else 0.0
-        if comply[UNDONE_AT] >= 0.0:
-            if state != int(comply[UNDONE_AT]):
-                comply[AWAY] = 1.0
-            elif comply[AWAY] != 0.0:  # back where it undid advice, by its own moves:
-                comply[UNDONE] = 0.0  # it circles here rather than goes its own way
-                comply[UNDONE_AT] = -1.0
-                comply[AWAY] = 0.0
+        undid = False
         if took and to != state:  # a piece taken
             if comply[CHAIN_FROM] < 0.0 or comply[OWN] > 0.0:  # the first of a chain
                 comply[CHAIN_FROM] = float(state)
@@ -777,10 +774,20 @@ class GuideAdvisor(Advisor):
                 comply[UNDONE_AT] = comply[CHAIN_FROM]
                 comply[AWAY] = 0.0
                 comply[CHAIN_FROM] = -1.0
+                undid = True
             elif comply[OWN] >= comply[CHAIN_LEN]:  # as many moves as it took: kept
                 comply[UNDONE] = 0.0
                 comply[UNDONE_AT] = -1.0
                 comply[CHAIN_FROM] = -1.0
+        if comply[UNDONE_AT] >= 0.0:  # where it undid the last: does it circle there?
+            if took:
+                comply[AWAY] = 0.0  # led: no way of its own since
+            elif not undid and to != int(comply[UNDONE_AT]):
+                comply[AWAY] = 1.0  # its own move away from there
+            elif not undid and comply[AWAY] != 0.0:  # and its own moves back there: it
+                comply[UNDONE] = 0.0  # circles rather than goes its own way
+                comply[UNDONE_AT] = -1.0
+                comply[AWAY] = 0.0
         if not advised:
             comply[SINCE] += 1.0
             return

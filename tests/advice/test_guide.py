@@ -331,6 +331,45 @@ def guide_advisor(d: GridDomain, per_goal: int) -> tuple[GuideMap, Advisor]:
     return gm, adv
 
 
+def test_a_detour_taken_and_undone_again_and_again_at_one_cell_holds_advice_back() -> None:
+    """A visitor that takes a piece at C and goes back to C by its own move, again and again,
+    is held back after UNDO_RUN such detours, even when in between it was led away from C and
+    back: a piece taken is no way of its own, so coming back to C so is not "circling" there
+    (before, it forgot the detours it had undone, and the cycle went on). One that leaves C by
+    its own moves and comes back by them circles there: it is let go."""
+    d = generate_building_domain(24, 28, 3, n_goals=3)
+    _, adv = guide_advisor(d, 2)
+    c = next(
+        s for s in range(d.n_states) if sum(int(d.next_state[s, a]) != s for a in range(4)) >= 2
+    )
+    ways = [a for a in range(4) if int(d.next_state[c, a]) != c]
+    ahead, aside = ways[0], ways[1]
+
+    def move(s: int, a: int, led: bool) -> int:
+        if led:
+            adv._last_advice = tuple(1.0 if b == a else 0.0 for b in range(4))  # type: ignore[attr-defined]
+        adv._observe_compliance(s, led, a)  # type: ignore[attr-defined]
+        return int(d.next_state[s, a])
+
+    def detour() -> None:  # a piece taken at C, its own move back
+        assert move(move(c, ahead, True), (ahead + 2) % 4, False) == c
+
+    adv.start(c)
+    comply = adv._comply  # type: ignore[attr-defined]
+    for _ in range(guide.UNDO_RUN - 1):
+        detour()
+    assert comply[guide.UNDONE] == guide.UNDO_RUN - 1
+    e = move(c, aside, False)  # its own move away from C, then led back and on
+    assert move(e, (aside + 2) % 4, True) == c
+    assert move(move(c, ahead, True), (ahead + 2) % 4, False) == c  # and back by itself
+    assert comply[guide.UNDONE] == guide.UNDO_RUN - 1  # not circling: nothing forgotten
+    detour()
+    assert adv.holding_back  # type: ignore[attr-defined]
+    e = move(c, aside, False)  # its own way out of C and back: it circles there
+    move(e, (aside + 2) % 4, False)
+    assert comply[guide.UNDONE] == 0 and not adv.holding_back  # type: ignore[attr-defined]
+
+
 def test_a_visitor_that_passed_every_destination_is_left_alone() -> None:
     """Once the explorer has stood on every destination and gone on, it is bound somewhere
     else: guide gives no more advice (before, it led it round the destinations again), and
