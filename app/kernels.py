@@ -690,8 +690,9 @@ def guide_observe_compliance(
     >= SURE until it is below RELEASE); the last chain of pieces taken in a row (where it
     began, -1: none open; its length k; the explorer's own moves since: undone if they lead
     back there within k moves, else kept); how many chains in a row were undone, where the
-    last began (-1: none) and whether the explorer has left it since (back there by its own
-    moves, the run is forgotten); the last decision's advice (theta's favourite move, -1:
+    last began (-1: none) and whether the explorer has left it since by its own moves, no
+    piece taken since (back there by its own moves, none undoing a chain, the run is
+    forgotten); the last decision's advice (theta's favourite move, -1:
     none) and whether every move since the last piece was that of the decision before it."""
     fade, ignored, sure, release = params[6], params[7], params[8], params[9]
     n = params[11]

@@ -527,9 +527,9 @@ def run_list(ring: IntArray) -> list[int]:
 #: began (-1: none open), how many it took, its own moves since; how many chains in a row
 #: its own moves undid (led back to where they began), where the last began (-1: none) and
 #: whether it has left that state by its own moves, no piece taken since (1.0) or not (0.0);
-#: the last decision's advice (theta's
-#: favourite move, given or not; -1: none yet) and whether every move since the last piece was
-#: that of the decision before it (1.0: it walks the way it is led) or not (0.0)
+#: the last decision's advice (theta's favourite move, given or not; -1: none yet) and whether
+#: every move since the last piece was that of the decision before it (1.0: it walks the way
+#: it is led) or not (0.0)
 CHANCE, SINCE, HELD, CHAIN_FROM, CHAIN_LEN, OWN, UNDONE, UNDONE_AT, AWAY, MODE, ON_LEAD = range(
     COMPLY_LEVELS, COMPLY_LEVELS + 11
 )
