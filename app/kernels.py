@@ -41,7 +41,7 @@ Tables = tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]
 GoalTables = tuple[IntArray, float, FloatArray, FloatArray, FloatArray]
 #: (next_state (S, 4), open moves per state (S,), cells (S, 2), distance to each destination
 #: (G, S), destination of each state (S,), the experts' goal counts (G, S * 4), the fewest moves
-#: against the compass on a way to each destination (G, S))
+#: against the compass on a way to each destination (G, S), the distance to each landmark (L, S))
 GuideArrays = tuple[
     IntArray, IntArray, IntArray, IntArray, IntArray, FloatArray, IntArray, IntArray
 ]
@@ -692,8 +692,8 @@ def guide_observe_compliance(
     back there within k moves, else kept); how many chains in a row were undone, where the
     last began (-1: none) and whether the explorer has left it since by its own moves, no
     piece taken since (back there by its own moves, none undoing a chain, the run is
-    forgotten); the last decision's advice (theta's favourite move, -1:
-    none) and whether every move since the last piece was that of the decision before it."""
+    forgotten); the last decision's advice (theta's favourite move, -1: none) and whether
+    every move since the last piece was that of the decision before it."""
     fade, ignored, sure, release = params[6], params[7], params[8], params[9]
     n = params[11]
     took = False  # the advised move, if advice was given
@@ -1027,14 +1027,11 @@ def guide_apart(
     """``GuideMap.apart``: a lower bound on the moves from ``u`` to ``v`` (the destinations'
     distances ``dist``, then the landmarks' ``marks``)."""
     far = int(abs(cells[u, 0] - cells[v, 0]) + abs(cells[u, 1] - cells[v, 1]))
-    for g in range(dist.shape[0]):
-        du, dv = dist[g, u], dist[g, v]
-        if du >= 0 and dv >= 0 and abs(du - dv) > far:
-            far = int(abs(du - dv))
-    for g in range(marks.shape[0]):
-        du, dv = marks[g, u], marks[g, v]
-        if du >= 0 and dv >= 0 and abs(du - dv) > far:
-            far = int(abs(du - dv))
+    for rows in (dist, marks):
+        for g in range(rows.shape[0]):
+            du, dv = rows[g, u], rows[g, v]
+            if du >= 0 and dv >= 0 and abs(du - dv) > far:
+                far = int(abs(du - dv))
     return far
 
 

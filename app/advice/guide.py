@@ -98,8 +98,9 @@ there (a lost "straight" walker) passes the first test for a while and fails the
 once it comes back. Which walks are shortest paths the map tells without a search per session:
 a walk of k moves from u to v is one when k is at most a lower bound on the moves between them
 (:meth:`GuideMap.apart`: the larger of the row plus column difference and, for each
-destination, the difference of their BFS distances to it); the bound can fall short of the
-true distance, more so over longer walks, hence the slacks. Before any advice the walk counts
+destination and each of ``MARKS`` landmarks, the difference of their BFS distances to it); the
+bound can fall short of the true distance, more so over longer walks, hence the slacks.
+Before any advice the walk counts
 from the first decision (one walking its way from the start is not told otherwise); after a
 piece of advice only once ``PURPOSE_RUN`` moves were walked since, and not while it walks all
 along the way to the target, or while each of its moves since the piece was the one the
