@@ -48,7 +48,7 @@ GuideArrays = tuple[
 #: (lam, p_lost, slack, spread, bump, the most destinations a tour is planned through)
 GuideParams = tuple[
     float, float, float, float, float, int, float, float, float, float, float, int, float, float,
-    float, int, int, int, int, int, int,
+    float, int, int, int, int, int, int, float, float, float, float,
 ]  # fmt: skip
 
 #: explorer kinds, in the order of app.agents.explorers.WALKERS (the paper's five first)
@@ -633,8 +633,13 @@ def guide_append(
         guide_fill_rows(gmap, goals, s, rows)
     guide_open(next_state, gmap[1], s, pi)
     lo = (1.0 - bump) * pi[a] + bump / 4.0
-    ll[0] = lam * ll[0] + math.log(0.25)
-    ll[1] = lam * ll[1] + math.log(lo)
+    l4, lo_, la = 0.25, lo, guide_ahead(next_state, gmap[1], s, heading, a, bump)
+    if advised:  # lost or not, it takes the advice or its own way, half each
+        l4, lo_, la = 0.5 * (l4 + advice[a]), 0.5 * (lo_ + advice[a]), 0.5 * (la + advice[a])
+    ll[0] = lam * ll[0] + math.log(l4)
+    ll[1] = lam * ll[1] + math.log(lo_)
+    last = ll.shape[0] - 1  # LA
+    ll[last] = lam * ll[last] + math.log(la)
     for w in range(2):  # the left-hand (w = 0) and right-hand wall followers
         rule = guide_wall(next_state, s, heading, w)
         ind = 1.0 if a == rule else 0.0
@@ -656,6 +661,24 @@ def guide_append(
         guide_rule_out(alive, doubt, gi)
     to = next_state[s, a]
     return (a if to != s else heading), to
+
+
+@njit(cache=True, inline="always")
+def guide_ahead(
+    next_state: IntArray, n_open: IntArray, s: int, heading: int, a: int, bump: float
+) -> float:  # pragma: no cover - compiled
+    """``GuideAdvisor._lost_ahead(s)[a]``: LA's move, uniform over the open moves but back
+    (against ``heading``) where another is open and it has moved, over the open moves
+    otherwise; ``bump`` spread over all four."""
+    n = n_open[s]
+    back = (heading + 2) % 4
+    if heading >= 0 and n > 1 and next_state[s, back] != s:
+        o = 1.0 / (n - 1) if a != back and next_state[s, a] != s else 0.0
+    elif n == 0:
+        o = 0.25
+    else:
+        o = 1.0 / n if next_state[s, a] != s else 0.0
+    return (1.0 - bump) * o + bump / 4.0
 
 
 @njit(cache=True)
@@ -749,20 +772,24 @@ def guide_observe_compliance(
         comply[n + 2] = 1.0
     elif low < release:  # it takes advice (again)
         comply[n + 2] = 0.0
+    # a piece not taken by one that takes only some (PARTLY, params[24]) is given back
+    if not took and guide_compliance_below(comply[:n], params[24]) >= 0.5:
+        comply[n + 11] = min(params[22], comply[n + 11] + 1.0)
 
 
 @njit(cache=True)
 def guide_compliance_state(params: GuideParams) -> FloatArray:  # pragma: no cover - compiled
     """``compliance_state``: no advice yet (``COMPLY_LEVELS`` levels, chance 1/2, ``BACKOFF``
     decisions since the last piece, not held back, no chain of taken pieces open, no run of
-    undone chains, no decision yet, not led)."""
+    undone chains, no decision yet, not led, one piece of the advice budget saved)."""
     n = params[11]
-    comply = np.zeros(n + 11)
+    comply = np.zeros(n + 12)
     comply[n] = 0.5
     comply[n + 1] = params[10]
     comply[n + 3] = -1.0
     comply[n + 7] = -1.0
     comply[n + 9] = -1.0
+    comply[n + 11] = 1.0  # one piece of the advice budget saved
     return comply
 
 
@@ -882,15 +909,17 @@ def guide_decide(
     compared with kappa, 1 - P(lost | H), the target, whether advice may be given at all: not
     to an explorer that ignores it, advice held back, within ``BACKOFF`` decisions of the
     last piece).
-    ``heading``: the last move that moved (-1: none). ``scratch`` is (4 + 3 G + 12 G + 4,);
+    ``heading``: the last move that moved (-1: none). ``scratch`` is (5 + 3 G + 12 G + 4,);
     ``comply`` as :func:`guide_observe_compliance` keeps it; ``run`` (:func:`guide_run_push`)
     the states decided for since the last piece of advice, ``s`` added here; ``fresh``: no
-    advice yet this session. A caller that advises restarts ``run`` (:func:`guide_run_restart`)."""
+    advice yet this session. A caller that advises restarts ``run`` and spends a piece
+    (:func:`guide_advised`). The value returned is divided by the advice budget's price."""
     p_lost, slack, spread, bump, max_tour = params[1], params[2], params[3], params[4], params[5]
     backoff = params[10]
     dist = gmap[3]
     n_goals = alive.shape[0]
-    n_models = 4 + 3 * n_goals
+    n_models = 4 + 3 * n_goals + 1  # LA last
+    la_k = n_models - 1
     any_alive = False
     for g in range(n_goals):
         any_alive = any_alive or alive[g]
@@ -899,7 +928,7 @@ def guide_decide(
         if alive[g] or not any_alive:
             n_alive += 1
     # P(k | H)
-    lw_lost = math.log(p_lost / 4.0)
+    lw_lost = math.log(p_lost / 5.0)
     lw_dir = math.log((1.0 - p_lost) / (3.0 * n_alive))
     post = scratch[:n_models]
     mx = -math.inf
@@ -907,7 +936,10 @@ def guide_decide(
         post[k] = ll[k] + lw_lost
         if post[k] > mx:
             mx = post[k]
-    for k in range(4, n_models):
+    post[la_k] = ll[la_k] + lw_lost
+    if post[la_k] > mx:
+        mx = post[la_k]
+    for k in range(4, la_k):
         g = (k - 4) // 3
         if alive[g] or not any_alive:
             post[k] = ll[k] + lw_dir
@@ -915,14 +947,14 @@ def guide_decide(
                 mx = post[k]
     tot = 0.0
     for k in range(n_models):
-        if k >= 4 and not (alive[(k - 4) // 3] or not any_alive):
+        if 4 <= k < la_k and not (alive[(k - 4) // 3] or not any_alive):
             post[k] = 0.0
         else:
             post[k] = 1.0 if post[k] == mx else math.exp(post[k] - mx)
         tot += post[k]
     for k in range(n_models):
         post[k] = post[k] / tot
-    lost = post[0] + post[1] + post[2] + post[3]
+    lost = post[0] + post[1] + post[2] + post[3] + post[la_k]
     # each destination's policies here, and the target
     rows = guide_rows(scratch, n_goals)  # pi_g and c_g for every one (guide_append reads them)
     guide_fill_rows(gmap, goals, s, rows)
@@ -957,6 +989,7 @@ def guide_decide(
         m = post[0] * 0.25 + post[1] * lo
         m += post[2] * ((1.0 - slack) * (1.0 if a == wl else 0.0) + slack * lo)
         m += post[3] * ((1.0 - slack) * (1.0 if a == wr else 0.0) + slack * lo)
+        m += post[la_k] * guide_ahead(gmap[0], gmap[1], s, heading, a, bump)
         for g in range(n_goals):
             if alive[g] or not any_alive:
                 k = 4 + 3 * g
@@ -989,6 +1022,17 @@ def guide_decide(
     on_lead = comply[n_levels + 10] != 0.0
     purpose = guide_purposeful(gmap[2], dist, gmap[7], run, fresh, on_lead, params, target)
     allowed = allowed and not purpose  # it walks a way of its own
+    # the advice budget: a piece more saved each 1 / ADVICE_RATE decisions (params[21], up to
+    # ADVICE_BURST, params[22]), the value divided by the price of the pieces saved
+    saved = min(params[22], comply[n_levels + 11] + params[21])
+    comply[n_levels + 11] = saved
+    ruled = post[2] + post[3]  # one with a rule of its own: a hand on the wall, the compass
+    for g in range(n_goals):
+        ruled += post[4 + 3 * g + 2]
+    free = ruled >= 0.5  # its detours are not held to the budget (paid for afterwards)
+    if saved >= 1.0 and not free:
+        kl = kl / (params[22] / saved) ** params[23]
+    allowed = allowed and (saved >= 1.0 or free)
     return kl, 1.0 - lost, target, allowed
 
 
@@ -1013,11 +1057,15 @@ def guide_run_new(params: GuideParams) -> IntArray:  # pragma: no cover - compil
 
 
 @njit(cache=True)
-def guide_run_restart(run: IntArray, s: int) -> None:  # pragma: no cover - compiled
-    """Advice was given at ``s``: ``run`` starts again there."""
+def guide_advised(
+    params: GuideParams, comply: FloatArray, run: IntArray, s: int
+) -> None:  # pragma: no cover - compiled
+    """Advice was given at ``s``: ``run`` starts again there, and it spends a piece of the
+    advice budget."""
     run[0] = 1
     run[1] = 0
     run[2] = s
+    comply[params[11] + 11] -= 1.0
 
 
 @njit(cache=True)
@@ -1090,15 +1138,15 @@ def guide_buffers(
     n_goals: int,
 ) -> tuple[FloatArray, FloatArray, FloatArray]:  # pragma: no cover - compiled
     """What :func:`guide_decide` and :func:`guide_append` need besides the session's state:
-    its scratch (4 + 3 G + 12 G + 4,), ``pi`` (4,) and ``theta`` (4,)."""
-    return np.empty(4 + 15 * n_goals + 4), np.empty(4), np.empty(4)
+    its scratch (5 + 3 G + 12 G + 4,), ``pi`` (4,) and ``theta`` (4,)."""
+    return np.empty(5 + 15 * n_goals + 4), np.empty(4), np.empty(4)
 
 
 @njit(cache=True)
 def guide_rows(scratch: FloatArray, n_goals: int) -> FloatArray:  # pragma: no cover - compiled
     """The rows of :func:`guide_decide`'s scratch holding every destination's pi_g, then its
     c_g, at the state of the last decision: (2 G, 4), what :func:`guide_append` reads."""
-    start = 4 + 3 * n_goals
+    start = 5 + 3 * n_goals
     return scratch[start : start + 8 * n_goals].reshape((2 * n_goals, 4))
 
 
@@ -1151,7 +1199,7 @@ def guide_stream(
             benefit += kl
             advise_out[i] = True
             last = next_states[i]
-            guide_run_restart(run, last)
+            guide_advised(params, comply, run, last)
             for a in range(4):
                 advice[a] = theta[a]
         else:
@@ -1440,7 +1488,7 @@ def episode(
     theta_w = np.empty(4)
     gmap, gparams, g_goals = guide
     n_dest = g_goals.shape[0] if rule == GUIDE else 0
-    g_ll = np.zeros(4 + 3 * n_dest)
+    g_ll = np.zeros(4 + 3 * n_dest + 1)
     g_alive = np.ones(n_dest, dtype=np.bool_)
     g_doubt = np.zeros(n_dest, dtype=np.int64)
     g_target = -1
@@ -1474,7 +1522,7 @@ def episode(
             )  # fmt: skip
             advise = kl >= kappa and allowed
             if advise:
-                guide_run_restart(g_run, s)
+                guide_advised(gparams, g_comply, g_run, s)
         else:
             says = rule == PAPER or rule_says(
                 rule, t, s, last_s, last_a, rule_params, tables, rule_rng
@@ -1578,7 +1626,7 @@ def q_learning(
     best = np.zeros(4, dtype=np.bool_)
     gmap, gparams, g_goals = guide
     n_dest = g_goals.shape[0] if rule == GUIDE else 0
-    g_ll = np.zeros(4 + 3 * n_dest)
+    g_ll = np.zeros(4 + 3 * n_dest + 1)
     g_alive = np.ones(n_dest, dtype=np.bool_)
     g_doubt = np.zeros(n_dest, dtype=np.int64)
     g_target = -1
@@ -1617,7 +1665,7 @@ def q_learning(
                     g_scratch, g_comply, g_run, g_given == 0,
                 )  # fmt: skip
                 if kl >= kappa and allowed:
-                    guide_run_restart(g_run, s)
+                    guide_advised(gparams, g_comply, g_run, s)
                     g_given += 1
                 row = theta_w
             else:
@@ -1663,6 +1711,16 @@ def q_learning(
             s = s2
             if step_budget > 0 and total_steps + t >= step_budget:
                 break
+        if rule == GUIDE and not success and t >= max_steps:
+            # the session saw the last move and decided for where it led (Advisor.observe),
+            # as a session kept for the next episode remembers
+            kl, p, g_target, allowed = guide_decide(
+                gmap, gparams, g_goals, g_ll, g_alive, g_target, g_heading, s, theta_w,
+                g_scratch, g_comply, g_run, g_given == 0,
+            )  # fmt: skip
+            if kl >= kappa and allowed:
+                guide_advised(gparams, g_comply, g_run, s)
+                g_given += 1
         total_steps += t
         steps_out[e] = t
         success_out[e] = success

@@ -9,12 +9,18 @@ its next action ``a`` at ``s`` (docs/ARCHITECTURE.md has the equations beside th
     L4      lost, any action:                1/4
     LO      lost, any open move:             lo(a | s) = (1 - b) open(s, a) / n_open(s) + b/4
     WL, WR  lost, a hand on the wall:        (1 - slack) [a = w(s, h)]' + slack lo(a | s)
+    LA      lost, never turning back:        la(a | s) = (1 - b) ahead(s, a) + b/4
     D4_g    on its way to destination g:     (1 - slack) pi_g(a | s)' + slack/4
     DO_g    the same, never into a wall:     (1 - slack) pi_g(a | s)' + slack lo(a | s)
     C_g     heading for g as the crow flies: (1 - slack) c_g(a | s)' + slack lo(a | s)
 
 * ``w(s, h)``: the move of someone keeping the left (WL) or right (WR) hand on the wall,
   heading ``h`` (the last move that moved).
+* ``ahead(s, a)``: uniform over the open moves but back (against ``h``) where another is
+  open and it has moved, over the open moves otherwise: a lost walker that goes on along
+  corridors and streets (the corridor walker), which LO explains poorly (it expects a step
+  back as often as any other) and the destinations' models explained instead, a stretch of
+  street at a time.
 * ``pi_g``: uniform over the moves that shorten the BFS distance to ``g``, each weighted by
   1 + the experts' goal-``g`` count of (s, a), so that among shortest moves the experts'
   routes are preferred; at ``g`` itself, or where ``g`` cannot be reached, uniform over the
@@ -22,15 +28,18 @@ its next action ``a`` at ``s`` (docs/ARCHITECTURE.md has the equations beside th
 * ``c_g``: the move of someone who heads for where ``g`` is (the paper's "bug"): along the
   axis of the larger row or column difference if that way is open, else along the other axis
   if that way is open (both on a tie); where neither is, uniform over the open moves.
-* ``'``: on a move where the last decision advised, each of these explorers takes the
-  advice or its own way, half each (its rule, pi_g or c_g averaged with the advice): they
+* ``'``: on a move where the last decision advised, each of these explorers, lost or not,
+  takes the advice or its own way, half each (its rule averaged with the advice): they
   follow advice, and those that have a way of their own go back to it when it stops, so a
-  detour must be advised step by step.
+  detour must be advised step by step. Taking a piece is thus no evidence either way of
+  being lost (when the lost models did not take advice, every piece taken counted for the
+  destinations' models, and a walker led one move in six was soon taken for one on its way
+  and left alone).
 
 The evidence fades with time constant W, the session's window::
 
     L_k  <-  lam L_k + log P(a | s, k)            lam = 1 - 1/W
-    P(k | H)  ~  exp(L_k) P(k)                    P(L4) = ... = P(WR) = p_lost / 4,
+    P(k | H)  ~  exp(L_k) P(k)                    P(L4) = ... = P(LA) = p_lost / 5,
                                                   3 n_alive P(D4_g) = ... = 1 - p_lost
 
 A destination is ruled out once the explorer stood on it and went on (its task would have
@@ -42,13 +51,15 @@ set aside come back, and a second visit rules one out. Once every one is ruled o
 explorer is bound somewhere else (it passed every destination): nothing more is advised.
 A lost explorer is led to a *target* T: the first destination of the shortest walk from
 where it is through every destination not ruled out (it could be going to any of them),
-planned again when T is ruled out. With P(lost | H) the sum over L4, LO, WL, WR::
+planned again when T is ruled out. With P(lost | H) the sum over L4, LO, WL, WR, LA::
 
     theta_s     = P(lost | H) r_T(s) + sum_g [P(D4_g | H) + P(DO_g | H)] pi_g(s)
                                      + sum_g P(C_g | H) pc_g(s)
     P(A | s, H) = sum_k P(k | H) P(A | s, k)
-    value       = KL[theta_s || P(A | s, H)] (1 + P(lost | H) delta_T(s))
-    advise  iff  value >= kappa; the advice: (1 - spread) [a = argmax theta_s] + spread/4
+    value       = KL[theta_s || P(A | s, H)] (1 + P(lost | H) delta_T(s)) / price
+    advise  iff  value >= kappa and t >= 1; the advice: (1 - spread) [a = argmax theta_s]
+                                                         + spread/4
+    price       = (ADVICE_BURST / t) ** ADVICE_POWER    t: pieces saved of the budget
 
 * ``r_T``: one shortest move towards T (the heaviest of ``pi_T``; the heading on a tie).
 * ``pc_g``: the way to ``g`` for someone who moves as ``c_g``: the moves after which the
@@ -57,6 +68,19 @@ planned again when T is ruled out. With P(lost | H) the sum over L4, LO, WL, WR:
 * ``delta_T(s)``: how far a random open move from ``s`` takes a lost explorer from T, on
   average (BFS distance); advice saves 1 + delta_T moves where it saves 1 in the open, so the
   paper's KL (eq. (3)'s stand-in for the benefit) is weighted by it.
+* the advice budget: ``t`` grows by ``ADVICE_RATE`` (1/4) each decision up to
+  ``ADVICE_BURST`` (8), starts at 1 and a piece spends 1, so a session gets at most one piece
+  in four decisions (and one more), whatever kappa; the price (1 with the budget full,
+  64 with one piece left) keeps the last pieces for the decisions worth most: a lost walker
+  in the open is worth a piece at nearly every move, and a budget spent first come, first
+  served leaves none for where the way turns. (A walker whose own moves have no drift gains
+  at most one step a piece; one that never turns back keeps the way it is given.) Two
+  exceptions: one taken for a walker with a rule of its own (a hand on the wall or the
+  compass: P(WL | H) + P(WR | H) + P(C_g | H) summed over g at least 1/2) is shown its
+  detours whole, at no price and into debt (``t`` below 0, paid back before any more
+  advice), for it goes back to its rule and a detour given by halves is undone; and a piece not taken by one that takes
+  only some (P(compliance < PARTLY) at least 1/2) is given back, so the budget counts the
+  pieces taken.
 
 How far this explorer takes advice is learned per session. After each piece, whether its
 move was the advised one is weighed against the chance of that move anyway (``m``, P(A | s, H)
@@ -139,7 +163,8 @@ from app.domain.grid import N_ACTIONS, GridDomain, bfs_distances_each, compass_d
 
 #: probability mass the open-moves lost model gives to bumping into walls
 LOST_BUMP = 0.02
-#: the lost models: L4, LO, WL, WR
+#: the lost models before the destinations' in a session's evidence: L4, LO, WL, WR (LA,
+#: the fifth, comes after the destinations', so that sessions written before it read on)
 N_LOST = 4
 #: most destinations a tour is planned through exactly (2^n n^2 steps; the nearest beyond)
 MAX_TOUR = 10
@@ -165,6 +190,16 @@ BACKOFF = 25
 #: taken in a row; undone: back where it began within as many moves) is held back as one
 #: that ignores advice, until it keeps one or comes back there by itself
 UNDO_RUN = 4
+#: the advice budget: ADVICE_RATE pieces a decision at most (one in four), saved up to
+#: ADVICE_BURST pieces while none is needed, a session starting with one; with t pieces
+#: saved a piece's value is divided by the price (ADVICE_BURST / t) ** ADVICE_POWER before
+#: it is compared with kappa, so that where advice is scarce it goes where it is worth most
+ADVICE_RATE = 0.25
+ADVICE_BURST = 8.0
+ADVICE_POWER = 2.0
+#: a piece not taken is given back to the budget of an explorer whose compliance is below
+#: PARTLY more likely than not (one that takes some advice: the budget counts what it takes)
+PARTLY = 0.75
 #: the chance that an explorer's own move is the advised one, kept within these bounds
 CHANCE_MIN, CHANCE_MAX = 0.01, 0.99
 #: an explorer whose last PURPOSE_RUN moves since the last piece of advice were a shortest
@@ -492,17 +527,19 @@ def kernel_params(
     window: int, p: GuideParams
 ) -> tuple[
     float, float, float, float, float, int, float, float, float, float, float, int, float, float,
-    float, int, int, int, int, int, int,
+    float, int, int, int, int, int, int, float, float, float, float,
 ]:  # fmt: skip
     """The parameters as app/kernels.py reads them: (lam, p_lost, slack, spread, bump,
     MAX_TOUR, COMPLY_FADE, IGNORED, SURE, RELEASE, BACKOFF, COMPLY_LEVELS, CHANCE_MIN,
     CHANCE_MAX, UNDO_RUN, PURPOSE_RUN, PURPOSE_SLACK, PURPOSE_LONG, PURPOSE_LONG_SLACK,
-    PURPOSE_WALK, PURPOSE_WALK_PART), with lam = 1 - 1/W the evidence's fading."""
+    PURPOSE_WALK, PURPOSE_WALK_PART, ADVICE_RATE, ADVICE_BURST, ADVICE_POWER, PARTLY), with
+    lam = 1 - 1/W the evidence's fading."""
     return (
         1.0 - 1.0 / window, float(p.p_lost), float(p.slack), float(p.spread), LOST_BUMP,
         MAX_TOUR, COMPLY_FADE, IGNORED, SURE, RELEASE, float(BACKOFF), COMPLY_LEVELS,
         CHANCE_MIN, CHANCE_MAX, float(UNDO_RUN), PURPOSE_RUN, PURPOSE_SLACK, PURPOSE_LONG,
-        PURPOSE_LONG_SLACK, PURPOSE_WALK, PURPOSE_WALK_PART,
+        PURPOSE_LONG_SLACK, PURPOSE_WALK, PURPOSE_WALK_PART, ADVICE_RATE, ADVICE_BURST,
+        ADVICE_POWER, PARTLY,
     )  # fmt: skip
 
 
@@ -530,9 +567,9 @@ def run_list(ring: IntArray) -> list[int]:
 #: whether it has left that state by its own moves, no piece taken since (1.0) or not (0.0);
 #: the last decision's advice (theta's favourite move, given or not; -1: none yet) and whether
 #: every move since the last piece was that of the decision before it (1.0: it walks the way
-#: it is led) or not (0.0)
-CHANCE, SINCE, HELD, CHAIN_FROM, CHAIN_LEN, OWN, UNDONE, UNDONE_AT, AWAY, MODE, ON_LEAD = range(
-    COMPLY_LEVELS, COMPLY_LEVELS + 11
+#: it is led) or not (0.0); the pieces of the advice budget saved (:data:`ADVICE_RATE`)
+CHANCE, SINCE, HELD, CHAIN_FROM, CHAIN_LEN, OWN, UNDONE, UNDONE_AT, AWAY, MODE, ON_LEAD, SAVED = (
+    range(COMPLY_LEVELS, COMPLY_LEVELS + 12)
 )
 
 
@@ -543,21 +580,30 @@ def compliance_state() -> list[float]:
     back (1.0) or not (0.0), the last chain of pieces taken in a row (where it began, -1:
     none open; its length; the explorer's own moves since), how many chains in a row were
     undone, where the last began (-1: none) and whether the explorer has left it since; no
-    decision yet, not led."""
+    decision yet, not led; one piece of the advice budget saved."""
     return [
         *[0.0] * COMPLY_LEVELS, 0.5, float(BACKOFF), 0.0, -1.0, 0.0, 0.0, 0.0, -1.0, 0.0, -1.0,
-        0.0,
+        0.0, 1.0,
     ]  # fmt: skip
 
 
 def upgraded_compliance(comply: list[float]) -> list[float]:
     """A session's compliance evidence as written by an earlier version, without the slots
-    of undone advice (``COMPLY_LEVELS + 3`` values) or of the way it is led (``+ 9``), with
-    them as a session starts them (none taken, none undone, no decision yet)."""
+    of undone advice (``COMPLY_LEVELS + 3`` values), of the way it is led (``+ 9``) or of the
+    advice budget (``+ 11``), with them as a session starts them (none taken, none undone, no
+    decision yet, one piece saved)."""
     full = compliance_state()
     if not COMPLY_LEVELS + 3 <= len(comply) < len(full):
         return comply
     return [*comply, *full[len(comply) :]]
+
+
+def upgraded_evidence(loglik: list[float], n_goals: int) -> list[float]:
+    """A session's evidence per model as written before the lost model LA (``N_LOST + 3 G``
+    sums), with LA's: the open-moves model LO's, the nearest of the lost models to it."""
+    if len(loglik) != N_LOST + 3 * n_goals:
+        return loglik
+    return [*loglik, loglik[1]]
 
 
 def compliance_below(levels: list[float], bound: float) -> float:
@@ -633,7 +679,7 @@ class GuideAdvisor(Advisor):
         self.decisions = 0
         self.advice_count = 0
         self.benefit = 0.0
-        self._loglik = [0.0] * (N_LOST + 3 * self.guide.n_goals)
+        self._loglik = [0.0] * (N_LOST + 3 * self.guide.n_goals + 1)  # LA's last
         self.alive = [True] * self.guide.n_goals
         self.doubt = [0] * self.guide.n_goals  # SET_ASIDE, BROUGHT_BACK or 0 (see rule_out)
         self._target = -1
@@ -698,9 +744,14 @@ class GuideAdvisor(Advisor):
         lam, slack = self._lam, self.slack
         ll = self._loglik
         lo = self._lost_open(state)[action]
-        ll[0] = lam * ll[0] + math.log(0.25)
-        ll[1] = lam * ll[1] + math.log(lo)
         advised = state == self._last
+        l4, lo_, la = 0.25, lo, self._lost_ahead(state)[action]
+        if advised:  # lost or not, it takes the advice or its own way, half each
+            took = self._last_advice[action]
+            l4, lo_, la = 0.5 * (l4 + took), 0.5 * (lo_ + took), 0.5 * (la + took)
+        ll[0] = lam * ll[0] + math.log(l4)
+        ll[1] = lam * ll[1] + math.log(lo_)
+        ll[-1] = lam * ll[-1] + math.log(la)
         self._observe_compliance(state, advised, action)
         for hand in range(2):
             ind = 1.0 if action == g.wall(state, self._heading, hand) else 0.0
@@ -804,9 +855,26 @@ class GuideAdvisor(Advisor):
             comply[HELD] = 1.0
         elif low < RELEASE:  # it takes advice (again)
             comply[HELD] = 0.0
+        # a piece not taken by one that takes only some is given back to the budget
+        if not took and compliance_below(comply[:n], PARTLY) >= 0.5:
+            comply[SAVED] = min(ADVICE_BURST, comply[SAVED] + 1.0)
 
     def _lost_open(self, s: int) -> list[float]:
         o = self.guide.open_policy(s)
+        return [(1.0 - LOST_BUMP) * o[a] + LOST_BUMP / 4.0 for a in range(N_ACTIONS)]
+
+    def _lost_ahead(self, s: int) -> list[float]:
+        """la(. | s), LA's move: uniform over the open moves but back (against the heading)
+        where another is open and it has moved, over the open moves otherwise."""
+        g, h = self.guide, self._heading
+        o = g.open_policy(s)
+        n = int(g.n_open[s])
+        if h >= 0 and n > 1 and int(g.next_state[s, (h + 2) % N_ACTIONS]) != s:
+            back = (h + 2) % N_ACTIONS
+            o = [
+                1.0 / (n - 1) if a != back and int(g.next_state[s, a]) != s else 0.0
+                for a in range(N_ACTIONS)
+            ]
         return [(1.0 - LOST_BUMP) * o[a] + LOST_BUMP / 4.0 for a in range(N_ACTIONS)]
 
     def _alive(self) -> list[bool]:
@@ -814,16 +882,17 @@ class GuideAdvisor(Advisor):
 
     def model_posterior(self) -> list[float]:
         """P(k | H): L4, LO, WL, WR, then D4_g, DO_g, C_g per destination (0 for those ruled
-        out)."""
+        out), then LA."""
         alive = self._alive()
         n_alive = sum(alive)
-        lw_lost = math.log(self.p_lost / 4.0)
+        lw_lost = math.log(self.p_lost / (N_LOST + 1.0))
         lw_dir = math.log((1.0 - self.p_lost) / (3.0 * n_alive))
         ll = self._loglik
         z = [ll[k] + lw_lost for k in range(N_LOST)]
         for i, on in enumerate(alive):
             for j in range(3):
                 z.append(ll[N_LOST + 3 * i + j] + lw_dir if on else -math.inf)
+        z.append(ll[-1] + lw_lost)
         mx = max(z)
         e = [0.0 if v == -math.inf else (1.0 if v == mx else math.exp(v - mx)) for v in z]
         tot = 0.0
@@ -836,7 +905,7 @@ class GuideAdvisor(Advisor):
         post = self.model_posterior()
         alive = self._alive()
         n_alive = sum(alive)
-        lost = post[0] + post[1] + post[2] + post[3]
+        lost = post[0] + post[1] + post[2] + post[3] + post[-1]
         return [
             (cell, self._p_goal(post, i) + lost / n_alive if alive[i] else 0.0, not self.alive[i])
             for i, cell in enumerate(self.guide.goals)
@@ -852,7 +921,7 @@ class GuideAdvisor(Advisor):
         g = self.guide
         post = self.model_posterior()
         alive = self._alive()
-        lost = post[0] + post[1] + post[2] + post[3]
+        lost = post[0] + post[1] + post[2] + post[3] + post[-1]
         pis = [g.policy(i, state) if alive[i] else None for i in range(g.n_goals)]
         cs = [g.compass(i, state) if alive[i] else None for i in range(g.n_goals)]
         pcs = [g.compass_route(i, state) if alive[i] else None for i in range(g.n_goals)]
@@ -873,6 +942,7 @@ class GuideAdvisor(Advisor):
                     pick = a
             pi_t = [1.0 if a == pick else 0.0 for a in range(N_ACTIONS)]
         lo = self._lost_open(state)
+        la = self._lost_ahead(state)
         wl, wr = g.wall(state, self._heading, 0), g.wall(state, self._heading, 1)
         slack, spread = self.slack, self.spread
         theta = [0.0, 0.0, 0.0, 0.0]
@@ -883,6 +953,7 @@ class GuideAdvisor(Advisor):
             m = post[0] * 0.25 + post[1] * lo[a]
             m += post[2] * ((1.0 - slack) * (1.0 if a == wl else 0.0) + slack * lo[a])
             m += post[3] * ((1.0 - slack) * (1.0 if a == wr else 0.0) + slack * lo[a])
+            m += post[-1] * la[a]
             for i in range(g.n_goals):
                 pi, c, pc = pis[i], cs[i], pcs[i]
                 if pi is not None and c is not None and pc is not None:
@@ -915,9 +986,21 @@ class GuideAdvisor(Advisor):
         if len(self._run) > PURPOSE_WALK + 1:
             del self._run[0]
         allowed = allowed and not self.purposeful  # it walks a way of its own
+        # the advice budget: a piece more saved each 1 / ADVICE_RATE decisions, the value
+        # divided by the price of the pieces saved
+        saved = min(ADVICE_BURST, self._comply[SAVED] + ADVICE_RATE)
+        self._comply[SAVED] = saved
+        ruled = post[2] + post[3]  # one with a rule of its own: a hand on the wall, the compass
+        for i in range(g.n_goals):
+            ruled += post[N_LOST + 3 * i + 2]
+        free = ruled >= 0.5  # its detours are not held to the budget (paid for afterwards)
+        if saved >= 1.0 and not free:
+            kl = kl / (ADVICE_BURST / saved) ** ADVICE_POWER
+        allowed = allowed and (saved >= 1.0 or free)
         advise = kl >= self.kappa and self.advice_count < self.cap and allowed
         self._last = state if advise else -1
         if advise:
+            self._comply[SAVED] = saved - 1.0
             self._last_advice = row
             self._run = [state]
         return self.record(state, advise, row, kl, 1.0 - lost)

@@ -583,3 +583,55 @@ def test_a_visitor_walking_the_way_it_would_be_led_is_led_on() -> None:
             longest = max(longest, on)
             assert not (on and adv.purposeful)  # type: ignore[attr-defined]
     assert longest > guide.PURPOSE_RUN
+
+
+def test_a_lost_walker_that_takes_every_piece_is_still_taken_for_lost_and_on_a_budget() -> None:
+    """A corridor walker (never turns back but in a dead end) that takes every piece of
+    advice, never arriving: taking a piece is no evidence of being on one's way (every model,
+    lost ones included, takes advice half the time), and the lost model LA explains its
+    moves, so guide holds it for lost nearly all the time (the rule before: two thirds of
+    the time, advised at 53 moves in 100). At kappa 0.5 and at kappa 0 (advice wherever it
+    helps) the budget gives it at most one piece in four decisions, one more at the start."""
+    d = generate_building_domain(96, 96, 7)
+    prior, goal_priors = train_goal_priors(d, np.random.default_rng(0), "start", 10, 1.0)
+    tables, gmap = AdviceTables.paper(prior.theta()), GuideMap.of(d, goal_priors)
+    for kappa in (0.5, 0.0):
+        adv = make_advisor("guide", tables, kappa, 300, StrategyParams(), goal_priors, gmap)
+        rng = np.random.default_rng(0)
+        walker = make_explorer("corridor", d)
+        walker.reset(d.goals[0], rng)
+        dec, s, lost = adv.start(d.start), d.start, []
+        for _ in range(1000):
+            a = walker.act(s, rng, np.array(dec.advice) if dec.advise else None)
+            s2 = int(d.next_state[s, a])
+            walker.observe(s, a, s2)
+            dec = adv.observe(s, a, s2)
+            s = s2
+            lost.append(dec.p_normal < 0.5)
+        assert np.mean(lost) >= 0.95
+        assert adv.advice_count <= 1 + adv.decisions / 4
+        assert adv.advice_count >= adv.decisions / 4 - 8  # the budget, not kappa, holds it
+
+
+def test_pieces_a_visitor_does_not_take_are_given_back_to_its_budget() -> None:
+    """A random walker that takes a piece of advice half the time: guide learns that it takes
+    only some (compliance below PARTLY more likely than not) and gives the pieces it does not
+    take back to the budget, so it is advised more than one move in four while the pieces it
+    takes stay within the budget."""
+    d = generate_building_domain(96, 96, 7)
+    prior, goal_priors = train_goal_priors(d, np.random.default_rng(0), "start", 10, 1.0)
+    adv = make_advisor("guide", AdviceTables.paper(prior.theta()), 0.5, 300, StrategyParams(),
+                       goal_priors, GuideMap.of(d, goal_priors))  # fmt: skip
+    rng = np.random.default_rng(1)
+    walker = make_explorer("random", d)
+    walker.reset(d.goals[0], rng)
+    dec, s, taken = adv.start(d.start), d.start, 0
+    for _ in range(1000):
+        take = dec.advise and rng.random() < 0.5
+        a = walker.act(s, rng, np.array(dec.advice) if take else None)
+        taken += take and a == int(np.argmax(np.asarray(dec.advice)))
+        s2 = int(d.next_state[s, a])
+        dec = adv.observe(s, a, s2)
+        s = s2
+    assert adv.advice_count > 1 + adv.decisions / 3
+    assert taken <= 1 + adv.decisions / 4

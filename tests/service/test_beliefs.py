@@ -70,16 +70,17 @@ def test_a_paper_session_that_looks_lost_reads_bad(client: TestClient) -> None:
 
 
 def led_walk(
-    client: TestClient, domain: str, moves: int, **body: Any
+    client: TestClient, domain: str, moves: int, bumps: int = 6, **body: Any
 ) -> tuple[str, dict[str, str], list[dict[str, Any]]]:
-    """A guide session (kappa 0: advice wherever it helps) whose walker bumps into walls for
-    a while, then follows the advice it is given: (id, auth, every one-event answer)."""
+    """A guide session (kappa 0: advice wherever it helps, a piece in four decisions at most)
+    whose walker bumps into walls for its first ``bumps`` moves, then follows the advice it
+    is given: (id, auth, every one-event answer)."""
     sid, auth, created = open_session(client, domain, strategy="guide", kappa=0.0, **body)
     answers = [created["decision"]]
     cell = created["decision"]["state"]
     for i in range(moves):
         last = answers[-1]
-        if i < 6 or not last["advise"]:
+        if i < bumps or not last["advise"]:
             a = "SW"[i % 2]  # the start [5, 1] has walls south and west
         else:
             a = max("NESW", key=lambda k: last["advice"][k])
@@ -107,7 +108,7 @@ def test_guide_s_decisions_name_the_destination_their_advice_leads_to(
 def test_guide_reads_a_lost_walker_it_leads_as_neutral_and_one_it_cannot_as_bad(
     client: TestClient, named: str
 ) -> None:
-    sid, auth, answers = led_walk(client, named, 8)
+    sid, auth, answers = led_walk(client, named, 24, bumps=22)
     seen = summary(client, sid, auth)
     p = seen["p_normal"]
     got = seen["beliefs"]

@@ -33,7 +33,7 @@ import numpy.typing as npt
 
 from app import strategies
 from app.advice.advisor import Advisor, Decision, DecisionBatch
-from app.advice.guide import GuideAdvisor, upgraded_compliance
+from app.advice.guide import GuideAdvisor, upgraded_compliance, upgraded_evidence
 from app.advice.models import AdviceTables
 from app.domain.grid import GridDomain
 from app.service.data.domains import DomainState
@@ -145,8 +145,9 @@ def restore_advisor(state: dict[str, Any], domain: DomainState, table_key: str) 
     adv = entry.service_advisor(domain.data(table_key), settings)
     for name, v in slots.items():
         setattr(adv, name, _unvalue(v))
-    if isinstance(adv, GuideAdvisor):  # written before undone advice was followed
-        adv._comply = upgraded_compliance(adv._comply)
+    if isinstance(adv, GuideAdvisor):  # written before undone advice was followed, the
+        adv._comply = upgraded_compliance(adv._comply)  # advice budget or the lost model LA
+        adv._loglik = upgraded_evidence(adv._loglik, adv.guide.n_goals)
     if isinstance(adv, KeyedWindow):
         try:
             adv.restore_window(state)

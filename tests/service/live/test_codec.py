@@ -278,22 +278,22 @@ def test_a_guide_session_saved_before_compliance_was_learned_loads_with_the_prio
     assert len(old.observe_batch(*moves)) == 20
 
 
-@pytest.mark.parametrize("kept", [COMPLY_LEVELS + 3, COMPLY_LEVELS + 9])
+@pytest.mark.parametrize("kept", [COMPLY_LEVELS + 3, COMPLY_LEVELS + 9, COMPLY_LEVELS + 11])
 def test_a_guide_session_saved_with_fewer_compliance_slots_loads(
     domain: DomainState, kept: int
 ) -> None:
     """A guide session whose compliance evidence was written by an earlier version, without
-    the slots of undone advice (levels, chance, since, held only: ``COMPLY_LEVELS + 3``) or
+    the slots of undone advice (levels, chance, since, held only: ``COMPLY_LEVELS + 3``),
     without those of the way it is led (the last decision's advice, whether it walks it:
-    ``+ 9``), loads with them as a session starts them and decides as the same session with
-    them so does."""
+    ``+ 9``) or without the advice budget's (``+ 11``), loads with them as a session starts
+    them and decides as the same session with them so does."""
     reg = SessionRegistry(Limits(100), 3600.0, replay_steps=32)
     session, _ = reg.create(domain, SessionSettings.of("guide", 0.5, 40, params_for("guide")))
     reg.observe_batch(session, walk(domain, domain.domain.start, 30, np.random.default_rng(3)))
     state = advisor_state(session.advisor)
     comply = list(state["slots"]["_comply"])
     fresh = compliance_state()
-    assert len(comply) == len(fresh) == COMPLY_LEVELS + 11
+    assert len(comply) == len(fresh) == COMPLY_LEVELS + 12
     state["slots"]["_comply"] = [*comply[:kept]]
     old = restore_advisor(state, domain, "*")
     assert old._comply == [*comply[:kept], *fresh[kept:]]  # type: ignore[attr-defined]
@@ -302,6 +302,28 @@ def test_a_guide_session_saved_with_fewer_compliance_slots_loads(
     moves = walk(domain, int(domain.domain.start), 20, np.random.default_rng(4))
     got, want = old.observe_batch(*moves), same.observe_batch(*moves)
     assert got.advise.tolist() == want.advise.tolist() and got.kl.tolist() == want.kl.tolist()
+
+
+def test_a_guide_session_saved_before_the_lost_model_la_loads(domain: DomainState) -> None:
+    """A guide session written with a sum per model but LA's (the version before it: 4 + 3 G)
+    loads with LA's sum the open-moves model's, and decides as the same session whose LA sum
+    is that."""
+    reg = SessionRegistry(Limits(100), 3600.0, replay_steps=32)
+    session, _ = reg.create(domain, SessionSettings.of("guide", 0.5, 40, params_for("guide")))
+    reg.observe_batch(session, walk(domain, domain.domain.start, 30, np.random.default_rng(3)))
+    state = advisor_state(session.advisor)
+    loglik = list(state["slots"]["_loglik"])
+    n_goals = len(domain.domain.goals)
+    assert len(loglik) == 4 + 3 * n_goals + 1
+    state["slots"]["_loglik"] = loglik[:-1]
+    old = restore_advisor(state, domain, "*")
+    assert old._loglik == [*loglik[:-1], loglik[1]]
+    same = restore_advisor(advisor_state(session.advisor), domain, "*")
+    same._loglik[-1] = loglik[1]
+    moves = walk(domain, int(domain.domain.start), 20, np.random.default_rng(4))
+    got, want = old.observe_batch(*moves), same.observe_batch(*moves)
+    assert got.advise.tolist() == want.advise.tolist() and got.kl.tolist() == want.kl.tolist()
+    assert old._loglik == same._loglik
 
 
 def test_a_guide_session_saved_before_destinations_were_set_aside_loads(
