@@ -78,9 +78,9 @@ planned again when T is ruled out. With P(lost | H) the sum over L4, LO, WL, WR,
   exceptions: one taken for a walker with a rule of its own (a hand on the wall or the
   compass: P(WL | H) + P(WR | H) + P(C_g | H) summed over g at least 1/2) is shown its
   detours whole, at no price and into debt (``t`` below 0, paid back before any more
-  advice), for it goes back to its rule and a detour given by halves is undone; and a piece not taken by one that takes
-  only some (P(compliance < PARTLY) at least 1/2) is given back, so the budget counts the
-  pieces taken.
+  advice), for it goes back to its rule and a detour given by halves is undone; and a piece
+  not taken by one that takes only some (P(compliance < PARTLY) at least 1/2) is given back,
+  so the budget counts the pieces taken.
 
 How far this explorer takes advice is learned per session. After each piece, whether its
 move was the advised one is weighed against the chance of that move anyway (``m``, P(A | s, H)
