@@ -633,13 +633,21 @@ def guide_append(
         guide_fill_rows(gmap, goals, s, rows)
     guide_open(next_state, gmap[1], s, pi)
     lo = (1.0 - bump) * pi[a] + bump / 4.0
-    l4, lo_, la = 0.25, lo, guide_ahead(next_state, gmap[1], s, heading, a, bump)
-    if advised:  # lost or not, it takes the advice or its own way, half each
-        l4, lo_, la = 0.5 * (l4 + advice[a]), 0.5 * (lo_ + advice[a]), 0.5 * (la + advice[a])
-    ll[0] = lam * ll[0] + math.log(l4)
-    ll[1] = lam * ll[1] + math.log(lo_)
-    last = ll.shape[0] - 1  # LA
-    ll[last] = lam * ll[last] + math.log(la)
+    # LO, LA and LS: their rule (bump 0), with a bump now and then
+    o_lo = pi[a]
+    o_la = guide_ahead(next_state, gmap[1], s, heading, a, 0.0)
+    o_ls = guide_straight(next_state, gmap[1], s, heading, a, 0.0)
+    if advised:  # lost or not, it takes the advice or its own rule, half each
+        o_lo, o_la, o_ls = (
+            0.5 * (o_lo + advice[a]),
+            0.5 * (o_la + advice[a]),
+            0.5 * (o_ls + advice[a]),
+        )
+    ll[0] = lam * ll[0] + math.log(0.25)  # L4: any action, advised or not
+    ll[1] = lam * ll[1] + math.log((1.0 - bump) * o_lo + bump / 4.0)
+    last = ll.shape[0] - 1  # LA, then LS
+    ll[last - 1] = lam * ll[last - 1] + math.log((1.0 - bump) * o_la + bump / 4.0)
+    ll[last] = lam * ll[last] + math.log((1.0 - bump) * o_ls + bump / 4.0)
     for w in range(2):  # the left-hand (w = 0) and right-hand wall followers
         rule = guide_wall(next_state, s, heading, w)
         ind = 1.0 if a == rule else 0.0
@@ -679,6 +687,17 @@ def guide_ahead(
     else:
         o = 1.0 / n if next_state[s, a] != s else 0.0
     return (1.0 - bump) * o + bump / 4.0
+
+
+@njit(cache=True, inline="always")
+def guide_straight(
+    next_state: IntArray, n_open: IntArray, s: int, heading: int, a: int, bump: float
+) -> float:  # pragma: no cover - compiled
+    """``GuideAdvisor._lost_straight(s)[a]``: LS's move, on along ``heading`` where it is
+    open, else LA's (:func:`guide_ahead`)."""
+    if heading >= 0 and next_state[s, heading] != s:
+        return (1.0 - bump) * (1.0 if a == heading else 0.0) + bump / 4.0
+    return guide_ahead(next_state, n_open, s, heading, a, bump)
 
 
 @njit(cache=True)
@@ -909,7 +928,7 @@ def guide_decide(
     compared with kappa, 1 - P(lost | H), the target, whether advice may be given at all: not
     to an explorer that ignores it, advice held back, within ``BACKOFF`` decisions of the
     last piece).
-    ``heading``: the last move that moved (-1: none). ``scratch`` is (5 + 3 G + 12 G + 4,);
+    ``heading``: the last move that moved (-1: none). ``scratch`` is (6 + 3 G + 12 G + 4,);
     ``comply`` as :func:`guide_observe_compliance` keeps it; ``run`` (:func:`guide_run_push`)
     the states decided for since the last piece of advice, ``s`` added here; ``fresh``: no
     advice yet this session. A caller that advises restarts ``run`` and spends a piece
@@ -918,8 +937,8 @@ def guide_decide(
     backoff = params[10]
     dist = gmap[3]
     n_goals = alive.shape[0]
-    n_models = 4 + 3 * n_goals + 1  # LA last
-    la_k = n_models - 1
+    n_models = 4 + 3 * n_goals + 2  # LA and LS last
+    la_k, ls_k = n_models - 2, n_models - 1
     any_alive = False
     for g in range(n_goals):
         any_alive = any_alive or alive[g]
@@ -928,7 +947,7 @@ def guide_decide(
         if alive[g] or not any_alive:
             n_alive += 1
     # P(k | H)
-    lw_lost = math.log(p_lost / 5.0)
+    lw_lost = math.log(p_lost / 6.0)
     lw_dir = math.log((1.0 - p_lost) / (3.0 * n_alive))
     post = scratch[:n_models]
     mx = -math.inf
@@ -936,9 +955,10 @@ def guide_decide(
         post[k] = ll[k] + lw_lost
         if post[k] > mx:
             mx = post[k]
-    post[la_k] = ll[la_k] + lw_lost
-    if post[la_k] > mx:
-        mx = post[la_k]
+    for k in range(la_k, n_models):
+        post[k] = ll[k] + lw_lost
+        if post[k] > mx:
+            mx = post[k]
     for k in range(4, la_k):
         g = (k - 4) // 3
         if alive[g] or not any_alive:
@@ -954,7 +974,7 @@ def guide_decide(
         tot += post[k]
     for k in range(n_models):
         post[k] = post[k] / tot
-    lost = post[0] + post[1] + post[2] + post[3] + post[la_k]
+    lost = post[0] + post[1] + post[2] + post[3] + post[la_k] + post[ls_k]
     # each destination's policies here, and the target
     rows = guide_rows(scratch, n_goals)  # pi_g and c_g for every one (guide_append reads them)
     guide_fill_rows(gmap, goals, s, rows)
@@ -990,6 +1010,7 @@ def guide_decide(
         m += post[2] * ((1.0 - slack) * (1.0 if a == wl else 0.0) + slack * lo)
         m += post[3] * ((1.0 - slack) * (1.0 if a == wr else 0.0) + slack * lo)
         m += post[la_k] * guide_ahead(gmap[0], gmap[1], s, heading, a, bump)
+        m += post[ls_k] * guide_straight(gmap[0], gmap[1], s, heading, a, bump)
         for g in range(n_goals):
             if alive[g] or not any_alive:
                 k = 4 + 3 * g
@@ -1003,7 +1024,8 @@ def guide_decide(
         if th > 0.0:
             kl += th * (math.log(th) - math.log(m))
     if target >= 0:  # the value: weighted by what a lost explorer's move costs here
-        kl = kl * (1.0 + lost * guide_drift(gmap, target, s))
+        d = guide_drift(gmap, target, s)  # over the open moves; L4's over all four
+        kl = kl * (1.0 + (lost - post[0]) * d + post[0] * (d * gmap[1][s] / 4.0))
     kl = kl if kl > 0.0 else 0.0
     best = 0  # the advice: theta's favourite move
     for a in range(4):
@@ -1138,15 +1160,15 @@ def guide_buffers(
     n_goals: int,
 ) -> tuple[FloatArray, FloatArray, FloatArray]:  # pragma: no cover - compiled
     """What :func:`guide_decide` and :func:`guide_append` need besides the session's state:
-    its scratch (5 + 3 G + 12 G + 4,), ``pi`` (4,) and ``theta`` (4,)."""
-    return np.empty(5 + 15 * n_goals + 4), np.empty(4), np.empty(4)
+    its scratch (6 + 3 G + 12 G + 4,), ``pi`` (4,) and ``theta`` (4,)."""
+    return np.empty(6 + 15 * n_goals + 4), np.empty(4), np.empty(4)
 
 
 @njit(cache=True)
 def guide_rows(scratch: FloatArray, n_goals: int) -> FloatArray:  # pragma: no cover - compiled
     """The rows of :func:`guide_decide`'s scratch holding every destination's pi_g, then its
     c_g, at the state of the last decision: (2 G, 4), what :func:`guide_append` reads."""
-    start = 5 + 3 * n_goals
+    start = 6 + 3 * n_goals
     return scratch[start : start + 8 * n_goals].reshape((2 * n_goals, 4))
 
 
@@ -1488,7 +1510,7 @@ def episode(
     theta_w = np.empty(4)
     gmap, gparams, g_goals = guide
     n_dest = g_goals.shape[0] if rule == GUIDE else 0
-    g_ll = np.zeros(4 + 3 * n_dest + 1)
+    g_ll = np.zeros(4 + 3 * n_dest + 2)
     g_alive = np.ones(n_dest, dtype=np.bool_)
     g_doubt = np.zeros(n_dest, dtype=np.int64)
     g_target = -1
@@ -1626,7 +1648,7 @@ def q_learning(
     best = np.zeros(4, dtype=np.bool_)
     gmap, gparams, g_goals = guide
     n_dest = g_goals.shape[0] if rule == GUIDE else 0
-    g_ll = np.zeros(4 + 3 * n_dest + 1)
+    g_ll = np.zeros(4 + 3 * n_dest + 2)
     g_alive = np.ones(n_dest, dtype=np.bool_)
     g_doubt = np.zeros(n_dest, dtype=np.int64)
     g_target = -1

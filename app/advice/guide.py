@@ -10,6 +10,7 @@ its next action ``a`` at ``s`` (docs/ARCHITECTURE.md has the equations beside th
     LO      lost, any open move:             lo(a | s) = (1 - b) open(s, a) / n_open(s) + b/4
     WL, WR  lost, a hand on the wall:        (1 - slack) [a = w(s, h)]' + slack lo(a | s)
     LA      lost, never turning back:        la(a | s) = (1 - b) ahead(s, a) + b/4
+    LS      lost, straight on:               (1 - b) [a = h] + b/4 where h is open, else la
     D4_g    on its way to destination g:     (1 - slack) pi_g(a | s)' + slack/4
     DO_g    the same, never into a wall:     (1 - slack) pi_g(a | s)' + slack lo(a | s)
     C_g     heading for g as the crow flies: (1 - slack) c_g(a | s)' + slack lo(a | s)
@@ -20,7 +21,8 @@ its next action ``a`` at ``s`` (docs/ARCHITECTURE.md has the equations beside th
   open and it has moved, over the open moves otherwise: a lost walker that goes on along
   corridors and streets (the corridor walker), which LO explains poorly (it expects a step
   back as often as any other) and the destinations' models explained instead, a stretch of
-  street at a time.
+  street at a time. LS goes straight on until a wall, then as LA (the straight walker): with
+  LA only, advice to go on as it goes is worth a piece in every room.
 * ``pi_g``: uniform over the moves that shorten the BFS distance to ``g``, each weighted by
   1 + the experts' goal-``g`` count of (s, a), so that among shortest moves the experts'
   routes are preferred; at ``g`` itself, or where ``g`` cannot be reached, uniform over the
@@ -39,7 +41,7 @@ its next action ``a`` at ``s`` (docs/ARCHITECTURE.md has the equations beside th
 The evidence fades with time constant W, the session's window::
 
     L_k  <-  lam L_k + log P(a | s, k)            lam = 1 - 1/W
-    P(k | H)  ~  exp(L_k) P(k)                    P(L4) = ... = P(LA) = p_lost / 5,
+    P(k | H)  ~  exp(L_k) P(k)                    P(L4) = ... = P(LS) = p_lost / 6,
                                                   3 n_alive P(D4_g) = ... = 1 - p_lost
 
 A destination is ruled out once the explorer stood on it and went on (its task would have
@@ -51,12 +53,13 @@ set aside come back, and a second visit rules one out. Once every one is ruled o
 explorer is bound somewhere else (it passed every destination): nothing more is advised.
 A lost explorer is led to a *target* T: the first destination of the shortest walk from
 where it is through every destination not ruled out (it could be going to any of them),
-planned again when T is ruled out. With P(lost | H) the sum over L4, LO, WL, WR, LA::
+planned again when T is ruled out. With P(lost | H) the sum over L4, LO, WL, WR, LA, LS::
 
     theta_s     = P(lost | H) r_T(s) + sum_g [P(D4_g | H) + P(DO_g | H)] pi_g(s)
                                      + sum_g P(C_g | H) pc_g(s)
     P(A | s, H) = sum_k P(k | H) P(A | s, k)
     value       = KL[theta_s || P(A | s, H)] (1 + P(lost | H) delta_T(s)) / price
+                  (with L4's share of P(lost | H) weighted by delta4_T(s) instead)
     advise  iff  value >= kappa and t >= 1; the advice: (1 - spread) [a = argmax theta_s]
                                                          + spread/4
     price       = (ADVICE_BURST / t) ** ADVICE_POWER    t: pieces saved of the budget
@@ -67,7 +70,10 @@ planned again when T is ruled out. With P(lost | H) the sum over L4, LO, WL, WR,
   its own moves first.
 * ``delta_T(s)``: how far a random open move from ``s`` takes a lost explorer from T, on
   average (BFS distance); advice saves 1 + delta_T moves where it saves 1 in the open, so the
-  paper's KL (eq. (3)'s stand-in for the benefit) is weighted by it.
+  paper's KL (eq. (3)'s stand-in for the benefit) is weighted by it. ``delta4_T(s)``, the
+  same over all four actions (a bump changes nothing: ``delta_T n_open / 4``), for L4: where
+  every open move leads towards T a random open move costs nothing, but one stuck against
+  the wall there gains a move a piece (with ``delta_T`` for every lost model its value was 0).
 * the advice budget: ``t`` grows by ``ADVICE_RATE`` (1/4) each decision up to
   ``ADVICE_BURST`` (8), starts at 1 and a piece spends 1, so a session gets at most one piece
   in four decisions (and one more), whatever kappa; the price (1 with the budget full,
@@ -163,8 +169,8 @@ from app.domain.grid import N_ACTIONS, GridDomain, bfs_distances_each, compass_d
 
 #: probability mass the open-moves lost model gives to bumping into walls
 LOST_BUMP = 0.02
-#: the lost models before the destinations' in a session's evidence: L4, LO, WL, WR (LA,
-#: the fifth, comes after the destinations', so that sessions written before it read on)
+#: the lost models before the destinations' in a session's evidence: L4, LO, WL, WR (LA and
+#: LS come after the destinations', so that sessions written before them read on)
 N_LOST = 4
 #: most destinations a tour is planned through exactly (2^n n^2 steps; the nearest beyond)
 MAX_TOUR = 10
@@ -599,11 +605,12 @@ def upgraded_compliance(comply: list[float]) -> list[float]:
 
 
 def upgraded_evidence(loglik: list[float], n_goals: int) -> list[float]:
-    """A session's evidence per model as written before the lost model LA (``N_LOST + 3 G``
-    sums), with LA's: the open-moves model LO's, the nearest of the lost models to it."""
+    """A session's evidence per model as written before the lost models LA and LS
+    (``N_LOST + 3 G`` sums), with theirs: the open-moves model LO's, the nearest of the lost
+    models to them."""
     if len(loglik) != N_LOST + 3 * n_goals:
         return loglik
-    return [*loglik, loglik[1]]
+    return [*loglik, loglik[1], loglik[1]]
 
 
 def compliance_below(levels: list[float], bound: float) -> float:
@@ -679,7 +686,7 @@ class GuideAdvisor(Advisor):
         self.decisions = 0
         self.advice_count = 0
         self.benefit = 0.0
-        self._loglik = [0.0] * (N_LOST + 3 * self.guide.n_goals + 1)  # LA's last
+        self._loglik = [0.0] * (N_LOST + 3 * self.guide.n_goals + 2)  # LA's, LS's last
         self.alive = [True] * self.guide.n_goals
         self.doubt = [0] * self.guide.n_goals  # SET_ASIDE, BROUGHT_BACK or 0 (see rule_out)
         self._target = -1
@@ -745,13 +752,17 @@ class GuideAdvisor(Advisor):
         ll = self._loglik
         lo = self._lost_open(state)[action]
         advised = state == self._last
-        l4, lo_, la = 0.25, lo, self._lost_ahead(state)[action]
-        if advised:  # lost or not, it takes the advice or its own way, half each
+        # LO, LA and LS: their rule, with a bump now and then
+        o_lo = self.guide.open_policy(state)[action]
+        o_la, o_ls = self._ahead(state)[action], self._straight(state)[action]
+        if advised:  # lost or not, it takes the advice or its own rule, half each
             took = self._last_advice[action]
-            l4, lo_, la = 0.5 * (l4 + took), 0.5 * (lo_ + took), 0.5 * (la + took)
-        ll[0] = lam * ll[0] + math.log(l4)
-        ll[1] = lam * ll[1] + math.log(lo_)
-        ll[-1] = lam * ll[-1] + math.log(la)
+            o_lo, o_la, o_ls = 0.5 * (o_lo + took), 0.5 * (o_la + took), 0.5 * (o_ls + took)
+        bump = LOST_BUMP / 4.0
+        ll[0] = lam * ll[0] + math.log(0.25)  # L4: any action, advised or not
+        ll[1] = lam * ll[1] + math.log((1.0 - LOST_BUMP) * o_lo + bump)
+        ll[-2] = lam * ll[-2] + math.log((1.0 - LOST_BUMP) * o_la + bump)
+        ll[-1] = lam * ll[-1] + math.log((1.0 - LOST_BUMP) * o_ls + bump)
         self._observe_compliance(state, advised, action)
         for hand in range(2):
             ind = 1.0 if action == g.wall(state, self._heading, hand) else 0.0
@@ -863,18 +874,29 @@ class GuideAdvisor(Advisor):
         o = self.guide.open_policy(s)
         return [(1.0 - LOST_BUMP) * o[a] + LOST_BUMP / 4.0 for a in range(N_ACTIONS)]
 
-    def _lost_ahead(self, s: int) -> list[float]:
-        """la(. | s), LA's move: uniform over the open moves but back (against the heading)
+    def _ahead(self, s: int) -> list[float]:
+        """LA's rule at ``s``: uniform over the open moves but back (against the heading)
         where another is open and it has moved, over the open moves otherwise."""
         g, h = self.guide, self._heading
-        o = g.open_policy(s)
         n = int(g.n_open[s])
         if h >= 0 and n > 1 and int(g.next_state[s, (h + 2) % N_ACTIONS]) != s:
             back = (h + 2) % N_ACTIONS
-            o = [
+            return [
                 1.0 / (n - 1) if a != back and int(g.next_state[s, a]) != s else 0.0
                 for a in range(N_ACTIONS)
             ]
+        return g.open_policy(s)
+
+    def _straight(self, s: int) -> list[float]:
+        """LS's rule at ``s``: on along the heading where it is open, else LA's."""
+        g, h = self.guide, self._heading
+        if h >= 0 and int(g.next_state[s, h]) != s:
+            return [1.0 if a == h else 0.0 for a in range(N_ACTIONS)]
+        return self._ahead(s)
+
+    @staticmethod
+    def _bumped(o: list[float]) -> list[float]:
+        """A lost model's rule ``o`` with LOST_BUMP spread over the four actions."""
         return [(1.0 - LOST_BUMP) * o[a] + LOST_BUMP / 4.0 for a in range(N_ACTIONS)]
 
     def _alive(self) -> list[bool]:
@@ -882,16 +904,17 @@ class GuideAdvisor(Advisor):
 
     def model_posterior(self) -> list[float]:
         """P(k | H): L4, LO, WL, WR, then D4_g, DO_g, C_g per destination (0 for those ruled
-        out), then LA."""
+        out), then LA and LS."""
         alive = self._alive()
         n_alive = sum(alive)
-        lw_lost = math.log(self.p_lost / (N_LOST + 1.0))
+        lw_lost = math.log(self.p_lost / (N_LOST + 2.0))
         lw_dir = math.log((1.0 - self.p_lost) / (3.0 * n_alive))
         ll = self._loglik
         z = [ll[k] + lw_lost for k in range(N_LOST)]
         for i, on in enumerate(alive):
             for j in range(3):
                 z.append(ll[N_LOST + 3 * i + j] + lw_dir if on else -math.inf)
+        z.append(ll[-2] + lw_lost)
         z.append(ll[-1] + lw_lost)
         mx = max(z)
         e = [0.0 if v == -math.inf else (1.0 if v == mx else math.exp(v - mx)) for v in z]
@@ -905,7 +928,7 @@ class GuideAdvisor(Advisor):
         post = self.model_posterior()
         alive = self._alive()
         n_alive = sum(alive)
-        lost = post[0] + post[1] + post[2] + post[3] + post[-1]
+        lost = post[0] + post[1] + post[2] + post[3] + post[-2] + post[-1]
         return [
             (cell, self._p_goal(post, i) + lost / n_alive if alive[i] else 0.0, not self.alive[i])
             for i, cell in enumerate(self.guide.goals)
@@ -921,7 +944,7 @@ class GuideAdvisor(Advisor):
         g = self.guide
         post = self.model_posterior()
         alive = self._alive()
-        lost = post[0] + post[1] + post[2] + post[3] + post[-1]
+        lost = post[0] + post[1] + post[2] + post[3] + post[-2] + post[-1]
         pis = [g.policy(i, state) if alive[i] else None for i in range(g.n_goals)]
         cs = [g.compass(i, state) if alive[i] else None for i in range(g.n_goals)]
         pcs = [g.compass_route(i, state) if alive[i] else None for i in range(g.n_goals)]
@@ -942,7 +965,7 @@ class GuideAdvisor(Advisor):
                     pick = a
             pi_t = [1.0 if a == pick else 0.0 for a in range(N_ACTIONS)]
         lo = self._lost_open(state)
-        la = self._lost_ahead(state)
+        la, ls = self._bumped(self._ahead(state)), self._bumped(self._straight(state))
         wl, wr = g.wall(state, self._heading, 0), g.wall(state, self._heading, 1)
         slack, spread = self.slack, self.spread
         theta = [0.0, 0.0, 0.0, 0.0]
@@ -953,7 +976,8 @@ class GuideAdvisor(Advisor):
             m = post[0] * 0.25 + post[1] * lo[a]
             m += post[2] * ((1.0 - slack) * (1.0 if a == wl else 0.0) + slack * lo[a])
             m += post[3] * ((1.0 - slack) * (1.0 if a == wr else 0.0) + slack * lo[a])
-            m += post[-1] * la[a]
+            m += post[-2] * la[a]
+            m += post[-1] * ls[a]
             for i in range(g.n_goals):
                 pi, c, pc = pis[i], cs[i], pcs[i]
                 if pi is not None and c is not None and pc is not None:
@@ -968,7 +992,8 @@ class GuideAdvisor(Advisor):
             if th > 0.0:
                 kl += th * (math.log(th) - math.log(m))
         if self._target >= 0:  # the value: weighted by what a lost explorer's move costs here
-            kl = kl * (1.0 + lost * g.drift(self._target, state))
+            d = g.drift(self._target, state)  # over the open moves; L4's over all four
+            kl = kl * (1.0 + (lost - post[0]) * d + post[0] * (d * int(g.n_open[state]) / 4.0))
         kl = kl if kl > 0.0 else 0.0
         best = 0  # the advice: theta's favourite move
         for a in range(N_ACTIONS):

@@ -426,14 +426,14 @@ class StreamGuide(GuideAdvisor):
     __slots__ = ()
 
     def footprint(self) -> int:
-        """Bytes the session's state can take at most: no window, but a sum per model (5 + 3G
+        """Bytes the session's state can take at most: no window, but a sum per model (6 + 3G
         Python floats in a list, 32 bytes each), a flag per destination (a list) and the
         compliance evidence (:func:`compliance_state`'s floats) and a doubt per destination
         (a list of small ints), and the states decided for since the last piece of advice (a
         list of up to PURPOSE_WALK + 1 ints, 32 bytes each)."""
         g = self.guide.n_goals
         run = (PURPOSE_WALK + 1) * 32
-        return (5 + 3 * g + len(compliance_state())) * 32 + g * 8 * 2 + 4 * 8 + run
+        return (6 + 3 * g + len(compliance_state())) * 32 + g * 8 * 2 + 4 * 8 + run
 
     def batch_slice(self) -> int:
         # compiled: about 0.45 us a decision and 0.06 us more a destination (bench_guide.py),

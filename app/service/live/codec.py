@@ -146,7 +146,7 @@ def restore_advisor(state: dict[str, Any], domain: DomainState, table_key: str) 
     for name, v in slots.items():
         setattr(adv, name, _unvalue(v))
     if isinstance(adv, GuideAdvisor):  # written before undone advice was followed, the
-        adv._comply = upgraded_compliance(adv._comply)  # advice budget or the lost model LA
+        adv._comply = upgraded_compliance(adv._comply)  # advice budget, the lost models LA, LS
         adv._loglik = upgraded_evidence(adv._loglik, adv.guide.n_goals)
     if isinstance(adv, KeyedWindow):
         try:

@@ -304,22 +304,24 @@ def test_a_guide_session_saved_with_fewer_compliance_slots_loads(
     assert got.advise.tolist() == want.advise.tolist() and got.kl.tolist() == want.kl.tolist()
 
 
-def test_a_guide_session_saved_before_the_lost_model_la_loads(domain: DomainState) -> None:
-    """A guide session written with a sum per model but LA's (the version before it: 4 + 3 G)
-    loads with LA's sum the open-moves model's, and decides as the same session whose LA sum
-    is that."""
+def test_a_guide_session_saved_before_the_lost_models_la_and_ls_loads(
+    domain: DomainState,
+) -> None:
+    """A guide session written with a sum per model but LA's and LS's (the version before
+    them: 4 + 3 G) loads with theirs the open-moves model's, and decides as the same session
+    whose LA and LS sums are that."""
     reg = SessionRegistry(Limits(100), 3600.0, replay_steps=32)
     session, _ = reg.create(domain, SessionSettings.of("guide", 0.5, 40, params_for("guide")))
     reg.observe_batch(session, walk(domain, domain.domain.start, 30, np.random.default_rng(3)))
     state = advisor_state(session.advisor)
     loglik = list(state["slots"]["_loglik"])
     n_goals = len(domain.domain.goals)
-    assert len(loglik) == 4 + 3 * n_goals + 1
-    state["slots"]["_loglik"] = loglik[:-1]
+    assert len(loglik) == 4 + 3 * n_goals + 2
+    state["slots"]["_loglik"] = loglik[:-2]
     old = restore_advisor(state, domain, "*")
-    assert old._loglik == [*loglik[:-1], loglik[1]]
+    assert old._loglik == [*loglik[:-2], loglik[1], loglik[1]]
     same = restore_advisor(advisor_state(session.advisor), domain, "*")
-    same._loglik[-1] = loglik[1]
+    same._loglik[-2:] = [loglik[1], loglik[1]]
     moves = walk(domain, int(domain.domain.start), 20, np.random.default_rng(4))
     got, want = old.observe_batch(*moves), same.observe_batch(*moves)
     assert got.advise.tolist() == want.advise.tolist() and got.kl.tolist() == want.kl.tolist()
