@@ -30,7 +30,8 @@ its next action ``a`` at ``s`` (docs/ARCHITECTURE.md has the equations beside th
 * ``c_g``: the move of someone who heads for where ``g`` is (the paper's "bug"): along the
   axis of the larger row or column difference if that way is open, else along the other axis
   if that way is open (both on a tie); where neither is, uniform over the open moves.
-* ``'``: on a move where the last decision advised, each of these explorers, lost or not,
+* ``'``: on a move where the last decision advised, each of these explorers, lost or not
+  (LO, LA and LS: their rule, in their own evidence; L4 is any action, advised or not),
   takes the advice or its own way, half each (its rule averaged with the advice): they
   follow advice, and those that have a way of their own go back to it when it stops, so a
   detour must be advised step by step. Taking a piece is thus no evidence either way of
