@@ -675,9 +675,9 @@ def guide_append(
 def guide_ahead(
     next_state: IntArray, n_open: IntArray, s: int, heading: int, a: int, bump: float
 ) -> float:  # pragma: no cover - compiled
-    """``GuideAdvisor._lost_ahead(s)[a]``: LA's move, uniform over the open moves but back
-    (against ``heading``) where another is open and it has moved, over the open moves
-    otherwise; ``bump`` spread over all four."""
+    """LA's move (``GuideAdvisor._ahead(s)[a]``, with ``bump`` spread over all four as
+    ``GuideAdvisor._bumped`` spreads LOST_BUMP): uniform over the open moves but back (against
+    ``heading``) where another is open and it has moved, over the open moves otherwise."""
     n = n_open[s]
     back = (heading + 2) % 4
     if heading >= 0 and n > 1 and next_state[s, back] != s:
@@ -693,8 +693,8 @@ def guide_ahead(
 def guide_straight(
     next_state: IntArray, n_open: IntArray, s: int, heading: int, a: int, bump: float
 ) -> float:  # pragma: no cover - compiled
-    """``GuideAdvisor._lost_straight(s)[a]``: LS's move, on along ``heading`` where it is
-    open, else LA's (:func:`guide_ahead`)."""
+    """LS's move (``GuideAdvisor._straight(s)[a]``, ``bump`` as in :func:`guide_ahead`): on
+    along ``heading`` where it is open, else LA's."""
     if heading >= 0 and next_state[s, heading] != s:
         return (1.0 - bump) * (1.0 if a == heading else 0.0) + bump / 4.0
     return guide_ahead(next_state, n_open, s, heading, a, bump)
@@ -1056,6 +1056,24 @@ def guide_decide(
         kl = kl / (params[22] / saved) ** params[23]
     allowed = allowed and (saved >= 1.0 or free)
     return kl, 1.0 - lost, target, allowed
+
+
+@njit(cache=True, inline="always")
+def guide_learner_decides(
+    gmap: GuideArrays, params: GuideParams, goals: IntArray, ll: FloatArray, alive: BoolArray,
+    target: int, heading: int, s: int, theta: FloatArray, scratch: FloatArray,
+    comply: FloatArray, run: IntArray, given: int, kappa: float,
+) -> tuple[float, float, int, bool, int]:  # pragma: no cover - compiled  # fmt: skip
+    """:func:`guide_decide` for a Q-learner's session, and the piece given if it advises
+    (:func:`guide_advised`): (value, 1 - P(lost | H), target, allowed, pieces given)."""
+    kl, p, target, allowed = guide_decide(
+        gmap, params, goals, ll, alive, target, heading, s, theta, scratch, comply, run,
+        given == 0,
+    )  # fmt: skip
+    if kl >= kappa and allowed:
+        guide_advised(params, comply, run, s)
+        given += 1
+    return kl, p, target, allowed, given
 
 
 @njit(cache=True, inline="always")
@@ -1682,13 +1700,10 @@ def q_learning(
         t = 0
         while t < max_steps:
             if rule == GUIDE:
-                kl, p, g_target, allowed = guide_decide(
+                kl, p, g_target, allowed, g_given = guide_learner_decides(
                     gmap, gparams, g_goals, g_ll, g_alive, g_target, g_heading, s, theta_w,
-                    g_scratch, g_comply, g_run, g_given == 0,
+                    g_scratch, g_comply, g_run, g_given, kappa,
                 )  # fmt: skip
-                if kl >= kappa and allowed:
-                    guide_advised(gparams, g_comply, g_run, s)
-                    g_given += 1
                 row = theta_w
             else:
                 kl, p = decide(loglik, tables, s, z)
@@ -1736,13 +1751,10 @@ def q_learning(
         if rule == GUIDE and not success and t >= max_steps:
             # the session saw the last move and decided for where it led (Advisor.observe),
             # as a session kept for the next episode remembers
-            kl, p, g_target, allowed = guide_decide(
+            _, _, g_target, _, g_given = guide_learner_decides(
                 gmap, gparams, g_goals, g_ll, g_alive, g_target, g_heading, s, theta_w,
-                g_scratch, g_comply, g_run, g_given == 0,
+                g_scratch, g_comply, g_run, g_given, kappa,
             )  # fmt: skip
-            if kl >= kappa and allowed:
-                guide_advised(gparams, g_comply, g_run, s)
-                g_given += 1
         total_steps += t
         steps_out[e] = t
         success_out[e] = success
