@@ -872,8 +872,7 @@ class GuideAdvisor(Advisor):
             comply[SAVED] = min(ADVICE_BURST, comply[SAVED] + 1.0)
 
     def _lost_open(self, s: int) -> list[float]:
-        o = self.guide.open_policy(s)
-        return [(1.0 - LOST_BUMP) * o[a] + LOST_BUMP / 4.0 for a in range(N_ACTIONS)]
+        return self._bumped(self.guide.open_policy(s))
 
     def _ahead(self, s: int) -> list[float]:
         """LA's rule at ``s``: uniform over the open moves but back (against the heading)
