@@ -23,9 +23,11 @@ kernel                    the readable form (and its test)
 ``guide_detours``         (app/domain/grid.py): a guide map's searches, without the GIL
 ========================  ====================================================================
 
-Tables are passed as the tuple ``AdviceTables.arrays``: (log_probs (M, S*4), log_weights (M,),
-probs (M, S*4), theta (S*4,), neg_entropy (S,)); goal tables as (goal_of_state (S,), alpha0,
-unknown counts (S*4,), goal counts (S*4, G), each goal's log theta (S*4, G)).
+Tables are passed as the tuple ``AdviceTables.arrays``: (log_probs (M, S*A), log_weights (M,),
+probs (M, S*A), theta (S*A,), neg_entropy (S,)), A the domain's actions (4 on one floor; the
+paper's rule and its stream take any A, the other strategies four); goal tables as
+(goal_of_state (S,), alpha0, unknown counts (S*4,), goal counts (S*4, G), each goal's log
+theta (S*4, G)).
 """
 
 from __future__ import annotations
@@ -127,10 +129,13 @@ def posterior(
 
 @njit(cache=True, inline="always")  # as a call it cost the stream loop twice its time (measured)
 def decide(
-    loglik: FloatArray, tables: Tables, s: int, z: FloatArray
+    loglik: FloatArray, tables: Tables, s: int, z: FloatArray, n_actions: int
 ) -> tuple[float, float]:  # pragma: no cover
     """(KL[theta_s || P(A | s, H)], P(M1 | H)) for the explorer now at ``s``: eqs. (4)-(6).
-    ``z`` is scratch space, one entry per model."""
+    ``z`` is scratch space, one entry per model; ``n_actions`` the tables' actions (4 here,
+    unrolled; any other number :func:`decide_any`)."""
+    if n_actions != 4:
+        return decide_any(loglik, tables, s, z, n_actions)
     _, log_weights, probs, theta, neg_entropy = tables
     tot = posterior(loglik, log_weights, z)
     b = s * 4
@@ -151,12 +156,39 @@ def decide(
 
 
 @njit(cache=True)
+def decide_any(
+    loglik: FloatArray, tables: Tables, s: int, z: FloatArray, n_actions: int
+) -> tuple[float, float]:  # pragma: no cover - compiled
+    """:func:`decide` for any number of actions (a building of several floors: six), the KL
+    times log 4 / log A (``AdviceTables.kl_scale``): ``Advisor._divergence_any``'s
+    operations in its order."""
+    _, log_weights, probs, theta, neg_entropy = tables
+    tot = posterior(loglik, log_weights, z)
+    b = s * n_actions
+    p0 = z[0] / tot
+    cross = 0.0
+    for a in range(n_actions):
+        mix = p0 * probs[0, b + a]  # the mixture P(a | s, H), eq. (4)
+        for m in range(1, loglik.shape[0]):
+            mix += z[m] / tot * probs[m, b + a]
+        if a == 0:
+            cross = theta[b] * math.log(mix)
+        else:
+            cross += theta[b + a] * math.log(mix)
+    kl = neg_entropy[s] - cross  # eq. (6)
+    if not kl > 0.0:  # as ``kl if kl > 0.0 else 0.0``
+        return 0.0, p0
+    return kl * (math.log(4.0) / math.log(float(n_actions))), p0
+
+
+@njit(cache=True)
 def decide_call(
     loglik: FloatArray, tables: Tables, s: int, z: FloatArray
 ) -> tuple[float, float]:  # pragma: no cover - compiled
     """:func:`decide` as a call, for long loops: inlined into the episode loop, it made that
-    loop about a fifth slower (measured), where the short stream loop gains from inlining."""
-    return decide(loglik, tables, s, z)
+    loop about a fifth slower (measured), where the short stream loop gains from inlining.
+    Four actions (the episodes' explorers walk one floor)."""
+    return decide(loglik, tables, s, z, 4)
 
 
 @njit(cache=True)
@@ -214,30 +246,36 @@ def goal_decide(
     loglik: FloatArray, tables: Tables, goals: GoalTables, w: FloatArray, s: int,
     theta_w: FloatArray, z: FloatArray,
 ) -> tuple[float, float]:  # pragma: no cover - compiled  # fmt: skip
-    """``GoalAwareAdvisor.decide``: fills ``theta_w`` (4,) with theta^w_s and returns
-    (KL[theta^w_s || P(M1 | H) theta^w_s + sum_m>1 P(M | H) P(A | s, M)], P(M1 | H))."""
+    """``GoalAwareAdvisor.decide``: fills ``theta_w`` (A,) with theta^w_s and returns
+    (KL[theta^w_s || P(M1 | H) theta^w_s + sum_m>1 P(M | H) P(A | s, M)], P(M1 | H)), the KL
+    times log 4 / log A for A other than 4 (``AdviceTables.kl_scale``)."""
     _, alpha0, unknown, counts, _ = goals
     n_goals = w.shape[0]
-    b = s * 4
+    n_actions = theta_w.shape[0]
+    b = s * n_actions
     total = 0.0
-    for a in range(4):
+    for a in range(n_actions):
         dot = 0.0
         for g in range(n_goals):
             dot += w[g] * counts[b + a, g]
         theta_w[a] = alpha0 + unknown[b + a] + n_goals * dot
         total += theta_w[a]
-    for a in range(4):
+    for a in range(n_actions):
         theta_w[a] = theta_w[a] / total
     _, log_weights, probs, _, _ = tables
     tot = posterior(loglik, log_weights, z)
     p0 = z[0] / tot
     kl = 0.0
-    for a in range(4):
+    for a in range(n_actions):
         mix = p0 * theta_w[a]
         for m in range(1, loglik.shape[0]):
             mix += z[m] / tot * probs[m, b + a]
         kl += theta_w[a] * (math.log(theta_w[a]) - math.log(mix))
-    return (kl if kl > 0.0 else 0.0), p0
+    if not kl > 0.0:  # as ``kl if kl > 0.0 else 0.0``
+        return 0.0, p0
+    if n_actions != 4:
+        kl = kl * (math.log(4.0) / math.log(float(n_actions)))
+    return kl, p0
 
 
 # ---- the service's batches: the window as pair keys -------------------------------------------
@@ -258,7 +296,7 @@ def observe_stream(
 ) -> tuple[int, int, float, int]:  # pragma: no cover - compiled
     """``Advisor.observe`` for each (s, a, s'), accounting as ``Advisor.decide``.
 
-    The window is (pair keys s * 4 + a, -1 where empty; 1 where a pair's value was kept in
+    The window is (pair keys s * A + a, -1 where empty; 1 where a pair's value was kept in
     ``old`` because the tables changed since it was added; those values): a leaving pair is
     subtracted with the value the core stored, and the exact re-sum (after ``steps`` +
     i + 1 pairs, a multiple of ``period``, at a wrap) sums the values the core's ring holds,
@@ -267,6 +305,7 @@ def observe_stream(
     kept values that left the window)."""
     keys, kept, old = window
     log_probs = tables[0]
+    n_actions = tables[3].shape[0] // tables[4].shape[0]  # theta (S*A,), neg_entropy (S,)
     states, actions, next_states = moves
     kl_out, p_out, advise_out, count_out, benefit_out = out
     size = keys.shape[0]
@@ -274,7 +313,7 @@ def observe_stream(
     z = np.empty(n_models)
     gone = 0
     for i in range(states.shape[0]):
-        k = states[i] * 4 + actions[i]
+        k = states[i] * n_actions + actions[i]
         leaving = keys[pos]
         if leaving < 0:  # the core's ring holds 0.0 until the window fills
             for m in range(n_models):
@@ -297,7 +336,7 @@ def observe_stream(
                     for p in range(size):
                         ring[p] = old[m, p] if kept[p] else log_probs[m, keys[p]]
                     loglik[m] = fsum(ring)
-        kl, p0 = decide(loglik, tables, next_states[i], z)
+        kl, p0 = decide(loglik, tables, next_states[i], z, n_actions)
         if kl >= kappa and count < cap:
             count += 1
             benefit += kl
@@ -344,8 +383,8 @@ def goal_push(
     values that left the window)."""
     keys, kept, old = window
     goal_kept, goal_old = goal_window
-    goal_of_state, _, _, _, goal_log_theta = goals
-    k = s * 4 + a
+    goal_of_state, _, unknown, _, goal_log_theta = goals
+    k = s * (unknown.shape[0] // goal_of_state.shape[0]) + a  # unknown counts: (S*A,)
     leaving = keys[pos]
     n_models = loglik.shape[0]
     gone = 0
@@ -443,14 +482,15 @@ def goal_stream(
     """``GoalAwareAdvisor.observe`` for each (s, a, s'): :func:`goal_push`, then the goal
     posterior and :func:`goal_decide`. ``sums`` is (log P(H | M) per model, log P(H | theta^g)
     per goal, goals not ruled out). Fills ``out`` (kl, p_normal, advise, count, benefit, the
-    advice theta^w of each decision (n, 4)); returns (position, advice count, benefit, model
+    advice theta^w of each decision (n, A)); returns (position, advice count, benefit, model
     values and goal values that left the window)."""
     loglik, goal_ll, alive = sums
     states, actions, next_states = moves
     kl_out, p_out, advise_out, count_out, benefit_out, rows = out
     w = np.empty(goal_ll.shape[0])
     z = np.empty(loglik.shape[0])
-    theta_w = np.empty(4)
+    n_actions = rows.shape[1]
+    theta_w = np.empty(n_actions)
     gone = 0
     goal_gone = 0
     for i in range(states.shape[0]):
@@ -468,7 +508,7 @@ def goal_stream(
             advise_out[i] = True
         else:
             advise_out[i] = False
-        for a in range(4):
+        for a in range(n_actions):
             rows[i, a] = theta_w[a]
         kl_out[i] = kl
         p_out[i] = p0
@@ -1706,7 +1746,7 @@ def q_learning(
                 )  # fmt: skip
                 row = theta_w
             else:
-                kl, p = decide(loglik, tables, s, z)
+                kl, p = decide(loglik, tables, s, z, 4)
                 row = theta[s * 4 : s * 4 + 4]
                 allowed = True
             advise = kl >= kappa and allowed

@@ -11,25 +11,32 @@ from hypothesis import strategies as st
 from app.advice.models import AdviceTables, BehaviourModel, normal_model, uniform_model
 
 
-def random_theta(rng: np.random.Generator, n_states: int) -> np.ndarray:
+def random_theta(rng: np.random.Generator, n_states: int, n_actions: int = 4) -> np.ndarray:
     """Rows from flat to peaked: Dirichlet-mean-like counts over a random alpha0."""
-    alpha = rng.choice([0.05, 0.5, 1.0, 5.0]) + rng.integers(0, 20, (n_states, 4))
+    alpha = rng.choice([0.05, 0.5, 1.0, 5.0]) + rng.integers(0, 20, (n_states, n_actions))
     out: np.ndarray = alpha / alpha.sum(axis=1, keepdims=True)
     return out
 
 
 def random_tables(
-    rng: np.random.Generator, n_states: int, n_models: int = 2, theta: np.ndarray | None = None
+    rng: np.random.Generator,
+    n_states: int,
+    n_models: int = 2,
+    theta: np.ndarray | None = None,
+    n_actions: int = 4,
 ) -> AdviceTables:
-    """theta (given or random), the normal and uniform models and, for three models, a third
-    random one; every weight drawn from 0.05 to 20 (they are normalised across models)."""
-    th = random_theta(rng, n_states) if theta is None else np.asarray(theta)
+    """theta (given or random) over ``n_actions`` actions, the normal and uniform models and,
+    for three models or more, random others; every weight drawn from 0.05 to 20 (they are
+    normalised across models)."""
+    th = random_theta(rng, n_states, n_actions) if theta is None else np.asarray(theta)
+    n_actions = th.shape[1]
     weights = rng.uniform(0.05, 20.0, n_models).tolist()
-    models = [normal_model(th, weights[0]), uniform_model(n_states, weights[1])]
-    if n_models == 3:
-        other = rng.dirichlet(np.full(4, 0.7), size=n_states)
+    models = [normal_model(th, weights[0]), uniform_model(n_states, weights[1], n_actions)]
+    for k in range(2, n_models):
+        other = rng.dirichlet(np.full(n_actions, 0.7), size=n_states)
         other = np.maximum(other, 1e-9)
-        models.append(BehaviourModel("other", other / other.sum(axis=1, keepdims=True), weights[2]))
+        name = "other" if k == 2 else f"other{k}"
+        models.append(BehaviourModel(name, other / other.sum(axis=1, keepdims=True), weights[k]))
     return AdviceTables(th, tuple(models))
 
 

@@ -53,8 +53,8 @@ class Decision(NamedTuple):
     step: int  # moves observed so far (0 for the start decision)
     state: int
     advise: bool
-    advice: tuple[float, float, float, float] | None  # theta_s when advising
-    kl: float  # KL[theta_s || P(A | s, H)] in nats
+    advice: tuple[float, ...] | None  # theta_s when advising (one probability an action)
+    kl: float  # KL[theta_s || P(A | s, H)] in nats (times ``kl_scale``: AdviceTables)
     p_normal: float  # P(M1 | H)
     advice_count: int
     total_cost: float  # kappa x advice_count
@@ -64,7 +64,7 @@ class Decision(NamedTuple):
 @dataclass(frozen=True, slots=True)
 class DecisionBatch:
     """The decisions for a batch of one explorer's moves, as columns: decision ``i`` is step
-    ``first_step + i``. ``advice`` holds the advice of the advising decisions, in order (k, 4).
+    ``first_step + i``. ``advice`` holds the advice of the advising decisions, in order (k, A).
     The running figures follow from the columns: ``total_cost = kappa * advice_count``."""
 
     first_step: int
@@ -94,7 +94,9 @@ class DecisionBatch:
         benefit_before: float, advised_from: AdviceTables | None = None,
     ) -> DecisionBatch:  # fmt: skip
         """Columns of decisions made one at a time (``first_step`` 0 when there are none)."""
-        rows = [d.advice for d in decisions if d.advise]
+        rows = [d.advice for d in decisions if d.advise and d.advice is not None]
+        width = len(rows[0]) if rows else N_ACTIONS
+        width = advised_from.n_actions if advised_from is not None else width
         return cls(
             decisions[0].step if decisions else 0,
             np.array([d.state for d in decisions], dtype=np.int64),
@@ -103,7 +105,7 @@ class DecisionBatch:
             np.array([d.p_normal for d in decisions], dtype=np.float64),
             np.array([d.advice_count for d in decisions], dtype=np.int64),
             np.array([d.benefit for d in decisions], dtype=np.float64),
-            np.array(rows, dtype=np.float64).reshape(len(rows), N_ACTIONS),
+            np.array(rows, dtype=np.float64).reshape(len(rows), width),
             kappa, count_before, benefit_before, advised_from,
         )  # fmt: skip
 
@@ -222,15 +224,16 @@ class Advisor:
     def _check(self, state: int, action: int | None = None) -> None:
         if not 0 <= state < self.tables.n_states:
             raise ValueError(f"state {state} out of range 0..{self.tables.n_states - 1}")
-        if action is not None and not 0 <= action < N_ACTIONS:
-            raise ValueError(f"action {action} out of range 0..3")
+        if action is not None and not 0 <= action < self.tables.n_actions:
+            raise ValueError(f"action {action} out of range 0..{self.tables.n_actions - 1}")
 
     def append(self, state: int, action: int) -> None:
         """Add (s, a) to H, dropping the oldest pair once the window is full. O(1)."""
         t = self.tables
-        if not (0 <= state < t.n_states and 0 <= action < N_ACTIONS):
+        n_actions = t.n_actions
+        if not (0 <= state < t.n_states and 0 <= action < n_actions):
             self._check(state, action)
-        k = state * N_ACTIONS + action
+        k = state * n_actions + action
         pos = self._pos
         loglik = self._loglik
         rings = self._ring
@@ -276,10 +279,11 @@ class Advisor:
         return self._mixture(self.posterior(), state)
 
     def _mixture(self, post: list[float], state: int) -> list[float]:
-        base = state * N_ACTIONS
+        n_actions = self.tables.n_actions
+        base = state * n_actions
         probs = self.tables.probs_flat
         out = []
-        for a in range(N_ACTIONS):
+        for a in range(n_actions):
             mix = post[0] * probs[0][base + a]
             for m in range(1, len(post)):
                 mix += post[m] * probs[m][base + a]
@@ -297,6 +301,8 @@ class Advisor:
         posterior and the mixture are inlined; app/kernels.py:decide is the same arithmetic
         in the same order, compiled."""
         t = self.tables
+        if t.n_actions != N_ACTIONS:
+            return self._divergence_any(state)
         b = state * N_ACTIONS
         probs = t.probs_flat
         loglik, weights = self._loglik, t.log_weight_list
@@ -333,6 +339,23 @@ class Advisor:
         kl = t.neg_entropy_list[state] - cross
         return (kl if kl > 0.0 else 0.0), p0
 
+    def _divergence_any(self, state: int) -> tuple[float, float]:
+        """:meth:`_divergence` for any number of actions A (a building of several floors: six),
+        the KL times ``kl_scale`` (log 4 / log A): the same operations in the same order as
+        app/kernels.py:decide_any."""
+        t = self.tables
+        n_actions = t.n_actions
+        b = state * n_actions
+        post = self.posterior()  # eq. (5)
+        mix = self._mixture(post, state)  # eq. (4)
+        th = t.theta_flat
+        log = math.log
+        cross = th[b] * log(mix[0])
+        for a in range(1, n_actions):
+            cross += th[b + a] * log(mix[a])
+        kl = t.neg_entropy_list[state] - cross  # eq. (6)
+        return (kl * t.kl_scale if kl > 0.0 else 0.0), post[0]
+
     def decide(self, state: int) -> Decision:
         """Decide for the explorer now at ``state`` and account for the cost."""
         t = self.tables
@@ -340,20 +363,22 @@ class Advisor:
             raise ValueError(f"state {state} out of range 0..{t.n_states - 1}")
         kl, p0 = self._divergence(state)
         self.decisions += 1
-        advice = None
+        advice: tuple[float, ...] | None = None
         if kl >= self.kappa and self.advice_count < self.cap:
             self.advice_count += 1
             self.benefit += kl
-            b = state * N_ACTIONS
-            th = t.theta_flat
-            advice = (th[b], th[b + 1], th[b + 2], th[b + 3])
+            b, th = state * t.n_actions, t.theta_flat
+            if t.n_actions == N_ACTIONS:
+                advice = (th[b], th[b + 1], th[b + 2], th[b + 3])
+            else:
+                advice = tuple(th[b : b + t.n_actions])
         return Decision(
             self.steps, state, advice is not None, advice, kl, p0,
             self.advice_count, self.kappa * self.advice_count, self.benefit,
         )  # fmt: skip
 
     def record(
-        self, state: int, advise: bool, advice: tuple[float, float, float, float] | None,
+        self, state: int, advise: bool, advice: tuple[float, ...] | None,
         kl: float, p_normal: float,
     ) -> Decision:  # fmt: skip
         """Account for a decision taken by another rule (see :mod:`app.advice.rules`); it
@@ -382,7 +407,7 @@ class Advisor:
         self, states: IntArray, actions: IntArray, next_states: IntArray
     ) -> DecisionBatch:
         """:meth:`observe` for each (s, a, s') in turn, as columns. Inputs must be valid
-        (states in range, actions 0..3): the caller checks them first. Advisors with a faster
+        (states in range, actions 0..A-1): the caller checks them first. Advisors with a faster
         way (the service's compiled one) override this with the same results."""
         count, benefit, tables = self.advice_count, self.benefit, self.tables
         moves = zip(states.tolist(), actions.tolist(), next_states.tolist(), strict=True)

@@ -13,7 +13,6 @@ import math
 from app.advice.advisor import DEFAULT_KAPPA, DEFAULT_WINDOW, Advisor, Decision, resync_period
 from app.advice.models import AdviceTables
 from app.advice.priors import GoalPriors
-from app.domain.grid import N_ACTIONS
 
 
 class GoalAwareAdvisor(Advisor):
@@ -40,7 +39,7 @@ class GoalAwareAdvisor(Advisor):
     ):
         if not (math.isfinite(beta) and 0.0 <= beta <= 1.0):
             raise ValueError(f"beta must be in [0, 1], got {beta!r}")
-        if priors.n_states != tables.n_states:
+        if (priors.n_states, priors.n_actions) != (tables.n_states, tables.n_actions):
             raise ValueError("goal priors and tables describe different domains")
         self.priors = priors
         self.beta = float(beta)
@@ -54,7 +53,9 @@ class GoalAwareAdvisor(Advisor):
         next step on. The window keeps the log-probabilities it added, so removing them stays
         exact."""
         if goals is not None:
-            if goals.goals != self.priors.goals or goals.n_states != self.priors.n_states:
+            if (goals.goals, goals.n_states, goals.n_actions) != (
+                self.priors.goals, self.priors.n_states, self.priors.n_actions,
+            ):  # fmt: skip
                 raise ValueError("the new goal priors describe another domain")
             self.priors = goals
         super().use_tables(tables)
@@ -79,7 +80,7 @@ class GoalAwareAdvisor(Advisor):
             self.alive[gi] = False
         if self.beta == 0.0:
             return
-        row = self.priors.rows().log_theta[state * N_ACTIONS + action]
+        row = self.priors.rows().log_theta[state * self.priors.n_actions + action]
         old = self._goal_ring[self._goal_pos]
         self._goal_ll = [ll + (v - o) for ll, v, o in zip(self._goal_ll, row, old, strict=True)]
         self._goal_ring[self._goal_pos] = row
@@ -114,12 +115,13 @@ class GoalAwareAdvisor(Advisor):
         post = self.posterior()
         p0 = post[0]
         probs = self.tables.probs_flat
-        b = state * N_ACTIONS
+        n_actions = self.tables.n_actions
+        b = state * n_actions
         kl = 0.0
-        for a in range(N_ACTIONS):
+        for a in range(n_actions):
             mix = p0 * tw[a]  # M1 now speaks for theta^w; the other models as before
             for m in range(1, len(post)):
                 mix += post[m] * probs[m][b + a]
             kl += tw[a] * (math.log(tw[a]) - math.log(mix))
-        kl = kl if kl > 0.0 else 0.0
+        kl = kl * self.tables.kl_scale if kl > 0.0 else 0.0  # kl_scale: AdviceTables
         return self.record(state, kl >= self.kappa, tw, kl, p0)

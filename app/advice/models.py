@@ -2,7 +2,7 @@
 
 The paper uses two (Section IV-B): M1 normalcy, P(a | s, M1) = theta_s(a), and M2 uniformity,
 P(a | s, M2) = 1/|A|, with P(M1) = P(M2) = 1/2. More can be added: anything that gives a
-strictly positive (states x 4) table. :class:`AdviceTables` precomputes everything the advisor
+strictly positive (states x actions) table. :class:`AdviceTables` precomputes everything the advisor
 needs for a fixed theta and model set, once: numpy arrays (the batch form, and flat views for the
 compiled kernels of :mod:`app.kernels`) and flat Python lists (the single form, where list
 indexing is several times faster than numpy scalar access). Every form holds the same numbers
@@ -26,7 +26,8 @@ from app.domain.grid import N_ACTIONS, packed
 
 @dataclass(frozen=True)
 class BehaviourModel:
-    """P(a | s, M) as a (states, 4) table, and the prior P(M) (normalised across models)."""
+    """P(a | s, M) as a (states, actions) table, and the prior P(M) (normalised across
+    models)."""
 
     name: str
     probabilities: FloatArray
@@ -38,9 +39,24 @@ def normal_model(theta: npt.ArrayLike, weight: float = 0.5) -> BehaviourModel:
     return BehaviourModel("normal", np.asarray(theta, dtype=np.float64), weight)
 
 
-def uniform_model(n_states: int, weight: float = 0.5) -> BehaviourModel:
-    """M2, uniformity: a lost explorer picks any of the four moves."""
-    return BehaviourModel("uniform", np.full((n_states, N_ACTIONS), 1.0 / N_ACTIONS), weight)
+def uniform_model(n_states: int, weight: float = 0.5, n_actions: int = N_ACTIONS) -> BehaviourModel:
+    """M2, uniformity: a lost explorer picks any of the domain's actions (the four moves; in
+    a building of several floors, up and down too)."""
+    return BehaviourModel("uniform", np.full((n_states, n_actions), 1.0 / n_actions), weight)
+
+
+def _as_theta(theta: npt.ArrayLike) -> FloatArray:
+    th = np.asarray(theta, dtype=np.float64)
+    if th.ndim != 2 or th.shape[1] < 2:
+        raise ValueError(f"theta must have shape (states, actions >= 2), got {th.shape}")
+    return th
+
+
+def kl_scale(n_actions: int) -> float:
+    """log 4 / log A: a KL over A actions in the units of four (1.0 for four). The uniform
+    model's KL from a certain theta is log A, so without it six actions would make every
+    piece of advice worth log 6 / log 4 = 1.29 times more against the same kappa."""
+    return 1.0 if n_actions == N_ACTIONS else math.log(4.0) / math.log(float(n_actions))
 
 
 @dataclass(frozen=True, eq=False)
@@ -54,31 +70,37 @@ class AdviceTables:
 
     theta: FloatArray
     models: tuple[BehaviourModel, ...]
-    probs: FloatArray = field(init=False, repr=False)  # (M, S, 4)
-    log_probs: FloatArray = field(init=False, repr=False)  # (M, S, 4)
+    probs: FloatArray = field(init=False, repr=False)  # (M, S, A)
+    log_probs: FloatArray = field(init=False, repr=False)  # (M, S, A)
     log_weights: FloatArray = field(init=False, repr=False)  # (M,)
     neg_entropy: FloatArray = field(init=False, repr=False)  # (S,) sum_a theta log theta
-    # action-major copies for the batch form: gathers give (4, n) rows with long inner loops
-    probs_t: FloatArray = field(init=False, repr=False)  # (M, 4, S)
-    theta_t: FloatArray = field(init=False, repr=False)  # (4, S)
+    # action-major copies for the batch form: gathers give (A, n) rows with long inner loops
+    probs_t: FloatArray = field(init=False, repr=False)  # (M, A, S)
+    theta_t: FloatArray = field(init=False, repr=False)  # (A, S)
     # what the compiled kernels read (app/kernels.py), views of the arrays above:
-    # (log_probs (M, S*4), log_weights (M,), probs (M, S*4), theta (S*4,), neg_entropy (S,))
+    # (log_probs (M, S*A), log_weights (M,), probs (M, S*A), theta (S*A,), neg_entropy (S,))
     arrays: tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray] = field(
         init=False, repr=False
     )
     # flat Python sequences (``array.array`` of doubles, ``grid.packed``) for the
-    # single-explorer form: index s * 4 + a
+    # single-explorer form: index s * A + a
     probs_flat: tuple[array[float], ...] = field(init=False, repr=False)
     log_probs_flat: tuple[array[float], ...] = field(init=False, repr=False)
     theta_flat: array[float] = field(init=False, repr=False)
     neg_entropy_list: array[float] = field(init=False, repr=False)
     log_weight_list: list[float] = field(init=False, repr=False)
     n_states: int = field(init=False, repr=False)  # a plain attribute: read on every decision
+    #: A, the domain's number of actions (4: N E S W; 6 with U D in a building of floors)
+    n_actions: int = field(init=False, repr=False)
+    #: what the decision multiplies a KL by before comparing it with kappa: log 4 / log A (1.0
+    #: for four actions, where nothing is multiplied), so that the most a KL from the uniform
+    #: model can be is log 4 whatever the number of actions (docs/ARCHITECTURE.md)
+    kl_scale: float = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         theta = np.ascontiguousarray(self.theta, dtype=np.float64)
-        if theta.ndim != 2 or theta.shape[1] != N_ACTIONS:
-            raise ValueError(f"theta must have shape (states, 4), got {theta.shape}")
+        if theta.ndim != 2 or theta.shape[1] < 2:
+            raise ValueError(f"theta must have shape (states, actions >= 2), got {theta.shape}")
         if not np.all(theta > 0) or not np.allclose(theta.sum(axis=1), 1.0, atol=1e-9):
             raise ValueError("theta rows must be strictly positive and sum to 1")
         if not self.models:
@@ -111,6 +133,8 @@ class AdviceTables:
             "neg_entropy_list": packed(neg_entropy, "d"),
             "log_weight_list": log_weights.tolist(),
             "n_states": int(theta.shape[0]),
+            "n_actions": int(theta.shape[1]),
+            "kl_scale": kl_scale(int(theta.shape[1])),
         }
         for name, value in setters.items():
             if isinstance(value, np.ndarray):
@@ -122,13 +146,14 @@ class AdviceTables:
     @classmethod
     def paper(cls, theta: npt.ArrayLike) -> AdviceTables:
         """The paper's two models, normal and uniform, equally likely a priori."""
-        th = np.asarray(theta, dtype=np.float64)
-        return cls(th, (normal_model(th), uniform_model(th.shape[0])))
+        th = _as_theta(theta)
+        return cls(th, (normal_model(th), uniform_model(th.shape[0], n_actions=th.shape[1])))
 
     @classmethod
     def with_models(cls, theta: npt.ArrayLike, extra: Sequence[BehaviourModel]) -> AdviceTables:
-        th = np.asarray(theta, dtype=np.float64)
-        return cls(th, (normal_model(th), uniform_model(th.shape[0]), *extra))
+        th = _as_theta(theta)
+        uniform = uniform_model(th.shape[0], n_actions=th.shape[1])
+        return cls(th, (normal_model(th), uniform, *extra))
 
     @property
     def n_models(self) -> int:

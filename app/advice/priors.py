@@ -31,8 +31,9 @@ class NotFittedError(RuntimeError):
     """An :class:`ActionPrior` was used before any data was given to it."""
 
 
-def as_pairs(trajectory: TrajectoryLike, n_states: int) -> IntArray:
-    """A trajectory as an int64 array of shape (T, 2), checked against the domain size."""
+def as_pairs(trajectory: TrajectoryLike, n_states: int, n_actions: int = N_ACTIONS) -> IntArray:
+    """A trajectory as an int64 array of shape (T, 2), checked against the domain's size and
+    its number of actions."""
     arr = np.asarray(trajectory)
     if arr.size == 0:
         return np.zeros((0, 2), dtype=np.int64)
@@ -46,42 +47,50 @@ def as_pairs(trajectory: TrajectoryLike, n_states: int) -> IntArray:
     s, a = pairs[:, 0], pairs[:, 1]
     if s.min() < 0 or s.max() >= n_states:
         raise ValueError(f"trajectory state out of range: states are 0..{n_states - 1}")
-    if a.min() < 0 or a.max() >= N_ACTIONS:
-        raise ValueError(f"trajectory action out of range: actions are 0..{N_ACTIONS - 1}")
+    if a.min() < 0 or a.max() >= n_actions:
+        raise ValueError(f"trajectory action out of range: actions are 0..{n_actions - 1}")
     return pairs
 
 
 def trajectory_counts(
-    trajectories: Sequence[TrajectoryLike], n_states: int, delta: float = 0.0
+    trajectories: Sequence[TrajectoryLike],
+    n_states: int,
+    delta: float = 0.0,
+    n_actions: int = N_ACTIONS,
 ) -> FloatArray:
     """The counts of eq. (1) summed over ``trajectories``: how many of them took ``a`` in
-    ``s`` with ``pi_hat(s, a) > delta``. Shape (n_states, 4)."""
-    pairs = [as_pairs(t, n_states) for t in trajectories]
+    ``s`` with ``pi_hat(s, a) > delta``. Shape (n_states, n_actions)."""
+    pairs = [as_pairs(t, n_states, n_actions) for t in trajectories]
     lengths = np.fromiter((len(p) for p in pairs), dtype=np.int64, count=len(pairs))
     if lengths.sum() == 0:
-        return np.zeros((n_states, N_ACTIONS))
+        return np.zeros((n_states, n_actions))
     flat = np.concatenate(pairs)
     tid = np.repeat(np.arange(len(pairs), dtype=np.int64), lengths)
-    n_sa = n_states * N_ACTIONS
-    sa = flat[:, 0] * N_ACTIONS + flat[:, 1]
+    n_sa = n_states * n_actions
+    sa = flat[:, 0] * n_actions + flat[:, 1]
     keys, visits_sa = np.unique(tid * n_sa + sa, return_counts=True)
     sa_of_key = keys % n_sa
     if delta > 0:
         # pi_hat(s, a) = visits(traj, s, a) / visits(traj, s)
         ts_keys, visits_s = np.unique(tid * n_states + flat[:, 0], return_counts=True)
-        ts_of_key = (keys // n_sa) * n_states + sa_of_key // N_ACTIONS
+        ts_of_key = (keys // n_sa) * n_states + sa_of_key // n_actions
         frac = visits_sa / visits_s[np.searchsorted(ts_keys, ts_of_key)]
         sa_of_key = sa_of_key[frac > delta]
-    return np.bincount(sa_of_key, minlength=n_sa).reshape(n_states, N_ACTIONS).astype(np.float64)
+    return np.bincount(sa_of_key, minlength=n_sa).reshape(n_states, n_actions).astype(np.float64)
 
 
-def policy_counts(policies: npt.ArrayLike, delta: float = 0.0) -> FloatArray:
-    """The counts of eq. (2) for full policies, shape (k, n_states, 4) or (n_states, 4)."""
+def policy_counts(
+    policies: npt.ArrayLike, delta: float = 0.0, n_actions: int = N_ACTIONS
+) -> FloatArray:
+    """The counts of eq. (2) for full policies, shape (k, n_states, n_actions) or
+    (n_states, n_actions)."""
     pi = np.asarray(policies, dtype=np.float64)
     if pi.ndim == 2:
         pi = pi[None]
-    if pi.ndim != 3 or pi.shape[2] != N_ACTIONS:
-        raise ValueError(f"policies must have shape (k, states, 4), got {np.shape(policies)}")
+    if pi.ndim != 3 or pi.shape[2] != n_actions:
+        raise ValueError(
+            f"policies must have shape (k, states, {n_actions}), got {np.shape(policies)}"
+        )
     if not np.all(np.isfinite(pi)) or pi.min() < 0:
         raise ValueError("policy probabilities must be finite and non-negative")
     out: FloatArray = (pi > delta).sum(axis=0).astype(np.float64)
@@ -93,10 +102,13 @@ class ActionPrior:
 
     Parameters
     ----------
-    alpha0 : float or array broadcastable to (n_states, 4)
+    alpha0 : float or array broadcastable to (n_states, n_actions)
         The hyperprior alpha0(a) > 0 (keeps every probability positive, so logs are finite).
     delta : float in [0, 1)
         A policy counts for (s, a) when ``pi(s, a) > delta`` (eq. (1)).
+    n_actions : int
+        The domain's number of actions (``domain.n_actions``: 4 on one floor, ``N E S W``; 6
+        in a building of several floors, ``U D`` as well).
 
     Learned attributes (after ``fit``/``partial_fit``): ``n_states_``, ``increments_`` (per
     agent type), ``pooled_increments_``, ``n_trajectories_`` (per type, and ``"*"`` pooled).
@@ -104,18 +116,24 @@ class ActionPrior:
 
     POOLED = "*"
 
-    def __init__(self, alpha0: float | npt.ArrayLike = 1.0, delta: float = 0.0):
+    def __init__(
+        self, alpha0: float | npt.ArrayLike = 1.0, delta: float = 0.0, n_actions: int = N_ACTIONS
+    ):
         self.alpha0 = alpha0
         self.delta = delta
+        self.n_actions = n_actions
 
     # ---- fitting ------------------------------------------------------------------------
     def _check_params(self, n_states: int) -> FloatArray:
+        if not (isinstance(self.n_actions, int) and self.n_actions >= 2):
+            raise ValueError(f"n_actions must be an int >= 2, got {self.n_actions!r}")
         a0 = np.asarray(self.alpha0, dtype=np.float64)
         try:
-            a0 = np.broadcast_to(a0, (n_states, N_ACTIONS))
+            a0 = np.broadcast_to(a0, (n_states, self.n_actions))
         except ValueError:
             raise ValueError(
-                f"alpha0 must be a number or broadcast to (states, 4), got shape {a0.shape}"
+                f"alpha0 must be a number or broadcast to (states, {self.n_actions}), got shape "
+                f"{a0.shape}"
             ) from None
         if not np.all(np.isfinite(a0)) or a0.min() <= 0:
             raise ValueError("alpha0 must be finite and > 0 (it keeps every theta positive)")
@@ -129,7 +147,7 @@ class ActionPrior:
         self.alpha0_ = self._check_params(n_states)
         self.n_states_ = int(n_states)
         self.increments_: dict[str, FloatArray] = {}
-        self.pooled_increments_ = np.zeros((n_states, N_ACTIONS))
+        self.pooled_increments_ = np.zeros((n_states, self.n_actions))
         self.n_trajectories_: dict[str, int] = {self.POOLED: 0}
         self._theta_cache: dict[str, FloatArray] = {}
 
@@ -173,12 +191,14 @@ class ActionPrior:
         n = self._ensure(n_states)
         trajectories = list(trajectories)
         self._add(
-            trajectory_counts(trajectories, n, float(self.delta)), len(trajectories), agent_type
+            trajectory_counts(trajectories, n, float(self.delta), self.n_actions),
+            len(trajectories),
+            agent_type,
         )
         return self
 
     def fit_policies(self, policies: npt.ArrayLike, agent_type: str | None = None) -> ActionPrior:
-        """Forget all data, then learn from full policies of shape (k, states, 4)."""
+        """Forget all data, then learn from full policies of shape (k, states, n_actions)."""
         pi = np.asarray(policies)
         self._reset(int(pi.shape[-2]))
         return self.partial_fit_policies(pi, agent_type=agent_type)
@@ -188,10 +208,12 @@ class ActionPrior:
     ) -> ActionPrior:
         pi = np.asarray(policies, dtype=np.float64)
         if pi.ndim not in (2, 3):
-            raise ValueError(f"policies must have shape (k, states, 4), got {pi.shape}")
+            raise ValueError(
+                f"policies must have shape (k, states, {self.n_actions}), got {pi.shape}"
+            )
         k = 1 if pi.ndim == 2 else int(pi.shape[0])
         self._ensure(int(pi.shape[-2]))
-        self._add(policy_counts(pi, float(self.delta)), k, agent_type)
+        self._add(policy_counts(pi, float(self.delta), self.n_actions), k, agent_type)
         return self
 
     # ---- reading ------------------------------------------------------------------------
@@ -226,7 +248,7 @@ class ActionPrior:
         rng: np.random.Generator | None = None,
     ) -> FloatArray:
         """theta_s(A): the Dirichlet mean alpha_s / sum(alpha_s), or with ``sample=True`` one
-        draw theta_s ~ Dir(alpha_s) per state. Shape (n_states, 4); rows sum to 1."""
+        draw theta_s ~ Dir(alpha_s) per state. Shape (n_states, n_actions); rows sum to 1."""
         if sample:
             if rng is None:
                 raise ValueError("sample=True needs an explicit rng (np.random.Generator)")
@@ -267,7 +289,7 @@ class ActionPrior:
             types=np.array(types, dtype=str),
             typed=np.stack([self.increments_[t] for t in types])
             if types
-            else np.zeros((0, self.n_states_, N_ACTIONS)),
+            else np.zeros((0, self.n_states_, self.n_actions)),
             n_traj_types=np.array([self.n_trajectories_[t] for t in types], dtype=np.int64),
             n_traj_pooled=np.int64(self.n_trajectories_[self.POOLED]),
         )
@@ -288,25 +310,32 @@ class ActionPrior:
         tables: Mapping[str, tuple[int, npt.ArrayLike]],
         n_states: int | None = None,
         delta: float = 0.0,
+        n_actions: int | None = None,
     ) -> ActionPrior:
         """A prior holding stored counts: ``tables`` maps the pooled key ``"*"`` and each agent
-        type to (trajectories, increments of shape (n_states, 4)); a missing pooled table is
-        the sum of the others. ``n_states`` defaults to the tables' (or alpha0's) size.
-        ValueError says what does not fit."""
+        type to (trajectories, increments of shape (n_states, n_actions)); a missing pooled
+        table is the sum of the others. ``n_states`` and ``n_actions`` default to the tables'
+        (or alpha0's) shape, ``n_actions`` to 4 when neither gives it. ValueError says what
+        does not fit."""
         shapes = {np.shape(inc) for _, inc in tables.values()}
+        given = {shape for shape in shapes if len(shape) == 2}
+        given |= {np.shape(alpha0)} if np.ndim(alpha0) == 2 else set()
         if n_states is None:
-            sizes = {shape[0] for shape in shapes if len(shape) == 2}
-            sizes |= {np.shape(alpha0)[0]} if np.ndim(alpha0) == 2 else set()
+            sizes = {shape[0] for shape in given}
             if len(sizes) != 1:
                 raise ValueError("n_states is needed (no table or alpha0 gives it, or they differ)")
             n_states = sizes.pop()
-        prior = cls(alpha0=alpha0, delta=delta)
+        if n_actions is None:
+            widths = {shape[1] for shape in given}
+            n_actions = widths.pop() if len(widths) == 1 else N_ACTIONS
+        prior = cls(alpha0=alpha0, delta=delta, n_actions=n_actions)
         prior._reset(n_states)
         for key, (n, inc) in tables.items():
             counts = np.asarray(inc, dtype=np.float64)
-            if counts.shape != (n_states, N_ACTIONS):
+            if counts.shape != (n_states, n_actions):
                 raise ValueError(
-                    f"table {key!r}: counts of shape {counts.shape}, expected ({n_states}, 4)"
+                    f"table {key!r}: counts of shape {counts.shape}, expected ({n_states}, "
+                    f"{n_actions})"
                 )
             if not np.all(np.isfinite(counts)) or counts.min(initial=0.0) < 0 or n < 0:
                 raise ValueError(f"table {key!r}: counts and trajectories must be >= 0")
@@ -348,7 +377,9 @@ class GoalPriors:
     through :meth:`add`; readers share the flat lists of :meth:`rows`, made once per change.
     """
 
-    def __init__(self, n_states: int, goals: Sequence[int], alpha0: float = 1.0):
+    def __init__(
+        self, n_states: int, goals: Sequence[int], alpha0: float = 1.0, n_actions: int = N_ACTIONS
+    ):
         if not (math.isfinite(alpha0) and alpha0 > 0):
             raise ValueError("alpha0 must be finite and > 0")
         if not goals:
@@ -357,8 +388,9 @@ class GoalPriors:
         self.goals = tuple(int(g) for g in goals)
         self.goal_index = {g: i for i, g in enumerate(self.goals)}
         self.alpha0 = float(alpha0)
-        self.goal_counts = np.zeros((len(self.goals), n_states, N_ACTIONS))
-        self.unknown_counts = np.zeros((n_states, N_ACTIONS))
+        self.n_actions = int(n_actions)
+        self.goal_counts = np.zeros((len(self.goals), n_states, self.n_actions))
+        self.unknown_counts = np.zeros((n_states, self.n_actions))
         self._rows: GoalRows | None = None
         self._arrays: GoalArrays | None = None
 
@@ -378,7 +410,7 @@ class GoalPriors:
                 raise ValueError(f"goal index {g} out of range 0..{self.n_goals - 1}")
             by_goal.setdefault(g, []).append(t)
         for g, group in by_goal.items():
-            counts = trajectory_counts(group, self.n_states)
+            counts = trajectory_counts(group, self.n_states, n_actions=self.n_actions)
             if g is None:
                 self.unknown_counts += counts
             else:
@@ -399,7 +431,7 @@ class GoalPriors:
         return self.theta(np.full(self.n_goals, 1.0 / self.n_goals))
 
     def theta(self, w: npt.ArrayLike) -> FloatArray:
-        """theta^w for every state, shape (S, 4)."""
+        """theta^w for every state, shape (S, A)."""
         wv = np.asarray(w, dtype=np.float64)
         alpha = (
             self.alpha0
@@ -409,28 +441,31 @@ class GoalPriors:
         out: FloatArray = alpha / alpha.sum(axis=1, keepdims=True)
         return out
 
-    def theta_row(self, state: int, w: Sequence[float]) -> tuple[float, float, float, float]:
+    def theta_row(self, state: int, w: Sequence[float]) -> tuple[float, ...]:
         """theta^w_s for one state, summed in order (app/kernels.py:goal_decide does the same
         operations on the same numbers, so the same bits)."""
         rows = self.rows()
-        b, g = state * N_ACTIONS, self.n_goals
+        n_actions = self.n_actions
+        b, g = state * n_actions, self.n_goals
         alpha = []
-        for a in range(N_ACTIONS):
+        for a in range(n_actions):
             dot = 0.0
             for wg, cg in zip(w, rows.counts[b + a], strict=True):
                 dot += wg * cg
             alpha.append(self.alpha0 + rows.unknown[b + a] + g * dot)
-        total = alpha[0] + alpha[1] + alpha[2] + alpha[3]
-        return (alpha[0] / total, alpha[1] / total, alpha[2] / total, alpha[3] / total)
+        total = alpha[0]
+        for a in range(1, n_actions):
+            total += alpha[a]
+        return tuple(x / total for x in alpha)
 
     def goal_log_theta(self) -> FloatArray:
-        """log theta^g: each goal's own prior (alpha0 + G c^g), shape (G, S, 4)."""
+        """log theta^g: each goal's own prior (alpha0 + G c^g), shape (G, S, A)."""
         alpha = self.alpha0 + self.n_goals * self.goal_counts
         out: FloatArray = np.log(alpha / alpha.sum(axis=2, keepdims=True))
         return out
 
     def rows(self) -> GoalRows:
-        """The counts and each goal's log theta as flat lists (index s * 4 + a), made once per
+        """The counts and each goal's log theta as flat lists (index s * A + a), made once per
         change of the counts and shared by every advisor that reads them."""
         if self._rows is None:
             g = self.n_goals
@@ -443,8 +478,8 @@ class GoalPriors:
 
     def arrays(self) -> GoalArrays:
         """The counts as app/kernels.py reads them (its ``GoalTables``): (goal index of each
-        state (S,), alpha0, unknown counts (S*4,), goal counts (S*4, G), each goal's log theta
-        (S*4, G)). The two (S*4, G) arrays are transposed views of (G, S*4) ones, the goal
+        state (S,), alpha0, unknown counts (S*A,), goal counts (S*A, G), each goal's log theta
+        (S*A, G)). The two (S*A, G) arrays are transposed views of (G, S*4) ones, the goal
         counts a view of :attr:`goal_counts` itself: made once per change of the counts, 32
         bytes per goal, state and action beside the counts, shared by every reader."""
         if self._arrays is None:

@@ -12,7 +12,7 @@ from typing import Literal
 import numpy as np
 
 from app.advice.priors import ActionPrior, GoalPriors
-from app.domain.grid import GridDomain
+from app.domain.building import Domain
 from app.domain.paths import TrajectorySource, expert_trajectories, optimal_policies
 
 ExpertSource = Literal["start", "anywhere", "policy"]
@@ -20,7 +20,7 @@ EXPERT_SOURCES: tuple[str, ...] = ("start", "anywhere", "policy")
 
 
 def train_prior(
-    domain: GridDomain,
+    domain: Domain,
     rng: np.random.Generator,
     source: ExpertSource = "start",
     per_goal: int = 10,
@@ -28,8 +28,9 @@ def train_prior(
     delta: float = 0.0,
     epsilon: float = 0.0,
 ) -> ActionPrior:
-    """An :class:`ActionPrior` learned from simulated experts of every goal of ``domain``."""
-    prior = ActionPrior(alpha0=alpha0, delta=delta)
+    """An :class:`ActionPrior` learned from simulated experts of every goal of ``domain`` (on
+    a building of several floors, over its six actions: experts ride stairs and lifts)."""
+    prior = ActionPrior(alpha0=alpha0, delta=delta, n_actions=domain.n_actions)
     if source == "policy":
         return prior.fit_policies(optimal_policies(domain))
     if source not in EXPERT_SOURCES:
@@ -41,7 +42,7 @@ def train_prior(
 
 
 def train_goal_priors(
-    domain: GridDomain,
+    domain: Domain,
     rng: np.random.Generator,
     source: TrajectorySource = "start",
     per_goal: int = 10,
@@ -52,7 +53,8 @@ def train_goal_priors(
     With the same ``rng`` the pooled prior is :func:`train_prior`'s (the same draws)."""
     experts = expert_trajectories(domain, rng, source, per_goal)
     pairs = [e.pairs for e in experts]
-    prior = ActionPrior(alpha0=alpha0).fit(pairs, domain.n_states)
+    prior = ActionPrior(alpha0=alpha0, n_actions=domain.n_actions).fit(pairs, domain.n_states)
     labels: list[int | None] = [domain.goals.index(e.goal) for e in experts]
-    goal_priors = GoalPriors(domain.n_states, domain.goals, alpha0).add(pairs, labels)
+    goal_priors = GoalPriors(domain.n_states, domain.goals, alpha0, domain.n_actions)
+    goal_priors.add(pairs, labels)
     return prior, goal_priors

@@ -316,6 +316,10 @@ def time_distances(next_state: IntArray, durations: IntArray, sources: Sequence[
     return dist
 
 
+#: a domain of either kind: one floor (four actions) or a building of several (six)
+Domain = GridDomain | Building
+
+
 def load_map(text: str, name: str = "maze") -> GridDomain | Building:
     """A map file's text as its domain: a :class:`Building` when it has ``floor:`` lines,
     else a :class:`~app.domain.grid.GridDomain`; :class:`MapError` names where it is wrong."""

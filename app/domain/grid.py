@@ -587,6 +587,16 @@ class GridDomain:
 
     # ---- shape --------------------------------------------------------------------------
     @property
+    def actions(self) -> tuple[str, ...]:
+        """The actions' names, ``N E S W`` (a :class:`~app.domain.building.Building` adds
+        ``U D``)."""
+        return ACTIONS
+
+    @property
+    def n_actions(self) -> int:
+        return N_ACTIONS
+
+    @property
     def shape(self) -> tuple[int, int]:
         return (len(self.rows_text), len(self.rows_text[0]))
 

@@ -6,6 +6,11 @@ each of the eight goals") walk such paths; where they start is a choice the pape
 (docs/METHOD.md): at the start cell (``"start"``) or at uniformly random free cells
 (``"anywhere"``). The service learns a new domain's prior from them; the experiments and the
 ``train`` command do too (:mod:`app.agents.experts`).
+
+In a building of several floors (:class:`~app.domain.building.Building`) a shortest path is one
+of the fewest moves of time: a ride on a stair or a lift takes its ``durations`` (so experts
+take the lift where it saves time, the stairs for one floor where they are quicker), every
+other action one.
 """
 
 from __future__ import annotations
@@ -15,7 +20,8 @@ from typing import Literal, NamedTuple
 import numpy as np
 
 from app.arrays import BoolArray, FloatArray, IntArray
-from app.domain.grid import N_ACTIONS, GridDomain
+from app.domain.building import Building, Domain
+from app.domain.grid import GridDomain
 
 TrajectorySource = Literal["start", "anywhere"]
 TRAJECTORY_SOURCES: tuple[str, ...] = ("start", "anywhere")
@@ -28,18 +34,24 @@ class ExpertTrajectory(NamedTuple):
     pairs: IntArray
 
 
-def optimal_actions(domain: GridDomain, goal: int) -> BoolArray:
-    """``out[s, a]``: action ``a`` lies on a shortest path from ``s`` to ``goal``.
+def optimal_actions(domain: Domain, goal: int) -> BoolArray:
+    """``out[s, a]``: action ``a`` lies on a shortest path from ``s`` to ``goal`` (in a
+    building, a quickest one: the module docstring).
 
     The goal itself is terminal (no action is optimal there).
     """
+    if isinstance(domain, Building):
+        time = domain.times_to(goal)
+        after = time[domain.next_state] + domain.durations  # time to the goal through a
+        out: BoolArray = (after == time[:, None]) & (time[:, None] > 0)
+        return out
     dist = domain.distances_to(goal)
     nxt = dist[domain.next_state]  # distance after each move
-    out: BoolArray = (nxt == dist[:, None] - 1) & (dist[:, None] > 0)
-    return out
+    one: BoolArray = (nxt == dist[:, None] - 1) & (dist[:, None] > 0)
+    return one
 
 
-def optimal_policy(domain: GridDomain, goal: int) -> FloatArray:
+def optimal_policy(domain: Domain, goal: int) -> FloatArray:
     """pi*(s, a): uniform over the optimal actions (ties all count: docs/METHOD.md); 0 at the
     goal."""
     opt = optimal_actions(domain, goal).astype(np.float64)
@@ -48,13 +60,13 @@ def optimal_policy(domain: GridDomain, goal: int) -> FloatArray:
     return out
 
 
-def optimal_policies(domain: GridDomain) -> FloatArray:
-    """One optimal policy per goal, shape (goals, states, 4)."""
+def optimal_policies(domain: Domain) -> FloatArray:
+    """One optimal policy per goal, shape (goals, states, actions)."""
     return np.stack([optimal_policy(domain, g) for g in domain.goals])
 
 
 def expert_trajectory(
-    domain: GridDomain,
+    domain: Domain,
     start: int,
     goal: int,
     rng: np.random.Generator,
@@ -70,7 +82,7 @@ def expert_trajectory(
     pairs: list[tuple[int, int]] = []
     while s != goal and len(pairs) < max_steps:
         if epsilon > 0 and rng.random() < epsilon:
-            a = int(rng.integers(N_ACTIONS))
+            a = int(rng.integers(domain.n_actions))
         else:
             choices = np.flatnonzero(opt[s])
             a = int(choices[rng.integers(len(choices))])
@@ -80,7 +92,7 @@ def expert_trajectory(
 
 
 def expert_trajectories(
-    domain: GridDomain,
+    domain: Domain,
     rng: np.random.Generator,
     source: TrajectorySource = "start",
     per_goal: int = 10,

@@ -41,7 +41,6 @@ from app.arrays import BoolArray, FloatArray, IntArray
 from app.domain.grid import N_ACTIONS
 
 _NO_RING = np.zeros((0, 0))  # no value kept: the window's values are those of the tables
-_NO_ADVICE = np.zeros((0, N_ACTIONS))
 
 
 #: what a window of pair keys holds, on each class using :class:`KeyedWindow`
@@ -79,7 +78,7 @@ class KeyedWindow(Advisor):
     """The core's window as pair keys (a mixin for the service's advisors).
 
     The core's window keeps, per model, the log-probability each pair added (lists of Python
-    floats, about 32 bytes an entry and model). This one keeps each pair's key ``s * 4 + a``
+    floats, about 32 bytes an entry and model). This one keeps each pair's key ``s * A + a``
     (int32, 4 bytes a pair whatever the number of models): the value the core stored is
     ``tables.log_probs[m][key]``. Only when the tables change (a prior update) are the values
     of the pairs then in the window kept as numbers (``_old``, models x W float64, until the
@@ -175,11 +174,11 @@ class KeyedWindow(Advisor):
     def append(self, state: int, action: int) -> None:
         """Add (s, a) to H exactly as :meth:`Advisor.append` does."""
         t = self.tables
-        if not (0 <= state < t.n_states and 0 <= action < N_ACTIONS):
+        if not (0 <= state < t.n_states and 0 <= action < t.n_actions):
             self._check(state, action)
         if self._keys_tables is not t:
             self._sync_tables()
-        k = state * N_ACTIONS + action
+        k = state * t.n_actions + action
         pos, loglik = self._pos, self._loglik
         leaving = int(self._keys[pos])
         tables = t.log_probs_flat
@@ -236,7 +235,7 @@ class StreamAdvisor(KeyedWindow):
         self._loglik, self._pos = loglik.tolist(), pos
         if gone:
             self._left(gone)
-        advice = tables.theta[next_states[out[2]]] if n else _NO_ADVICE
+        advice = tables.theta[next_states[out[2]]] if n else tables.theta[:0]
         return decided(self, next_states, out, advice, (count_before, benefit_before), tables)
 
 
@@ -274,7 +273,7 @@ class StreamGoalAware(KeyedWindow, GoalAwareAdvisor):
         g = self.priors.n_goals
         self.alive = np.ones(g, dtype=np.bool_)
         self._goal_ll = np.zeros(g)
-        self._theta_w = np.empty(N_ACTIONS)
+        self._theta_w = np.empty(self.priors.n_actions)
 
     def _reset_goal_window(self) -> None:
         self._goal_ring = []  # the core's rows are not used: the pair keys index the tables
@@ -387,8 +386,7 @@ class StreamGoalAware(KeyedWindow, GoalAwareAdvisor):
             loglik, self.tables.arrays, self._goal_arrays, self._goal_ll, self.alive, self.beta,
             state, tw,
         )  # fmt: skip
-        a0, a1, a2, a3 = tw.tolist()
-        return self.record(state, kl >= self.kappa, (a0, a1, a2, a3), kl, p0)
+        return self.record(state, kl >= self.kappa, tuple(tw.tolist()), kl, p0)
 
     def observe_batch(
         self, states: IntArray, actions: IntArray, next_states: IntArray
@@ -396,7 +394,7 @@ class StreamGoalAware(KeyedWindow, GoalAwareAdvisor):
         n = len(states)
         count_before, benefit_before = self.advice_count, self.benefit
         window, goal_window, loglik = self._windows()
-        out, rows = columns(n), np.empty((n, N_ACTIONS))
+        out, rows = columns(n), np.empty((n, self.priors.n_actions))
         pos, self.advice_count, self.benefit, gone, goal_gone = kernels.goal_stream(
             window, goal_window, (loglik, self._goal_ll, self.alive), self._pos, self.steps,
             resync_period(self.window), self.beta, self.tables.arrays, self._goal_arrays,

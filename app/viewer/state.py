@@ -18,7 +18,7 @@ from app.arrays import FloatArray
 from app.domain.grid import GridDomain
 
 Cell = tuple[int, int]
-Probabilities = tuple[float, float, float, float]
+Probabilities = tuple[float, ...]
 
 
 class Figure(NamedTuple):

@@ -75,6 +75,47 @@ def test_advisor_matches_from_scratch_method(
     assert adv.advice_per_100 == pytest.approx(100 * count / (len(events) + 1))
 
 
+@given(
+    st.integers(2, 8).flatmap(
+        lambda n: hnp.arrays(np.float64, (3, n), elements=st.floats(0.01, 50.0))
+    ),
+    st.lists(st.tuples(st.integers(0, 2), st.integers(0, 7), st.integers(0, 2)), max_size=60),
+    st.integers(1, 20),
+    st.sampled_from([0.0, 0.2, 0.5, 1.0]),
+)
+def test_advisor_matches_from_scratch_method_over_any_number_of_actions(
+    alpha: np.ndarray, events: list[tuple[int, int, int]], window: int, kappa: float
+) -> None:
+    """Six actions in a building of several floors (N E S W U D), or any other number A: the
+    uniform model is 1/A, and the KL compared with kappa is KL x log 4 / log A (so the most a
+    certain theta can be worth against the uniform model is log 4 whatever A)."""
+    theta = alpha / alpha.sum(axis=1, keepdims=True)
+    n_actions = theta.shape[1]
+    adv = Advisor(AdviceTables.paper(theta), kappa=kappa, window=window)
+    adv.start(0)
+    pairs: list[tuple[int, int]] = []
+    for s, a, s2 in events:
+        a %= n_actions
+        d = adv.observe(s, a, s2)
+        pairs.append((s, a))
+        h = pairs[-window:]
+        l1 = sum(math.log(theta[si, ai]) for si, ai in h)
+        l2 = len(h) * math.log(1 / n_actions)
+        p1 = 1.0 / (1.0 + math.exp(l2 - l1))
+        kl = kl_divergence(theta[s2], p1 * theta[s2] + (1 - p1) / n_actions)
+        assert d.p_normal == pytest.approx(p1, abs=1e-9)
+        assert d.kl == pytest.approx(kl * LOG4 / math.log(n_actions), abs=1e-9)
+        assert d.advise == (d.kl >= kappa)
+        assert d.advice == (tuple(theta[s2]) if d.advise else None)
+    certain = np.full((1, n_actions), 1e-12)
+    certain[0, 0] = 1.0
+    lost = Advisor(AdviceTables.paper(certain / certain.sum()), kappa=0.0, window=50)
+    lost.start(0)
+    for _ in range(50):  # every move the uncertain one: the uniform model certain
+        d = lost.observe(0, n_actions - 1, 0)
+    assert d.kl == pytest.approx(LOG4, rel=1e-6)
+
+
 @given(thetas(), st.integers(1, 30), st.integers(0, 2_000), st.integers(0, 2**32 - 1))
 def test_window_sums_stay_exact_over_long_streams(
     theta: np.ndarray, window: int, length: int, seed: int
@@ -191,7 +232,8 @@ def test_advisor_rejects_out_of_range_events() -> None:
 @pytest.mark.parametrize(
     ("theta", "models", "message"),
     [
-        (np.full((2, 3), 1 / 3), None, "shape"),
+        (np.full((2, 1), 1.0), None, "shape"),
+        (np.full(4, 0.25), None, "shape"),
         (np.array([[1.0, 0, 0, 0]]), None, "strictly positive"),
         (np.full((1, 4), 0.3), None, "sum to 1"),
         (

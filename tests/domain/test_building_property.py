@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 from app.domain.building import ACTIONS, Building, D, U
 from app.domain.floors import Connection, Floor, FloorName
 from app.domain.grid import Frame, NamedCell
+from app.domain.paths import optimal_actions, optimal_policy
 
 Cell = tuple[int, int, int]
 COMPASS = {"N": (-1, 0), "E": (0, 1), "S": (1, 0), "W": (0, -1)}
@@ -181,3 +182,25 @@ def test_building_times_to_is_dijkstra(parts: Parts, data: st.DataObject) -> Non
     expected = [dist.get(s, -1) for s in range(b.n_states)]
     assert b.times_to(target).tolist() == expected
     assert (b.distances_to(target) >= 0).all()  # every state reaches every other
+
+
+@settings(max_examples=100, deadline=None)
+@given(buildings(), st.data())
+def test_experts_optimal_actions_are_every_first_action_of_a_quickest_route(
+    parts: Parts, data: st.DataObject
+) -> None:
+    """``optimal_actions`` in a building: an action is optimal at s exactly when some route
+    that starts with it reaches the goal in the fewest moves of time (the action's time plus
+    the quickest time from where it leads: ``times_to``, Dijkstra's by the test above); none
+    at the goal, and no action that stays."""
+    b = build(parts)
+    goal = data.draw(st.sampled_from(b.goals))
+    opt = optimal_actions(b, goal)
+    best = b.times_to(goal)
+    for s in range(b.n_states):
+        for a in range(6):
+            nxt = b.step(s, a)
+            quickest = nxt != s and int(b.durations[s, a]) + int(best[nxt]) == best[s]
+            assert bool(opt[s, a]) == (quickest and s != goal), (b.cell(s), ACTIONS[a])
+    policy = optimal_policy(b, goal)
+    assert np.allclose(policy.sum(axis=1), (np.arange(b.n_states) != goal).astype(float))

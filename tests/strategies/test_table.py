@@ -44,7 +44,7 @@ class QuietAdvisor(Advisor):
         kl, p_normal = self.divergence(state)
         th = self.tables.theta_flat
         row = tuple(th[state * N_ACTIONS + a] for a in range(N_ACTIONS))
-        return self.record(state, p_normal < self.threshold, row, kl, p_normal)  # type: ignore[arg-type]
+        return self.record(state, p_normal < self.threshold, row, kl, p_normal)
 
 
 def _quiet(data: DomainData, s: AdvisorSettings) -> Advisor:

@@ -18,7 +18,7 @@ import numpy.typing as npt
 from app.advice.models import AdviceTables
 from app.arrays import IntArray
 
-Advice = tuple[float, float, float, float]
+Advice = tuple[float, ...]
 
 
 def _ring_spans(count: int, k: int, size: int) -> tuple[int, int, int]:

@@ -15,8 +15,9 @@ from app.advice.models import AdviceTables
 from app.advice.params import StrategyParams
 from app.advice.rules import RULES
 from app.agents.experts import train_goal_priors
+from app.domain.building import Domain
+from app.domain.floorplans import generate_floors
 from app.domain.generate import generate_building_domain, generate_domain
-from app.domain.grid import GridDomain
 from app.strategies.stream import KeyedWindow, StreamAdvisor, StreamGoalAware, StreamGuide, keyed
 from tests.tables import random_tables, split_weight_tables
 
@@ -204,12 +205,12 @@ def test_guide_batches_equal_the_core_guide(
 
 
 def _moves(
-    rng: np.random.Generator, d: GridDomain, s: int, n: int, follow: bool
+    rng: np.random.Generator, d: Domain, s: int, n: int, follow: bool
 ) -> tuple[list[int], list[int], list[int], int]:
     """``n`` moves from ``s``: along the map, or (``follow`` off) jumping anywhere at times."""
     states, actions, nexts = [], [], []
     for _ in range(n):
-        a = int(rng.integers(4))
+        a = int(rng.integers(d.n_actions))
         if follow or rng.random() < 0.8:
             s2 = int(d.next_state[s, a])
         else:
@@ -229,15 +230,20 @@ def _moves(
     beta=st.sampled_from([0.0, 0.5, 1.0]),
     follow=st.booleans(),
     batches=st.lists(st.one_of(st.integers(0, 10), st.integers(0, 900)), min_size=1, max_size=6),
+    floors=st.sampled_from([1, 1, 2, 3]),
 )
 def test_goal_aware_batches_equal_the_core_goal_aware_advisor(
-    seed: int, window: int, kappa: float, beta: float, follow: bool, batches: list[int]
-) -> None:
+    seed: int, window: int, kappa: float, beta: float, follow: bool, batches: list[int],
+    floors: int,
+) -> None:  # fmt: skip
     """StreamGoalAware (both windows as pair keys into shared tables, every event compiled)
     against GoalAwareAdvisor.observe, with new tables and new goal counts mid-session (the
-    values of the pairs added before kept exactly), single events between batches."""
+    values of the pairs added before kept exactly), single events between batches; on one
+    floor (four actions) or a building of two or three (six: up and down)."""
     rng = np.random.default_rng(seed)
-    d = generate_domain(7, 7, seed % 1000, braid=0.3, n_goals=1 + seed % 4)
+    d: Domain = generate_domain(7, 7, seed % 1000, braid=0.3, n_goals=1 + seed % 4)
+    if floors > 1:
+        d = generate_floors(20, 20, floors, rng, n_goals=1 + seed % 2, room=(3, 5))
     prior, goals = train_goal_priors(d, rng, "start", 2, 1.0)
     tables = AdviceTables.paper(prior.theta())
     core = GoalAwareAdvisor(tables, goals, kappa, window, beta)
@@ -247,7 +253,8 @@ def test_goal_aware_batches_equal_the_core_goal_aware_advisor(
     for n in batches:
         if rng.random() < 0.3:  # more expert data: new counts, and new tables or not
             _, more = train_goal_priors(d, rng, "anywhere", 1, 1.0)
-            new = random_tables(rng, d.n_states) if rng.random() < 0.5 else tables
+            new = random_tables(rng, d.n_states, n_actions=d.n_actions)
+            new = new if rng.random() < 0.5 else tables
             core.use_tables(new, more)
             fast.use_tables(new, more)
         _maybe_cap(rng, core, fast)
@@ -260,7 +267,7 @@ def test_goal_aware_batches_equal_the_core_goal_aware_advisor(
         np.testing.assert_array_equal(fast._window, np.array(core._ring))
         if beta > 0.0:
             np.testing.assert_array_equal(fast._goal_window, np.array(core._goal_ring))
-        a = int(rng.integers(4))  # a single event between batches
+        a = int(rng.integers(d.n_actions))  # a single event between batches
         s2 = int(d.next_state[s, a])
         assert fast.observe(s, a, s2) == core.observe(s, a, s2)
         s = s2
@@ -293,4 +300,38 @@ def test_rule_advisors_with_pair_keys_equal_the_core_rules(
                     rng.integers(0, n_states, n))  # fmt: skip
         expected = [core.observe(int(x), int(y), int(z)) for x, y, z in zip(s, a, s2, strict=True)]
         assert fast.observe_batch(s, a, s2).decisions() == expected
+        _same_state(fast, core)
+
+
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    n_states=st.integers(1, 30),
+    n_actions=st.sampled_from([6, 2, 3, 5, 8]),
+    n_models=st.integers(2, 4),
+    window=st.one_of(st.integers(1, 40), st.sampled_from([300, 1024])),
+    kappa=st.sampled_from([0.0, 0.05, 0.3, 0.5, 1.0, 1.5]),
+    batches=st.lists(st.integers(0, 400), min_size=1, max_size=5),
+)
+def test_observe_batch_equals_core_observe_for_any_number_of_actions(
+    seed: int, n_states: int, n_actions: int, n_models: int, window: int, kappa: float,
+    batches: list[int],
+) -> None:  # fmt: skip
+    """A building of several floors has six actions (N E S W U D): the compiled stream and the
+    core decide alike over any number of actions, models and weights, the KL scaled to four
+    actions' units in both."""
+    rng = np.random.default_rng(seed)
+    tables = random_tables(rng, n_states, n_models, n_actions=n_actions)
+    core, fast = Advisor(tables, kappa, window), StreamAdvisor(tables, kappa, window)
+    start = int(rng.integers(n_states))
+    assert fast.start(start) == core.start(start)
+    for n in batches:
+        if rng.random() < 0.2:
+            core.tables = fast.tables = random_tables(rng, n_states, n_models, n_actions=n_actions)
+        _maybe_cap(rng, core, fast)
+        s, a, s2 = (rng.integers(0, n_states, n), rng.integers(0, n_actions, n),
+                    rng.integers(0, n_states, n))  # fmt: skip
+        expected = [core.observe(int(x), int(y), int(z)) for x, y, z in zip(s, a, s2, strict=True)]
+        got = fast.observe_batch(s, a, s2)
+        assert got.decisions() == expected
+        assert got.advice.shape == (sum(d.advise for d in expected), n_actions)
         _same_state(fast, core)

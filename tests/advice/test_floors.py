@@ -1,0 +1,101 @@
+"""The paper's rule in a building of several floors: experts ride the stairs and lifts on the
+quickest routes, the prior learnt from them has six actions, and a lost visitor is told apart
+from one who walks with purpose upstairs as on one floor (readable and compiled alike)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from app.advice.advisor import Advisor
+from app.advice.goals import GoalAwareAdvisor
+from app.advice.models import AdviceTables
+from app.agents.experts import train_goal_priors, train_prior
+from app.domain.building import Building, D, U
+from app.domain.floorplans import generate_floors
+from app.domain.paths import expert_trajectories
+from app.strategies.stream import StreamAdvisor
+
+
+@pytest.fixture(scope="module")
+def hospital() -> Building:
+    return generate_floors(40, 40, 3, np.random.default_rng(3), purpose="hospital", n_goals=3)
+
+
+def test_experts_take_the_quickest_routes_through_stairs_and_lifts(hospital: Building) -> None:
+    b = hospital
+    experts = expert_trajectories(b, np.random.default_rng(1), "start", per_goal=3)
+    assert len(experts) == 3 * len(b.goals)
+    for e in experts:
+        s, time = b.start, 0
+        for state, action in e.pairs.tolist():
+            assert state == s
+            time += int(b.durations[s, action])
+            s = b.step(s, action)
+        assert s == e.goal
+        assert time == b.times_to(e.goal)[b.start]  # no quicker way: the fewest moves of time
+        if b.cell(e.goal)[0] > 0:  # upstairs: up by a stair or a lift, never down
+            assert (e.pairs[:, 1] == U).sum() == b.cell(e.goal)[0]
+            assert (e.pairs[:, 1] == D).sum() == 0
+
+
+def test_a_lost_visitor_is_advised_and_one_walking_upstairs_is_not(hospital: Building) -> None:
+    b = hospital
+    prior = train_prior(b, np.random.default_rng(2), "anywhere", per_goal=200)
+    theta = prior.theta()
+    assert theta.shape == (b.n_states, 6)
+    stops = np.flatnonzero(b.connection_of >= 0)
+    assert (theta[stops].argmax(axis=1) == U).any()  # experts ride up from the ground floor
+    tables = AdviceTables.paper(theta)
+    upstairs = [g for g in b.goals if b.cell(g)[0] == 2]
+    walk = expert_trajectories(b, np.random.default_rng(4), "start", 1)
+    purposeful = next(e.pairs for e in walk if e.goal == upstairs[0])
+    rng = np.random.default_rng(5)
+    lost = []
+    s = b.start
+    for _ in range(400):
+        a = int(rng.integers(6))
+        lost.append((s, a))
+        s = b.step(s, a)
+    for pairs, most, least in ((purposeful, 0, 0), (lost, 400, 20)):
+        core, fast = Advisor(tables, 0.5, 300), StreamAdvisor(tables, 0.5, 300)
+        assert fast.start(b.start) == core.start(b.start)
+        states = np.array([p[0] for p in pairs], dtype=np.int64)
+        actions = np.array([p[1] for p in pairs], dtype=np.int64)
+        after = b.next_state[states, actions]
+        expected = [core.observe(*p) for p in zip(states.tolist(), actions.tolist(),
+                                                   after.tolist(), strict=True)]  # fmt: skip
+        assert fast.observe_batch(states, actions, after).decisions() == expected
+        assert least <= core.advice_count <= most
+        for d in expected:
+            if d.advise:
+                assert d.advice is not None and len(d.advice) == 6
+
+
+def test_goal_aware_advice_with_no_goal_told_apart_is_the_paper_s_on_six_actions(
+    hospital: Building,
+) -> None:
+    """Goal-aware advice narrows theta by a posterior over the goals; before any goal is ruled
+    out (beta 0) theta^w is the pooled prior, so its decisions are the paper's rule's, KL
+    scale included, up to rounding; advice has six probabilities."""
+    b = hospital
+    prior, goals = train_goal_priors(b, np.random.default_rng(6), "anywhere", 40)
+    assert goals.goal_counts.shape == (len(b.goals), b.n_states, 6)
+    tables = AdviceTables.paper(prior.theta())
+    paper, aware = Advisor(tables, 0.3, 100), GoalAwareAdvisor(tables, goals, 0.3, 100)
+    rng = np.random.default_rng(7)
+    s = b.start
+    first = [paper.start(s), aware.start(s)]
+    assert first[1].kl == pytest.approx(first[0].kl, rel=1e-9, abs=1e-12)
+    goal_cells = set(b.goals)
+    for _ in range(300):
+        a = int(rng.integers(6))
+        s2 = b.step(s, a)
+        if s in goal_cells or s2 in goal_cells:
+            break  # leaving a goal rules it out: the two part from there
+        d_paper, d_aware = paper.observe(s, a, s2), aware.observe(s, a, s2)
+        assert d_aware.kl == pytest.approx(d_paper.kl, rel=1e-9, abs=1e-12)
+        assert d_aware.advise == d_paper.advise or abs(d_paper.kl - 0.3) < 1e-9
+        if d_aware.advise:
+            assert d_aware.advice == pytest.approx(d_paper.advice, rel=1e-9)
+        s = s2
