@@ -75,20 +75,6 @@ def load_any(path: Path) -> GridDomain | Building:
         raise typer.Exit(code=2) from None
 
 
-def load_domain(path: Path) -> GridDomain:
-    """Load a one-floor map, or exit with the loader's message; a map of several floors is
-    refused, naming its floors (what uses this runs on one floor)."""
-    domain = load_any(path)
-    if isinstance(domain, Building):
-        floors = ", ".join(f.label for f in domain.floors[:6])
-        floors += f" and {domain.n_floors - 6} more" if domain.n_floors > 6 else ""
-        _fail(
-            f"{path}: a map of {domain.n_floors} floors ({floors}): this command runs on a "
-            "one-floor map in this version (`maze check` and `maze show` read floors)"
-        )
-    return domain
-
-
 def describe(domain: GridDomain) -> str:
     rows, cols = domain.shape
     dist = domain.goal_distances[:, domain.start]

@@ -12,9 +12,10 @@ from typing import Annotated, cast
 import numpy as np
 import typer
 
-from app.cli.maze import MazeOption, describe, load_domain
+from app.cli.building import describe_building
+from app.cli.maze import MazeOption, describe, load_any
 from app.cli.options import choice
-from app.domain.grid import ACTIONS
+from app.domain.building import Building
 from app.domain.maps import DEFAULT_MAP
 
 SOURCES = ("start", "anywhere", "policy")  # app.agents.experts.EXPERT_SOURCES (checked below)
@@ -46,7 +47,8 @@ def train(
     as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
 ) -> None:
     """Learn an action prior from simulated optimal experts; print what it holds and each
-    cell's most advised direction. (A service domain learns it with PUT /domains/{name} and
+    cell's most advised direction (a map of several floors: floor by floor, U and D where
+    experts ride up or down). (A service domain learns it with PUT /domains/{name} and
     "experts": {"source", "per_goal", "seed"}.)"""
     from app.advice.text import direction_map
     from app.agents.experts import EXPERT_SOURCES, ExpertSource, train_prior
@@ -54,7 +56,7 @@ def train(
     if experts not in EXPERT_SOURCES:
         typer.echo(f"error: --experts must be one of {', '.join(EXPERT_SOURCES)}", err=True)
         raise typer.Exit(code=2)
-    domain = load_domain(maze)
+    domain = load_any(maze)
     try:
         source = cast(ExpertSource, experts)
         rng = np.random.default_rng(seed)
@@ -74,13 +76,14 @@ def train(
     if as_json:
         typer.echo(json.dumps(summary, indent=2))
         return
-    typer.echo(describe(domain))
+    typer.echo(describe_building(domain) if isinstance(domain, Building) else describe(domain))
     kind = "policies" if experts == "policy" else "trajectories"
     typer.echo(
         f"prior: {summary['trajectories']} expert {kind}"
         f" ({experts}), alpha0={alpha0}, delta={delta}; {summary['states_with_data']}/"
         f"{summary['states']} states have expert data; mean entropy "
-        f"{summary['mean_entropy_nats']:.3f} nats (uniform {np.log(len(ACTIONS)):.3f})"
+        f"{summary['mean_entropy_nats']:.3f} nats (uniform over {domain.n_actions} actions "
+        f"{np.log(domain.n_actions):.3f})"
     )
     typer.echo("most advised direction (· no data, + tie):")
     typer.echo(direction_map(domain, prior.theta()))
