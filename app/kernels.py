@@ -294,6 +294,36 @@ def observe_stream(
     moves: tuple[IntArray, IntArray, IntArray],
     out: tuple[FloatArray, FloatArray, BoolArray, IntArray, FloatArray],
 ) -> tuple[int, int, float, int]:  # pragma: no cover - compiled
+    """:func:`stream_loop` with the tables' number of actions A: four, a constant in the loop
+    compiled for it, or any other. (A number read from the tables in the loop made one-floor
+    streams 6-7% slower, with or without a branch on it there: docs/PERFORMANCE.md.)"""
+    n_actions = tables[3].shape[0] // tables[4].shape[0]  # theta (S*A,), neg_entropy (S,)
+    if n_actions == 4:
+        return stream_loop(
+            window, loglik, pos, steps, period, tables, kappa, count, benefit, cap, moves, out, 4
+        )
+    return stream_loop(
+        window, loglik, pos, steps, period, tables, kappa, count, benefit, cap, moves, out,
+        n_actions,
+    )  # fmt: skip
+
+
+@njit(cache=True, inline="always")
+def stream_loop(
+    window: tuple[KeyArray, ByteArray, FloatArray],
+    loglik: FloatArray,
+    pos: int,
+    steps: int,
+    period: int,
+    tables: Tables,
+    kappa: float,
+    count: int,
+    benefit: float,
+    cap: int,
+    moves: tuple[IntArray, IntArray, IntArray],
+    out: tuple[FloatArray, FloatArray, BoolArray, IntArray, FloatArray],
+    n_actions: int,
+) -> tuple[int, int, float, int]:  # pragma: no cover - compiled
     """``Advisor.observe`` for each (s, a, s'), accounting as ``Advisor.decide``.
 
     The window is (pair keys s * A + a, -1 where empty; 1 where a pair's value was kept in
@@ -305,7 +335,6 @@ def observe_stream(
     kept values that left the window)."""
     keys, kept, old = window
     log_probs = tables[0]
-    n_actions = tables[3].shape[0] // tables[4].shape[0]  # theta (S*A,), neg_entropy (S,)
     states, actions, next_states = moves
     kl_out, p_out, advise_out, count_out, benefit_out = out
     size = keys.shape[0]

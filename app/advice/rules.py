@@ -56,9 +56,9 @@ class RuleAdvisor(Advisor):
 
     def decide(self, state: int) -> Decision:
         kl, p_normal = self.divergence(state)
-        th = self.tables.theta_flat
-        b = state * N_ACTIONS
-        row = (th[b], th[b + 1], th[b + 2], th[b + 3])
+        t = self.tables
+        b, th = state * t.n_actions, t.theta_flat
+        row = tuple(th[b : b + t.n_actions])
         return self.record(state, self.says(state), row, kl, p_normal)
 
     def says(self, state: int) -> bool:
@@ -89,15 +89,19 @@ class EarlyAdvisor(RuleAdvisor):
 
 class ImportanceAdvisor(RuleAdvisor):
     """Advises where the prior is sure: KL[theta_s || uniform] >= ``threshold``, whatever the
-    explorer does."""
+    explorer does (the KL in four actions' units: ``AdviceTables.kl_scale``)."""
 
     strategy = "importance"
     reads = ("threshold",)
     __slots__ = ()
 
     def says(self, state: int) -> bool:
-        # KL[theta_s || uniform] = log 4 + sum theta log theta
-        return math.log(N_ACTIONS) + self.tables.neg_entropy_list[state] >= self._params.threshold
+        # KL[theta_s || uniform] = log A + sum theta log theta
+        t = self.tables
+        if t.n_actions == N_ACTIONS:
+            return math.log(N_ACTIONS) + t.neg_entropy_list[state] >= self._params.threshold
+        kl = (math.log(t.n_actions) + t.neg_entropy_list[state]) * t.kl_scale
+        return kl >= self._params.threshold
 
 
 class MistakeAdvisor(RuleAdvisor):
@@ -112,7 +116,7 @@ class MistakeAdvisor(RuleAdvisor):
         if self._last is None:
             return False
         s, a = self._last
-        return self.tables.theta_flat[s * N_ACTIONS + a] < self._params.threshold
+        return self.tables.theta_flat[s * self.tables.n_actions + a] < self._params.threshold
 
 
 class RandomAdvisor(RuleAdvisor):

@@ -4,12 +4,16 @@ from one who walks with purpose upstairs as on one floor (readable and compiled 
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
-from app.advice.advisor import Advisor
+from app.advice.advisor import Advisor, kl_divergence
 from app.advice.goals import GoalAwareAdvisor
 from app.advice.models import AdviceTables
+from app.advice.params import StrategyParams
+from app.advice.rules import RULES
 from app.agents.experts import train_goal_priors, train_prior
 from app.domain.building import Building, D, U
 from app.domain.floorplans import generate_floors
@@ -99,3 +103,27 @@ def test_goal_aware_advice_with_no_goal_told_apart_is_the_paper_s_on_six_actions
         if d_aware.advise:
             assert d_aware.advice == pytest.approx(d_paper.advice, rel=1e-9)
         s = s2
+
+
+@pytest.mark.parametrize("n_actions", [4, 6])
+def test_the_rules_read_the_number_of_actions(n_actions: int) -> None:
+    """Importance advises where KL[theta_s || uniform over A] (in four actions' units) reaches
+    the threshold; mistake after an action theta_s gave less than the threshold; every rule's
+    advice is theta_s, A probabilities."""
+    rng = np.random.default_rng(n_actions)
+    theta = rng.dirichlet(np.full(n_actions, 0.5), size=30)
+    theta = np.maximum(theta, 1e-6)
+    theta /= theta.sum(axis=1, keepdims=True)
+    tables = AdviceTables.paper(theta)
+    params = StrategyParams(threshold=0.3)
+    importance = RULES["importance"](tables, 0.5, 50, params)
+    mistake = RULES["mistake"](tables, 0.5, 50, params)
+    importance.start(0)
+    mistake.start(0)
+    for _ in range(200):
+        s, a, s2 = int(rng.integers(30)), int(rng.integers(n_actions)), int(rng.integers(30))
+        d = importance.observe(s, a, s2)
+        sure = kl_divergence(theta[s2], np.full(n_actions, 1 / n_actions))
+        assert d.advise == (sure * math.log(4) / math.log(n_actions) >= 0.3)
+        assert d.advice == (tuple(theta[s2]) if d.advise else None)
+        assert mistake.observe(s, a, s2).advise == (theta[s, a] < 0.3)

@@ -280,13 +280,14 @@ def test_goal_aware_batches_equal_the_core_goal_aware_advisor(
     rule=st.sampled_from(sorted(RULES)),
     window=st.one_of(st.integers(1, 30), st.sampled_from([300, 1100])),
     batches=st.lists(st.integers(0, 400), min_size=1, max_size=5),
+    n_actions=st.sampled_from([4, 4, 6]),
 )
 def test_rule_advisors_with_pair_keys_equal_the_core_rules(
-    seed: int, rule: str, window: int, batches: list[int]
+    seed: int, rule: str, window: int, batches: list[int], n_actions: int
 ) -> None:
     rng = np.random.default_rng(seed)
     n_states = 15
-    tables = random_tables(rng, n_states)
+    tables = random_tables(rng, n_states, n_actions=n_actions)
     params = StrategyParams(n_steps=30, threshold=0.4, rate=0.3, seed=seed % 100)
     core = RULES[rule](tables, 0.5, window, params)
     fast = keyed(RULES[rule])(tables, 0.5, window, params)
@@ -294,9 +295,9 @@ def test_rule_advisors_with_pair_keys_equal_the_core_rules(
     assert fast.start(0) == core.start(0)
     for n in batches:
         if rng.random() < 0.3:
-            core.tables = fast.tables = random_tables(rng, n_states)
+            core.tables = fast.tables = random_tables(rng, n_states, n_actions=n_actions)
         _maybe_cap(rng, core, fast)
-        s, a, s2 = (rng.integers(0, n_states, n), rng.integers(0, 4, n),
+        s, a, s2 = (rng.integers(0, n_states, n), rng.integers(0, n_actions, n),
                     rng.integers(0, n_states, n))  # fmt: skip
         expected = [core.observe(int(x), int(y), int(z)) for x, y, z in zip(s, a, s2, strict=True)]
         assert fast.observe_batch(s, a, s2).decisions() == expected
