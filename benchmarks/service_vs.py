@@ -7,7 +7,7 @@ drifting load falls on all of them alike. Each figure is the median of the round
 before`` is the median of the per-round ratios. CPU is the server process's user + system time.
 
     python benchmarks/service_vs.py --before /tmp/before --label "commit 36317f0" \\
-        [--repeats 5] [--seconds 4] [--write docs/PERFORMANCE.md]
+        [--repeats 5] [--seconds 4] [--write docs/PERFORMANCE.md] [--section MARKER]
 """
 
 from __future__ import annotations
@@ -134,6 +134,7 @@ def main() -> None:
     ap.add_argument("--rest-conns", type=int, default=32)
     ap.add_argument("--ws-conns", type=int, default=4)
     ap.add_argument("--write", type=Path, help="rewrite this file's marked section")
+    ap.add_argument("--section", default="service_before_after", help="the section's marker")
     args = ap.parse_args()
     loads = [load_average()]
     with tempfile.TemporaryDirectory(prefix="service-vs-") as tmp:
@@ -143,7 +144,7 @@ def main() -> None:
     body = report(runs, args.label, loads, args)
     print(body)
     if args.write:
-        write_section(args.write, "service_before_after", body)
+        write_section(args.write, args.section, body)
 
 
 if __name__ == "__main__":
