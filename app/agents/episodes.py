@@ -22,6 +22,7 @@ import numpy as np
 from app.advice.advisor import Advisor, Decision
 from app.agents.explorers import FixedPolicyExplorer, in_sight, read_position
 from app.agents.qlearning import GOAL_REWARD, QLearningExplorer
+from app.domain.building import Domain
 from app.domain.grid import GridDomain
 from app.domain.paths import walked_cells
 
@@ -49,7 +50,7 @@ class EpisodeRecord:
 
 
 def visitor_act(
-    domain: GridDomain,
+    domain: Domain,
     explorer: FixedPolicyExplorer | QLearningExplorer,
     x: int,
     goal: int,
@@ -73,7 +74,7 @@ def visitor_act(
 
 
 def run_episode(
-    domain: GridDomain,
+    domain: Domain,
     explorer: FixedPolicyExplorer | QLearningExplorer,
     advisor: Advisor,
     goal: int,

@@ -1,7 +1,10 @@
 """Explorers: the agents the advisor watches (Section V-B), as readable reference classes.
 
 Every explorer moves on a :class:`~app.domain.grid.GridDomain` with the four compass actions
-``N, E, S, W`` (0..3) and knows its own goal; the advisor does not. One step::
+``N, E, S, W`` (0..3) and knows its own goal; the advisor does not. ``random``,
+``random-avoid`` and ``optimal`` also walk a building of several floors
+(:class:`~app.domain.building.Building`, six actions: ``U, D`` 4 and 5) in the reference loop;
+the compass walkers do not yet (:data:`FLOORS_EXPLORERS`). One step::
 
     action = explorer.act(state, rng, advice)   # advice: theta_s, or None when not advised
     next_state = domain.next_state[state, action]
@@ -19,8 +22,10 @@ the same order, so from the same ``np.random.Generator`` they follow the same tr
 =============  ===========================================================================
 name           own rule (no advice)
 =============  ===========================================================================
-random         uniform over the 4 moves, walls included (a bump leaves the cell unchanged)
-random-avoid   uniform over the moves that do not hit a wall
+random         uniform over the 4 moves, walls included (a bump leaves the cell unchanged);
+               in a building over the 6 actions (up and down leave it in place off a stop)
+random-avoid   uniform over the moves that do not hit a wall (in a building: up and down at
+               a stop that has a floor above or below)
 left           wall follower: keeps a heading and takes the first open direction among
                left, straight, right, back (relative to the heading); the heading becomes
                every move that changed the cell. The first heading is drawn uniformly.
@@ -29,7 +34,8 @@ bug            greedy on coordinates: of the (at most two) moves that reduce the
                difference first (that move most reduces the straight-line distance); equal
                differences: random order. If neither is open it moves uniformly among the
                open moves (it has no memory, so it can be caught in a pocket).
-optimal        a shortest path to its goal (uniform among tied shortest-path moves)
+optimal        a shortest path to its goal (uniform among tied shortest-path moves; in a
+               building a quickest one, rides timed: :mod:`app.domain.paths`)
 corridor       never turns back but in a dead end: uniform over the open moves other than
                back (back only where nothing else is open); the heading is its last move
                that changed the cell, the first drawn uniformly
@@ -66,6 +72,7 @@ import numpy as np
 import numpy.typing as npt
 
 from app.arrays import BoolArray, FloatArray
+from app.domain.building import Building, Domain
 from app.domain.grid import N_ACTIONS, GridDomain
 from app.domain.paths import optimal_actions
 
@@ -79,15 +86,16 @@ def sample_action(weights: npt.ArrayLike, u: float, mask: npt.ArrayLike | None =
     """Inverse-CDF draw of an action from ``weights`` (restricted to ``mask``) with one uniform
     ``u``: the first action whose running weight exceeds ``u`` times the total."""
     w = np.asarray(weights, dtype=np.float64)
-    allowed = np.ones(N_ACTIONS, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
+    n = len(w)  # the domain's actions: 4, or 6 in a building of several floors
+    allowed = np.ones(n, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
     total = 0.0
-    for a in range(N_ACTIONS):
+    for a in range(n):
         if allowed[a]:
             total += float(w[a])
     target = u * total
     running = 0.0
     last = -1
-    for a in range(N_ACTIONS):
+    for a in range(n):
         if allowed[a]:
             running += float(w[a])
             last = a
@@ -107,7 +115,7 @@ class FixedPolicyExplorer:
 
     name: ClassVar[str] = ""
 
-    def __init__(self, domain: GridDomain):
+    def __init__(self, domain: Domain):
         self.domain = domain
         self.goal = domain.goals[0]
 
@@ -129,12 +137,13 @@ class FixedPolicyExplorer:
 
 
 class RandomExplorer(FixedPolicyExplorer):
-    """Completely random: any of the four moves with probability 1/4."""
+    """Completely random: any of the domain's actions with probability 1/A (the four moves;
+    in a building of several floors up and down too)."""
 
     name = "random"
 
     def policy(self, state: int, rng: np.random.Generator) -> int:
-        return int(rng.random() * N_ACTIONS)
+        return int(rng.random() * self.domain.n_actions)
 
 
 class RandomAvoidExplorer(FixedPolicyExplorer):
@@ -188,6 +197,7 @@ class BugExplorer(FixedPolicyExplorer):
     """
 
     name = "bug"
+    domain: GridDomain  # a goal's row and column: one floor (:data:`FLOORS_EXPLORERS`)
 
     def candidates(self, state: int, rng: np.random.Generator) -> list[int]:
         """Moves towards the goal, in the order they are tried."""
@@ -216,7 +226,7 @@ class OptimalExplorer(FixedPolicyExplorer):
 
     name = "optimal"
 
-    def __init__(self, domain: GridDomain):
+    def __init__(self, domain: Domain):
         super().__init__(domain)
         self._optimal: dict[int, BoolArray] = {}
 
@@ -228,7 +238,7 @@ class OptimalExplorer(FixedPolicyExplorer):
     def policy(self, state: int, rng: np.random.Generator) -> int:
         best = self._optimal[self.goal][state]
         if not best.any():  # at the goal (terminal): any move
-            return int(rng.random() * N_ACTIONS)
+            return int(rng.random() * self.domain.n_actions)
         if best.sum() == 1:
             return int(np.argmax(best))
         return uniform_choice(best, rng.random())
@@ -274,17 +284,27 @@ EXPLORER_CLASSES: dict[str, type[FixedPolicyExplorer]] = {
 }  # fmt: skip
 
 
-def make_explorer(name: str, domain: GridDomain) -> FixedPolicyExplorer:
-    """A fixed-policy explorer by name (one of :data:`WALKERS`)."""
-    try:
-        return EXPLORER_CLASSES[name](domain)
-    except KeyError:
-        raise ValueError(f"unknown explorer {name!r}: use one of {', '.join(WALKERS)}") from None
+#: the explorers that walk a building of several floors (the others keep a compass heading or
+#: a goal's row and column on one floor)
+FLOORS_EXPLORERS: tuple[str, ...] = ("random", "random-avoid", "optimal")
 
 
-def in_sight(domain: GridDomain, state: int, goal: int, reach: int) -> int | None:
+def make_explorer(name: str, domain: Domain) -> FixedPolicyExplorer:
+    """A fixed-policy explorer by name (one of :data:`WALKERS`; on a building of several
+    floors one of :data:`FLOORS_EXPLORERS`)."""
+    if name not in EXPLORER_CLASSES:
+        raise ValueError(f"unknown explorer {name!r}: use one of {', '.join(WALKERS)}")
+    if isinstance(domain, Building) and name not in FLOORS_EXPLORERS:
+        raise ValueError(
+            f"explorer {name!r} walks one floor by the compass in this version: on a building "
+            f"of several floors use one of {', '.join(FLOORS_EXPLORERS)}"
+        )
+    return EXPLORER_CLASSES[name](domain)
+
+
+def in_sight(domain: Domain, state: int, goal: int, reach: int) -> int | None:
     """The move along a straight line of free cells from ``state`` that reaches ``goal``
-    within ``reach`` moves (N, E, S, W tried in turn), or None."""
+    within ``reach`` moves (N, E, S, W tried in turn: on its floor in a building), or None."""
     for a in range(N_ACTIONS):
         x = state
         for _ in range(reach):
@@ -298,7 +318,7 @@ def in_sight(domain: GridDomain, state: int, goal: int, reach: int) -> int | Non
 
 
 def read_position(
-    domain: GridDomain, state: int, noise: float, rng: np.random.Generator, jump: int = 1
+    domain: Domain, state: int, noise: float, rng: np.random.Generator, jump: int = 1
 ) -> int:
     """The cell an advisor reads for an explorer at ``state``: with probability ``noise``
     (one draw) a uniformly drawn open neighbour (a second draw), else ``state``; no draw

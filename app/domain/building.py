@@ -246,6 +246,14 @@ class Building:
         named = self.goal_names[index] if self.goal_names is not None else None
         return named if named is not None else f"G{index}"
 
+    @cached_property
+    def open_moves(self) -> BoolArray:
+        """``open_moves[s, a]``: action ``a`` leaves ``s`` (a compass move not into a wall, a
+        ride from a stop with a stop above or below)."""
+        out: BoolArray = self.next_state != np.arange(self.n_states)[:, None]
+        out.setflags(write=False)
+        return out
+
     # ---- time and distance --------------------------------------------------------------
     @cached_property
     def durations(self) -> IntArray:

@@ -21,7 +21,6 @@ import numpy as np
 
 from app.arrays import BoolArray, FloatArray, IntArray
 from app.domain.building import Building, Domain
-from app.domain.grid import GridDomain
 
 TrajectorySource = Literal["start", "anywhere"]
 TRAJECTORY_SOURCES: tuple[str, ...] = ("start", "anywhere")
@@ -116,7 +115,7 @@ def expert_trajectories(
     return out
 
 
-def walked_cells(domain: GridDomain, here: int, target: int, limit: int) -> list[int] | None:
+def walked_cells(domain: Domain, here: int, target: int, limit: int) -> list[int] | None:
     """The cells a reading at ``target`` walks from ``here``, ``here`` excluded: none for the
     same cell, the cell itself for a neighbour, else the rest of :func:`path_within`'s
     shortest path; ``None`` when ``target`` is more than ``limit`` moves away. How the
@@ -130,7 +129,7 @@ def walked_cells(domain: GridDomain, here: int, target: int, limit: int) -> list
     return None if path is None else path[1:]
 
 
-def path_within(domain: GridDomain, source: int, target: int, limit: int) -> list[int] | None:
+def path_within(domain: Domain, source: int, target: int, limit: int) -> list[int] | None:
     """A shortest path ``[source, ..., target]`` of at most ``limit`` moves, or ``None`` if
     ``target`` is farther. Breadth-first from ``source``, moves tried in the order N, E, S, W
     (so the path is the same every time); it visits only cells within ``limit`` moves."""

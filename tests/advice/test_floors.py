@@ -14,7 +14,9 @@ from app.advice.goals import GoalAwareAdvisor
 from app.advice.models import AdviceTables
 from app.advice.params import StrategyParams
 from app.advice.rules import RULES
+from app.agents.episodes import run_episode
 from app.agents.experts import train_goal_priors, train_prior
+from app.agents.explorers import make_explorer
 from app.domain.building import Building, D, U
 from app.domain.floorplans import generate_floors
 from app.domain.paths import expert_trajectories
@@ -127,3 +129,38 @@ def test_the_rules_read_the_number_of_actions(n_actions: int) -> None:
         assert d.advise == (sure * math.log(4) / math.log(n_actions) >= 0.3)
         assert d.advice == (tuple(theta[s2]) if d.advise else None)
         assert mistake.observe(s, a, s2).advise == (theta[s, a] < 0.3)
+
+
+def test_the_paper_s_rule_leads_random_walkers_upstairs_and_leaves_the_quickest_alone() -> None:
+    """The reference loop on a two-floor hospital, destinations upstairs: random-avoid walkers
+    (the paper's protocol: an advised walker samples theta_s, six actions) arrive more often
+    when advised; the optimal walker takes the quickest route (rides timed) and is never
+    advised at kappa 0.5."""
+    b = generate_floors(24, 24, 2, np.random.default_rng(3), purpose="hospital", n_goals=2)
+    tables = AdviceTables.paper(train_prior(b, np.random.default_rng(2), "anywhere", 200).theta())
+    upstairs = [g for g in b.goals if b.cell(g)[0] == 1]
+    arrived = {}
+    for advised in (False, True):
+        rng = np.random.default_rng(11)
+        runs = [
+            run_episode(b, make_explorer("random-avoid", b), Advisor(tables, 0.5, 300),
+                        upstairs[k % len(upstairs)], rng, advised=advised, max_steps=2000)
+            for k in range(40)
+        ]  # fmt: skip
+        arrived[advised] = sum(r.success for r in runs)
+        if advised:
+            assert all(len(d.advice or ()) in (0, 6) for r in runs for d in r.decisions)
+            assert any(a >= U for r in runs for a in r.actions)  # it rides
+    assert arrived[True] >= arrived[False] + 5, arrived
+    for goal in upstairs:
+        rec = run_episode(b, make_explorer("optimal", b), Advisor(tables, 0.5, 300), goal,
+                          np.random.default_rng(1))  # fmt: skip
+        assert rec.success and rec.advice_count == 0
+        assert sum(int(b.durations[s, a]) for s, a in zip(rec.states, rec.actions, strict=True)) \
+            == b.times_to(goal)[b.start]  # fmt: skip
+
+
+def test_compass_explorers_say_they_walk_one_floor(hospital: Building) -> None:
+    for name in ("left", "bug", "corridor", "straight"):
+        with pytest.raises(ValueError, match=f"explorer '{name}' walks one floor by the compass"):
+            make_explorer(name, hospital)
