@@ -105,7 +105,13 @@ def service(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Service]:
     server = uvicorn.Server(config)
     thread = threading.Thread(target=server.run, name="uvicorn", daemon=True)
     thread.start()
-    wait_until(lambda: server.started, 60.0, "uvicorn to start")
+    # no deadline of ours: the startup compiles the kernels the service runs when numba's
+    # cache is cold (80 s measured on a slow day, from a fresh clone); a server that stopped
+    # fails at once, and pytest-timeout (setup included) bounds a hang
+    while not server.started:
+        if not thread.is_alive():
+            pytest.fail("uvicorn stopped before it started (its log is above)")
+        time.sleep(0.05)
     base = f"http://127.0.0.1:{settings.port}"
     # the viewer as `python -m app viewer` runs it (serve starts that process): reading the
     # service over HTTP with the operator key; here in the test's process, to look inside it
