@@ -129,13 +129,11 @@ def posterior(
 
 @njit(cache=True, inline="always")  # as a call it cost the stream loop twice its time (measured)
 def decide(
-    loglik: FloatArray, tables: Tables, s: int, z: FloatArray, n_actions: int
+    loglik: FloatArray, tables: Tables, s: int, z: FloatArray
 ) -> tuple[float, float]:  # pragma: no cover
     """(KL[theta_s || P(A | s, H)], P(M1 | H)) for the explorer now at ``s``: eqs. (4)-(6).
-    ``z`` is scratch space, one entry per model; ``n_actions`` the tables' actions (4 here,
-    unrolled; any other number :func:`decide_any`)."""
-    if n_actions != 4:
-        return decide_any(loglik, tables, s, z, n_actions)
+    ``z`` is scratch space, one entry per model. Four actions, unrolled: tables of any other
+    number are :func:`decide_any`'s."""
     _, log_weights, probs, theta, neg_entropy = tables
     tot = posterior(loglik, log_weights, z)
     b = s * 4
@@ -187,19 +185,19 @@ def decide_call(
 ) -> tuple[float, float]:  # pragma: no cover - compiled
     """:func:`decide` as a call, for long loops: inlined into the episode loop, it made that
     loop about a fifth slower (measured), where the short stream loop gains from inlining.
-    Four actions (the episodes' explorers walk one floor)."""
-    return decide(loglik, tables, s, z, 4)
+    Four actions (:func:`decide_any` for the others)."""
+    return decide(loglik, tables, s, z)
 
 
 @njit(cache=True)
 def push(
     ring: FloatArray, loglik: FloatArray, pos: int, steps: int, period: int,
-    log_probs: FloatArray, s: int, a: int,
+    log_probs: FloatArray, s: int, a: int, n_actions: int,
 ) -> int:  # pragma: no cover - compiled  # fmt: skip
     """Add (s, a) to the window ring (M, W); returns the new position. ``steps`` counts the
     pairs appended, this one included; every ``period`` pairs (at a wrap) the sums are
-    recomputed exactly."""
-    k = s * 4 + a
+    recomputed exactly. ``n_actions``: the tables' A (pairs are keyed s * A + a)."""
+    k = s * n_actions + a
     for m in range(ring.shape[0]):
         lp = log_probs[m, k]
         loglik[m] += lp - ring[m, pos]  # the ring holds 0.0 until the window fills
@@ -365,7 +363,10 @@ def stream_loop(
                     for p in range(size):
                         ring[p] = old[m, p] if kept[p] else log_probs[m, keys[p]]
                     loglik[m] = fsum(ring)
-        kl, p0 = decide(loglik, tables, next_states[i], z, n_actions)
+        if n_actions == 4:  # a constant in the loop compiled for four
+            kl, p0 = decide(loglik, tables, next_states[i], z)
+        else:
+            kl, p0 = decide_any(loglik, tables, next_states[i], z, n_actions)
         if kl >= kappa and count < cap:
             count += 1
             benefit += kl
@@ -1402,17 +1403,21 @@ def guide_detours(
 
 
 # ---- explorers ----------------------------------------------------------------------------------
-@njit(cache=True)
-def sample_action(weights: FloatArray, u: float, mask: BoolArray) -> int:  # pragma: no cover
-    """explorers.sample_action: inverse CDF over the allowed actions."""
+@njit(cache=True, inline="always")
+def sample_action(
+    weights: FloatArray, u: float, mask: BoolArray, n: int
+) -> int:  # pragma: no cover - compiled
+    """explorers.sample_action: inverse CDF over the ``n`` actions' allowed ones. Inlined, so
+    that a caller's constant 4 makes loops of four (a count read from the arrays made the
+    Q-learning kernel 7% slower, measured: docs/PERFORMANCE.md)."""
     total = 0.0
-    for a in range(4):
+    for a in range(n):
         if mask[a]:
             total += weights[a]
     target = u * total
     running = 0.0
     last = -1
-    for a in range(4):
+    for a in range(n):
         if mask[a]:
             running += weights[a]
             last = a
@@ -1421,15 +1426,16 @@ def sample_action(weights: FloatArray, u: float, mask: BoolArray) -> int:  # pra
     return last
 
 
-@njit(cache=True)
-def uniform_choice(mask: BoolArray, u: float) -> int:  # pragma: no cover
-    """explorers.uniform_choice: the int(u * k)-th allowed action."""
+@njit(cache=True, inline="always")
+def uniform_choice(mask: BoolArray, u: float, n: int) -> int:  # pragma: no cover - compiled
+    """explorers.uniform_choice: the int(u * k)-th allowed action of the ``n`` (inlined, as
+    :func:`sample_action`)."""
     k = 0
-    for a in range(4):
+    for a in range(n):
         if mask[a]:
             k += 1
     pick = int(u * k)
-    for a in range(4):
+    for a in range(n):
         if mask[a]:
             if pick == 0:
                 return a
@@ -1442,11 +1448,12 @@ def own_action(
     kind: int, s: int, heading: int, goal: int, open_moves: BoolArray, cells: IntArray,
     optimal: BoolArray, rng: np.random.Generator,
 ) -> int:  # pragma: no cover  # fmt: skip
-    """The rule of a fixed-policy explorer (explorers.*.policy)."""
+    """The rule of a fixed-policy explorer (explorers.*.policy); random, random-avoid and
+    optimal over the domain's actions (``open_moves``' columns), the others the compass's."""
     if kind == RANDOM:
-        return int(rng.random() * 4)
+        return int(rng.random() * open_moves.shape[1])
     if kind == RANDOM_AVOID:
-        return uniform_choice(open_moves[s], rng.random())
+        return uniform_choice(open_moves[s], rng.random(), open_moves.shape[1])
     if kind == LEFT:
         for turn in (3, 0, 1, 2):  # left, straight, right, back
             a = (heading + turn) % 4
@@ -1460,7 +1467,7 @@ def own_action(
         ahead = open_moves[s].copy()
         ahead[back] = False
         if ahead.any():
-            return uniform_choice(ahead, rng.random())
+            return uniform_choice(ahead, rng.random(), 4)
         return back if open_moves[s, back] else heading  # a dead end: back
     if kind == BUG:
         dr = cells[goal, 0] - cells[s, 0]
@@ -1474,20 +1481,20 @@ def own_action(
             return first
         if second >= 0 and open_moves[s, second]:
             return second
-        return uniform_choice(open_moves[s], rng.random())
+        return uniform_choice(open_moves[s], rng.random(), 4)
     # OPTIMAL
     best = optimal[s]
     n_best = 0
     only = 0
-    for a in range(4):
+    for a in range(best.shape[0]):
         if best[a]:
             n_best += 1
             only = a
     if n_best == 0:
-        return int(rng.random() * 4)
+        return int(rng.random() * open_moves.shape[1])
     if n_best == 1:
         return only
-    return uniform_choice(best, rng.random())
+    return uniform_choice(best, rng.random(), best.shape[0])
 
 
 @njit(cache=True)
@@ -1515,7 +1522,7 @@ def read_position(
         return s
     if seen_rng.random() >= noise or not open_moves[s].any():
         return s
-    return int(next_state[s, uniform_choice(open_moves[s], seen_rng.random())])
+    return int(next_state[s, uniform_choice(open_moves[s], seen_rng.random(), open_moves.shape[1])])
 
 
 # ---- whole episodes -----------------------------------------------------------------------------
@@ -1527,12 +1534,18 @@ def rule_says(
     """``RuleAdvisor``'s rules: advise at ``s`` after ``t`` decisions (the last move was
     (``last_s``, ``last_a``), -1 before the first)."""
     n_steps, threshold, rate, _ = rule_params
+    n_actions = tables[3].shape[0] // tables[4].shape[0]  # theta (S*A,), neg_entropy (S,)
     if rule == EARLY:
         return t < n_steps
-    if rule == IMPORTANCE:  # KL[theta_s || uniform] = log 4 + sum theta log theta
-        return bool(math.log(4.0) + tables[4][s] >= threshold)
+    if rule == IMPORTANCE:  # KL[theta_s || uniform] = log A + sum theta log theta
+        if n_actions == 4:
+            return bool(math.log(4.0) + tables[4][s] >= threshold)
+        kl = (math.log(float(n_actions)) + tables[4][s]) * (
+            math.log(4.0) / math.log(float(n_actions))
+        )  # in four actions' units, as ImportanceAdvisor.says
+        return bool(kl >= threshold)
     if rule == MISTAKE:
-        return last_s >= 0 and bool(tables[3][last_s * 4 + last_a] < threshold)
+        return last_s >= 0 and bool(tables[3][last_s * n_actions + last_a] < threshold)
     if rule == RANDOM_RULE:
         return rule_rng.random() < rate
     return True  # ALWAYS
@@ -1570,14 +1583,17 @@ def episode(
     true cell; with r > 0 an explorer whose goal is in sight (:func:`in_sight`) walks to it,
     whatever the advice. ``s`` is the cell the advisor reads, ``x`` the explorer's own.
 
-    ``world`` is (next_state (S, 4), open moves (S, 4), cells (S, 2), the optimal moves to
-    ``goal`` (S, 4)); ``rule_params`` (n_steps, threshold, rate, beta). ``out`` receives, before
+    ``world`` is (next_state (S, A), open moves (S, A), cells (S, 2; a building's (S, 3)),
+    the optimal moves to ``goal`` (S, A)), A 4 or, in a building of several floors, 6 (the
+    random, random-avoid and optimal explorers; the paper's rule, goal-aware advice and the
+    rules); ``rule_params`` (n_steps, threshold, rate, beta). ``out`` receives, before
     each move, the state, P(M1 | H) (when ``out[1]`` is not empty) and the decision (given to
     the explorer only if ``advised``). The explorer's draws come from ``rng``, the ``random``
     rule's from ``rule_rng``, in the reference's order. ``goals`` is read by ``goal_aware``
     only (G may be 0 for the others), ``guide`` (its map, parameters and destination states)
     by ``guide`` only. ``out[0]`` receives the explorer's own cell."""
     next_state, open_moves, cells, optimal = world
+    n_actions = next_state.shape[1]  # 4, or 6 in a building (random, random-avoid, optimal)
     compliance, noise, sight = visitor
     beta = rule_params[3]
     log_probs, _, _, theta, _ = tables
@@ -1594,7 +1610,7 @@ def episode(
     goal_ll = np.zeros(n_goals)
     alive = np.ones(n_goals, dtype=np.bool_)
     w = np.empty(n_goals)
-    theta_w = np.empty(4)
+    theta_w = np.empty(n_actions)  # guide: one floor, four
     gmap, gparams, g_goals = guide
     n_dest = g_goals.shape[0] if rule == GUIDE else 0
     g_ll = np.zeros(4 + 3 * n_dest + 2)
@@ -1611,7 +1627,7 @@ def episode(
     has_heading = kind in (LEFT, CORRIDOR, STRAIGHT)
     if has_heading:
         heading = int(rng.random() * 4)
-    all_moves = np.ones(4, dtype=np.bool_)
+    all_moves = np.ones(n_actions, dtype=np.bool_)
     advice_count = 0
     benefit = 0.0
     x = start
@@ -1638,7 +1654,10 @@ def episode(
             )
             kl, p = 0.0, 0.0
             if rule == PAPER or says or record_p:  # the paper's KL is reported where advised
-                kl, p = decide_call(loglik, tables, s, z)
+                if n_actions == 4:
+                    kl, p = decide_call(loglik, tables, s, z)
+                else:
+                    kl, p = decide_any(loglik, tables, s, z, n_actions)
             advise = kl >= kappa if rule == PAPER else says
         if advise:
             advice_count += 1
@@ -1654,9 +1673,10 @@ def episode(
         elif advised and advise and (compliance >= 1.0 or rng.random() < compliance):
             # two calls: one merged row variable cost a quarter (measured)
             if rule in (GOAL_AWARE, GUIDE):
-                a = sample_action(theta_w, rng.random(), all_moves)
+                a = sample_action(theta_w, rng.random(), all_moves, n_actions)
             else:
-                a = sample_action(theta[s * 4 : s * 4 + 4], rng.random(), all_moves)
+                b = s * n_actions
+                a = sample_action(theta[b : b + n_actions], rng.random(), all_moves, n_actions)
         else:
             a = own_action(kind, x, heading, goal, open_moves, cells, optimal, rng)
         x2 = next_state[x, a]
@@ -1672,7 +1692,7 @@ def episode(
             if gi >= 0:  # it stood on goal gi's cell and went on: not its goal
                 alive[gi] = False
             if beta > 0.0:  # beta = 0 never reads the per-goal window
-                k = s * 4 + a
+                k = s * n_actions + a
                 for g in range(n_goals):
                     v = goal_log_theta[k, g]
                     goal_ll[g] += v - goal_ring[g, pos]
@@ -1686,7 +1706,7 @@ def episode(
                 g_heading, g_pi, g_rows, True, g_comply, g_came,
             )  # fmt: skip
         else:
-            pos = push(ring, loglik, pos, t + 1, period, log_probs, s, a)
+            pos = push(ring, loglik, pos, t + 1, period, log_probs, s, a, n_actions)
         last_s, last_a = s, a
         s = s2
         x = x2
@@ -1775,7 +1795,7 @@ def q_learning(
                 )  # fmt: skip
                 row = theta_w
             else:
-                kl, p = decide(loglik, tables, s, z, 4)
+                kl, p = decide(loglik, tables, s, z)
                 row = theta[s * 4 : s * 4 + 4]
                 allowed = True
             advise = kl >= kappa and allowed
@@ -1784,7 +1804,7 @@ def q_learning(
             give = advised and advise
             if rng.random() < epsilon:
                 u = rng.random()
-                a = sample_action(row, u, all_moves) if give else int(u * 4)
+                a = sample_action(row, u, all_moves, 4) if give else int(u * 4)
             else:
                 qmax = q[s].max()
                 n_best = 0
@@ -1796,9 +1816,9 @@ def q_learning(
                         a = b
                 if n_best > 1:
                     if give and ties_advice:
-                        a = sample_action(row, rng.random(), best)
+                        a = sample_action(row, rng.random(), best, 4)
                     else:
-                        a = uniform_choice(best, rng.random())
+                        a = uniform_choice(best, rng.random(), 4)
             s2 = next_state[s, a]
             t += 1
             if s2 == goal:
@@ -1813,7 +1833,7 @@ def q_learning(
                     g_heading, g_pi, g_rows, True, g_comply, g_came,
                 )  # fmt: skip
             else:
-                pos = push(ring, loglik, pos, appended, period, log_probs, s, a)
+                pos = push(ring, loglik, pos, appended, period, log_probs, s, a, 4)
             s = s2
             if step_budget > 0 and total_steps + t >= step_budget:
                 break

@@ -289,9 +289,9 @@ EXPLORER_CLASSES: dict[str, type[FixedPolicyExplorer]] = {
 FLOORS_EXPLORERS: tuple[str, ...] = ("random", "random-avoid", "optimal")
 
 
-def make_explorer(name: str, domain: Domain) -> FixedPolicyExplorer:
-    """A fixed-policy explorer by name (one of :data:`WALKERS`; on a building of several
-    floors one of :data:`FLOORS_EXPLORERS`)."""
+def check_walker(name: str, domain: Domain) -> None:
+    """ValueError unless ``name`` is one of :data:`WALKERS` that walks ``domain`` (on a
+    building of several floors, one of :data:`FLOORS_EXPLORERS`)."""
     if name not in EXPLORER_CLASSES:
         raise ValueError(f"unknown explorer {name!r}: use one of {', '.join(WALKERS)}")
     if isinstance(domain, Building) and name not in FLOORS_EXPLORERS:
@@ -299,6 +299,11 @@ def make_explorer(name: str, domain: Domain) -> FixedPolicyExplorer:
             f"explorer {name!r} walks one floor by the compass in this version: on a building "
             f"of several floors use one of {', '.join(FLOORS_EXPLORERS)}"
         )
+
+
+def make_explorer(name: str, domain: Domain) -> FixedPolicyExplorer:
+    """A fixed-policy explorer by name (:func:`check_walker`)."""
+    check_walker(name, domain)
     return EXPLORER_CLASSES[name](domain)
 
 

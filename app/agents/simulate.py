@@ -26,10 +26,10 @@ from app.advice.models import AdviceTables
 from app.advice.params import StrategyParams
 from app.advice.priors import GoalPriors
 from app.agents.episodes import run_episode
-from app.agents.explorers import FEEDS, WALKERS, make_explorer
+from app.agents.explorers import FEEDS, check_walker, make_explorer
 from app.agents.qlearning import TIE_RULES
 from app.arrays import BoolArray, FloatArray, IntArray
-from app.domain.grid import GridDomain
+from app.domain.building import Building, Domain
 from app.domain.paths import optimal_actions
 from app.strategies import AdvisorSettings, DomainData, Need, Strategy
 
@@ -111,13 +111,13 @@ class LearningRun:
         return out
 
 
-def goal_tables(domain: GridDomain, priors: GoalPriors | None) -> kernels.GoalTables:
+def goal_tables(domain: Domain, priors: GoalPriors | None) -> kernels.GoalTables:
     """The per-goal counts as the kernels read them (no goals when ``priors`` is None)."""
     s = domain.n_states
     of_state = np.full(s, -1, dtype=np.int64)
     if priors is None:
-        empty = np.zeros((4 * s, 0))
-        return of_state, 1.0, np.zeros(4 * s), empty, empty
+        empty = np.zeros((domain.n_actions * s, 0))
+        return of_state, 1.0, np.zeros(domain.n_actions * s), empty, empty
     g = priors.n_goals
     of_state[list(priors.goals)] = np.arange(g)
     return (
@@ -134,11 +134,13 @@ class Simulator:
     with), prepared once for many runs: compiled where the strategy has a compiled form
     (:attr:`Strategy.kernel`), else the readable loop with its readable advisor."""
 
-    def __init__(
-        self, domain: GridDomain, tables: AdviceTables, goal_priors: GoalPriors | None = None
-    ):
+    def __init__(self, domain: Domain, tables: AdviceTables, goal_priors: GoalPriors | None = None):
         if tables.n_states != domain.n_states:
             raise ValueError(f"tables have {tables.n_states} states, the maze {domain.n_states}")
+        if tables.n_actions != domain.n_actions:
+            raise ValueError(
+                f"tables of {tables.n_actions} actions, the maze has {domain.n_actions}"
+            )
         if goal_priors is not None and goal_priors.n_states != domain.n_states:
             raise ValueError("goal priors and maze must have the same states")
         self.domain = domain
@@ -146,10 +148,17 @@ class Simulator:
         self.goal_priors = goal_priors
         self.goals = goal_tables(domain, goal_priors)
         self._no_guide: GuideError | None = None  # why the map cannot be guided
-        try:
-            self.guide: GuideMap | None = GuideMap.of(domain, goal_priors)
-        except GuideError as exc:
-            self.guide, self._no_guide = None, exc
+        self.guide: GuideMap | None = None
+        if isinstance(domain, Building):
+            self._no_guide = GuideError(
+                f"guide leads on one floor in this version: {domain.name!r} has "
+                f"{domain.n_floors} floors"
+            )
+        else:
+            try:
+                self.guide = GuideMap.of(domain, goal_priors)
+            except GuideError as exc:
+                self._no_guide = exc
         self.data = DomainData(tables, goal_priors, self.guide)
         self.next_state = np.ascontiguousarray(domain.next_state)
         self.open_moves = np.ascontiguousarray(domain.open_moves)
@@ -226,8 +235,7 @@ class Simulator:
         (:func:`app.agents.episodes.run_episode` with ``positions``) with the service's
         advisor; without ``advised`` the compiled run (the explorer's moves and draws are the
         same, the advisor's watching is not reported)."""
-        if explorer not in WALKERS:
-            raise ValueError(f"unknown explorer {explorer!r}: use {', '.join(WALKERS)}")
+        check_walker(explorer, self.domain)
         entry, settings = self.settings(strategy, kappa, window, params)
         if max_steps < 1:
             raise ValueError(f"max_steps must be at least 1, got {max_steps}")

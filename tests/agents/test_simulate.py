@@ -17,17 +17,19 @@ from app.advice.guide import GuideMap
 from app.advice.models import AdviceTables
 from app.advice.params import StrategyParams
 from app.advice.priors import GoalPriors
-from app.agents.episodes import run_episode, run_learning
+from app.agents.episodes import EpisodeRecord, run_episode, run_learning
 from app.agents.experts import train_goal_priors, train_prior
 from app.agents.explorers import (
     FIXED_EXPLORERS,
+    FLOORS_EXPLORERS,
     WALKERS,
     Visitor,
     make_explorer,
     read_position,
 )
 from app.agents.qlearning import QLearningExplorer
-from app.agents.simulate import EXPLORER_CODES, QParams, Simulator
+from app.agents.simulate import EXPLORER_CODES, FixedRun, QParams, Simulator
+from app.domain.floorplans import generate_floors
 from app.domain.generate import generate_domain
 from app.domain.grid import GridDomain
 from app.strategies import make_advisor, names
@@ -116,6 +118,17 @@ def test_compiled_episode_follows_the_reference_loop(
     assert fast.goals_ruled_out == (sum(out for *_, out in beliefs) if beliefs else 0)
 
 
+def assert_same_run(fast: FixedRun, ref: EpisodeRecord, strategy: str) -> None:
+    """The compiled run made the reference loop's moves and decisions (P(M1 | H) where the
+    strategy reads it)."""
+    assert (fast.success, fast.steps) == (ref.success, ref.steps)
+    assert fast.states.tolist() == ref.states
+    assert fast.advise.tolist() == [dec.advise for dec in ref.decisions]
+    assert fast.benefit == ref.decisions[-1].benefit
+    if strategy in ("paper", "goal_aware", "guide"):
+        assert fast.p_normal.tolist() == [dec.p_normal for dec in ref.decisions]
+
+
 @settings(max_examples=40, deadline=None)
 @given(
     st.integers(0, 10_000),
@@ -155,12 +168,7 @@ def test_compiled_visitor_follows_the_reference_loop(
         advised=advised, max_steps=600, compliance=compliance, noise=noise, sight=sight,
         seen_rng=np.random.default_rng(seed + 7),
     )  # fmt: skip
-    assert (fast.success, fast.steps) == (ref.success, ref.steps)
-    assert fast.states.tolist() == ref.states
-    assert fast.advise.tolist() == [dec.advise for dec in ref.decisions]
-    assert fast.benefit == ref.decisions[-1].benefit
-    if strategy in ("paper", "goal_aware", "guide"):
-        assert fast.p_normal.tolist() == [dec.p_normal for dec in ref.decisions]
+    assert_same_run(fast, ref, strategy)
 
 
 @settings(max_examples=20, deadline=None)
@@ -385,3 +393,52 @@ def test_simulator_rejects_bad_arguments() -> None:
     other = generate_domain(7, 7, 0)
     with pytest.raises(ValueError, match="states"):
         Simulator(other, tables)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    st.integers(0, 10_000),
+    st.sampled_from([s for s in STRATEGIES if s != "guide"]),
+    st.sampled_from(FLOORS_EXPLORERS),
+    st.sampled_from([2, 3]),
+    st.sampled_from([1.0, 0.5]),
+    st.sampled_from([0.0, 0.1]),
+    st.sampled_from([0, 3]),
+    st.booleans(),
+)
+def test_compiled_episode_follows_the_reference_loop_in_a_building(
+    seed: int, strategy: str, explorer: str, floors: int, compliance: float, noise: float,
+    sight: int, advised: bool,
+) -> None:  # fmt: skip
+    """A building of several floors (six actions, rides): the compiled episode makes the
+    reference loop's draws, moves and decisions for the explorers that walk one (random,
+    random-avoid, optimal), every strategy but guide, visitors' compliance, noise and sight;
+    guide and the compass walkers are refused, saying why."""
+    b = generate_floors(20, 20, floors, np.random.default_rng(seed), n_goals=2, room=(3, 5))
+    prior, goal_priors = train_goal_priors(b, np.random.default_rng(seed), "start", 2, 1.0)
+    tables = random_tables(np.random.default_rng(seed + 1), b.n_states, 2 + seed % 2,
+                           prior.theta())  # fmt: skip
+    rng = np.random.default_rng(seed)
+    params = StrategyParams(
+        n_steps=int(rng.integers(0, 60)), threshold=float(rng.choice([0.1, 0.3, 0.5])),
+        rate=0.3, beta=float(seed % 2), seed=seed,
+    )  # fmt: skip
+    goal = b.goals[seed % len(b.goals)]
+    kappa, window = float(rng.choice([0.0, 0.3, 0.7])), int(rng.integers(3, 40))
+    sim = Simulator(b, tables, goal_priors)
+    fast = sim.fixed(
+        explorer, goal, np.random.default_rng(seed), advised=advised, strategy=strategy,
+        kappa=kappa, window=window, params=params, max_steps=1100, compliance=compliance,
+        noise=noise, sight=sight, seen_rng=np.random.default_rng(seed + 7),
+    )  # fmt: skip
+    advisor = make_advisor(strategy, tables, kappa, window, params, goal_priors, None)
+    ref = run_episode(
+        b, make_explorer(explorer, b), advisor, goal, np.random.default_rng(seed),
+        advised=advised, max_steps=1100, compliance=compliance, noise=noise, sight=sight,
+        seen_rng=np.random.default_rng(seed + 7),
+    )  # fmt: skip
+    assert_same_run(fast, ref, strategy)
+    with pytest.raises(ValueError, match="guide leads on one floor in this version"):
+        sim.fixed(explorer, goal, rng, advised=True, strategy="guide")
+    with pytest.raises(ValueError, match="explorer 'bug' walks one floor by the compass"):
+        sim.fixed("bug", goal, rng, advised=True)
