@@ -24,10 +24,10 @@ kernel                    the readable form (and its test)
 ========================  ====================================================================
 
 Tables are passed as the tuple ``AdviceTables.arrays``: (log_probs (M, S*A), log_weights (M,),
-probs (M, S*A), theta (S*A,), neg_entropy (S,)), A the domain's actions (4 on one floor; the
-paper's rule and its stream take any A, the other strategies four); goal tables as
-(goal_of_state (S,), alpha0, unknown counts (S*4,), goal counts (S*4, G), each goal's log
-theta (S*4, G)).
+probs (M, S*A), theta (S*A,), neg_entropy (S,)), A the domain's actions (4 on one floor, 6 in
+a building of several floors: the paper's rule, goal-aware advice, the rules and the episodes
+take any A, guide and Q-learning four); goal tables as (goal_of_state (S,), alpha0, unknown
+counts (S*A,), goal counts (S*A, G), each goal's log theta (S*A, G)).
 """
 
 from __future__ import annotations
