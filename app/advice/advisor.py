@@ -95,8 +95,10 @@ class DecisionBatch:
     ) -> DecisionBatch:  # fmt: skip
         """Columns of decisions made one at a time (``first_step`` 0 when there are none)."""
         rows = [d.advice for d in decisions if d.advise and d.advice is not None]
-        width = len(rows[0]) if rows else N_ACTIONS
-        width = advised_from.n_actions if advised_from is not None else width
+        width = (
+            advised_from.n_actions if advised_from is not None
+            else len(rows[0]) if rows else N_ACTIONS
+        )  # fmt: skip
         return cls(
             decisions[0].step if decisions else 0,
             np.array([d.state for d in decisions], dtype=np.int64),

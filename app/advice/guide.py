@@ -166,7 +166,8 @@ from app.advice.models import AdviceTables
 from app.advice.params import StrategyParams
 from app.advice.priors import GoalPriors
 from app.arrays import FloatArray, IntArray
-from app.domain.grid import N_ACTIONS, GridDomain, bfs_distances_each, compass_detours_each
+from app.domain.building import Building, Domain
+from app.domain.grid import N_ACTIONS, bfs_distances_each, compass_detours_each
 
 #: probability mass the open-moves lost model gives to bumping into walls
 LOST_BUMP = 0.02
@@ -285,7 +286,7 @@ class GuideMap:
 
     @classmethod
     def of(
-        cls, domain: GridDomain, goal_priors: GoalPriors | None = None,
+        cls, domain: Domain, goal_priors: GoalPriors | None = None,
         searches: Searches | None = None, distances: Distances | None = None,
     ) -> GuideMap:  # fmt: skip
         """``domain``'s guide map (:class:`GuideError` first if it cannot have one), with the
@@ -295,6 +296,11 @@ class GuideMap:
         :attr:`GridDomain.goal_distances` and :func:`compass_detours_each`. ``distances``:
         the searches of the landmarks (:func:`landmarks`), by default
         :func:`~app.domain.grid.bfs_distances_each`."""
+        if isinstance(domain, Building):
+            raise GuideError(
+                f"guide leads on one floor in this version: {domain.name!r} has "
+                f"{domain.n_floors} floors"
+            )
         goals = tuple(int(g) for g in domain.goals)
         if not goals:
             raise GuideError("guide advice needs the map's destinations: this map has no goal")

@@ -16,7 +16,6 @@ import numpy as np
 from app.advice.advisor import DEFAULT_KAPPA, DEFAULT_WINDOW, Advisor, Decision
 from app.advice.models import AdviceTables
 from app.advice.params import StrategyParams
-from app.domain.grid import N_ACTIONS
 
 
 class RuleAdvisor(Advisor):
@@ -96,10 +95,8 @@ class ImportanceAdvisor(RuleAdvisor):
     __slots__ = ()
 
     def says(self, state: int) -> bool:
-        # KL[theta_s || uniform] = log A + sum theta log theta
+        # KL[theta_s || uniform] = log A + sum theta log theta (kl_scale 1.0 for four)
         t = self.tables
-        if t.n_actions == N_ACTIONS:
-            return math.log(N_ACTIONS) + t.neg_entropy_list[state] >= self._params.threshold
         kl = (math.log(t.n_actions) + t.neg_entropy_list[state]) * t.kl_scale
         return kl >= self._params.threshold
 

@@ -29,7 +29,7 @@ from app.agents.episodes import run_episode
 from app.agents.explorers import FEEDS, check_walker, make_explorer
 from app.agents.qlearning import TIE_RULES
 from app.arrays import BoolArray, FloatArray, IntArray
-from app.domain.building import Building, Domain
+from app.domain.building import Domain
 from app.domain.paths import optimal_actions
 from app.strategies import AdvisorSettings, DomainData, Need, Strategy
 
@@ -148,17 +148,10 @@ class Simulator:
         self.goal_priors = goal_priors
         self.goals = goal_tables(domain, goal_priors)
         self._no_guide: GuideError | None = None  # why the map cannot be guided
-        self.guide: GuideMap | None = None
-        if isinstance(domain, Building):
-            self._no_guide = GuideError(
-                f"guide leads on one floor in this version: {domain.name!r} has "
-                f"{domain.n_floors} floors"
-            )
-        else:
-            try:
-                self.guide = GuideMap.of(domain, goal_priors)
-            except GuideError as exc:
-                self._no_guide = exc
+        try:
+            self.guide: GuideMap | None = GuideMap.of(domain, goal_priors)
+        except GuideError as exc:
+            self.guide, self._no_guide = None, exc
         self.data = DomainData(tables, goal_priors, self.guide)
         self.next_state = np.ascontiguousarray(domain.next_state)
         self.open_moves = np.ascontiguousarray(domain.open_moves)

@@ -40,14 +40,12 @@ def optimal_actions(domain: Domain, goal: int) -> BoolArray:
     The goal itself is terminal (no action is optimal there).
     """
     if isinstance(domain, Building):
-        time = domain.times_to(goal)
-        after = time[domain.next_state] + domain.durations  # time to the goal through a
-        out: BoolArray = (after == time[:, None]) & (time[:, None] > 0)
-        return out
-    dist = domain.distances_to(goal)
-    nxt = dist[domain.next_state]  # distance after each move
-    one: BoolArray = (nxt == dist[:, None] - 1) & (dist[:, None] > 0)
-    return one
+        time, cost = domain.times_to(goal), domain.durations
+    else:  # every move takes one
+        time, cost = domain.distances_to(goal), np.ones_like(domain.next_state)
+    after = time[domain.next_state] + cost  # time to the goal through each action
+    out: BoolArray = (after == time[:, None]) & (time[:, None] > 0)
+    return out
 
 
 def optimal_policy(domain: Domain, goal: int) -> FloatArray:
