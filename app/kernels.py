@@ -25,9 +25,9 @@ kernel                    the readable form (and its test)
 
 Tables are passed as the tuple ``AdviceTables.arrays``: (log_probs (M, S*A), log_weights (M,),
 probs (M, S*A), theta (S*A,), neg_entropy (S,)), A the domain's actions (4 on one floor, 6 in
-a building of several floors: the paper's rule, goal-aware advice, the rules and the episodes
-take any A, guide and Q-learning four); goal tables as (goal_of_state (S,), alpha0, unknown
-counts (S*A,), goal counts (S*A, G), each goal's log theta (S*A, G)).
+a building of several floors: the paper's rule, goal-aware advice, the rules, the episodes of
+every explorer and Q-learning take any A, guide four); goal tables as (goal_of_state (S,),
+alpha0, unknown counts (S*A,), goal counts (S*A, G), each goal's log theta (S*A, G)).
 """
 
 from __future__ import annotations
@@ -153,7 +153,7 @@ def decide(
     return (kl if kl > 0.0 else 0.0), p0
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def decide_any(
     loglik: FloatArray, tables: Tables, s: int, z: FloatArray, n_actions: int
 ) -> tuple[float, float]:  # pragma: no cover - compiled
@@ -162,13 +162,15 @@ def decide_any(
     operations in its order."""
     _, log_weights, probs, theta, neg_entropy = tables
     tot = posterior(loglik, log_weights, z)
+    for m in range(loglik.shape[0]):  # P(M | H), once each (z is scratch)
+        z[m] = z[m] / tot
     b = s * n_actions
-    p0 = z[0] / tot
+    p0 = z[0]
     cross = 0.0
     for a in range(n_actions):
         mix = p0 * probs[0, b + a]  # the mixture P(a | s, H), eq. (4)
         for m in range(1, loglik.shape[0]):
-            mix += z[m] / tot * probs[m, b + a]
+            mix += z[m] * probs[m, b + a]
         if a == 0:
             cross = theta[b] * math.log(mix)
         else:
@@ -177,6 +179,14 @@ def decide_any(
     if not kl > 0.0:  # as ``kl if kl > 0.0 else 0.0``
         return 0.0, p0
     return kl * (math.log(4.0) / math.log(float(n_actions))), p0
+
+
+@njit(cache=True)
+def decide_any_call(
+    loglik: FloatArray, tables: Tables, s: int, z: FloatArray, n_actions: int
+) -> tuple[float, float]:  # pragma: no cover - compiled
+    """:func:`decide_any` as a call (as :func:`decide_call`)."""
+    return decide_any(loglik, tables, s, z, n_actions)
 
 
 @njit(cache=True)
@@ -299,6 +309,10 @@ def observe_stream(
     if n_actions == 4:
         return stream_loop(
             window, loglik, pos, steps, period, tables, kappa, count, benefit, cap, moves, out, 4
+        )
+    if n_actions == 6:
+        return stream_loop(
+            window, loglik, pos, steps, period, tables, kappa, count, benefit, cap, moves, out, 6
         )
     return stream_loop(
         window, loglik, pos, steps, period, tables, kappa, count, benefit, cap, moves, out,
@@ -1446,10 +1460,11 @@ def uniform_choice(mask: BoolArray, u: float, n: int) -> int:  # pragma: no cove
 @njit(cache=True)
 def own_action(
     kind: int, s: int, heading: int, goal: int, open_moves: BoolArray, cells: IntArray,
-    optimal: BoolArray, rng: np.random.Generator,
+    optimal: BoolArray, stops: IntArray, rng: np.random.Generator,
 ) -> int:  # pragma: no cover  # fmt: skip
-    """The rule of a fixed-policy explorer (explorers.*.policy); random, random-avoid and
-    optimal over the domain's actions (``open_moves``' columns), the others the compass's."""
+    """The rule of a fixed-policy explorer (explorers.*.policy) over the domain's actions
+    (``open_moves``' columns), the heading a compass move. ``cells``: (row, col), or in a
+    building (floor, row, col), with ``stops`` (``Building.nearest_stops``) read there."""
     if kind == RANDOM:
         return int(rng.random() * open_moves.shape[1])
     if kind == RANDOM_AVOID:
@@ -1467,11 +1482,20 @@ def own_action(
         ahead = open_moves[s].copy()
         ahead[back] = False
         if ahead.any():
-            return uniform_choice(ahead, rng.random(), 4)
+            return uniform_choice(ahead, rng.random(), open_moves.shape[1])
         return back if open_moves[s, back] else heading  # a dead end: back
     if kind == BUG:
-        dr = cells[goal, 0] - cells[s, 0]
-        dc = cells[goal, 1] - cells[s, 1]
+        aim = goal
+        rc = cells.shape[1] - 2  # the row's column: 0, or 1 after a building's floor
+        if rc == 1 and cells[s, 0] != cells[goal, 0]:  # another floor: the nearest stop
+            k = 0 if cells[goal, 0] > cells[s, 0] else 1
+            aim = stops[s, k]
+            if aim == s:
+                return 4 + k  # U or D
+            if aim < 0:
+                return uniform_choice(open_moves[s], rng.random(), open_moves.shape[1])
+        dr = cells[aim, rc] - cells[s, rc]
+        dc = cells[aim, rc + 1] - cells[s, rc + 1]
         vert = -1 if dr == 0 else (2 if dr > 0 else 0)
         horiz = -1 if dc == 0 else (1 if dc > 0 else 3)
         first, second = vert, horiz
@@ -1481,7 +1505,7 @@ def own_action(
             return first
         if second >= 0 and open_moves[s, second]:
             return second
-        return uniform_choice(open_moves[s], rng.random(), 4)
+        return uniform_choice(open_moves[s], rng.random(), open_moves.shape[1])
     # OPTIMAL
     best = optimal[s]
     n_best = 0
@@ -1555,7 +1579,7 @@ def rule_says(
 def episode(
     kind: int,
     visitor: VisitorParams,
-    world: tuple[IntArray, BoolArray, IntArray, BoolArray],
+    world: tuple[IntArray, BoolArray, IntArray, BoolArray, IntArray],
     start: int,
     goal: int,
     max_steps: int,
@@ -1584,16 +1608,17 @@ def episode(
     whatever the advice. ``s`` is the cell the advisor reads, ``x`` the explorer's own.
 
     ``world`` is (next_state (S, A), open moves (S, A), cells (S, 2; a building's (S, 3)),
-    the optimal moves to ``goal`` (S, A)), A 4 or, in a building of several floors, 6 (the
-    random, random-avoid and optimal explorers; the paper's rule, goal-aware advice and the
-    rules); ``rule_params`` (n_steps, threshold, rate, beta). ``out`` receives, before
-    each move, the state, P(M1 | H) (when ``out[1]`` is not empty) and the decision (given to
-    the explorer only if ``advised``). The explorer's draws come from ``rng``, the ``random``
-    rule's from ``rule_rng``, in the reference's order. ``goals`` is read by ``goal_aware``
-    only (G may be 0 for the others), ``guide`` (its map, parameters and destination states)
-    by ``guide`` only. ``out[0]`` receives the explorer's own cell."""
-    next_state, open_moves, cells, optimal = world
-    n_actions = next_state.shape[1]  # 4, or 6 in a building (random, random-avoid, optimal)
+    the optimal moves to ``goal`` (S, A), a building's ``nearest_stops`` (S, 2; not read on
+    one floor)), A 4 or, in a building of several floors, 6 (every explorer; the paper's
+    rule, goal-aware advice and the rules); ``rule_params`` (n_steps, threshold, rate,
+    beta). ``out`` receives, before each move, the state, P(M1 | H) (when ``out[1]`` is not
+    empty) and the decision (given to the explorer only if ``advised``). The explorer's draws
+    come from ``rng``, the ``random`` rule's from ``rule_rng``, in the reference's order.
+    ``goals`` is read by ``goal_aware`` only (G may be 0 for the others), ``guide`` (its map,
+    parameters and destination states) by ``guide`` only. ``out[0]`` receives the explorer's
+    own cell."""
+    next_state, open_moves, cells, optimal, stops = world
+    n_actions = next_state.shape[1]  # 4, or 6 in a building
     compliance, noise, sight = visitor
     beta = rule_params[3]
     log_probs, _, _, theta, _ = tables
@@ -1657,7 +1682,7 @@ def episode(
                 if n_actions == 4:
                     kl, p = decide_call(loglik, tables, s, z)
                 else:
-                    kl, p = decide_any(loglik, tables, s, z, n_actions)
+                    kl, p = decide_any_call(loglik, tables, s, z, n_actions)
             advise = kl >= kappa if rule == PAPER else says
         if advise:
             advice_count += 1
@@ -1678,9 +1703,9 @@ def episode(
                 b = s * n_actions
                 a = sample_action(theta[b : b + n_actions], rng.random(), all_moves, n_actions)
         else:
-            a = own_action(kind, x, heading, goal, open_moves, cells, optimal, rng)
+            a = own_action(kind, x, heading, goal, open_moves, cells, optimal, stops, rng)
         x2 = next_state[x, a]
-        if has_heading and x2 != x:
+        if has_heading and x2 != x and a < 4:  # a ride keeps the heading
             heading = a
         if x2 == goal:
             ruled = n_goals - int(alive.sum()) + n_dest - int(g_alive.sum())
@@ -1735,13 +1760,50 @@ def q_learning(
     q: FloatArray,
     out: tuple[IntArray, BoolArray, IntArray, IntArray, FloatArray],
 ) -> int:  # pragma: no cover - compiled
-    """Episodes of one Q-learning task (``q`` (S, 4) is learned in place); returns how many
+    """Episodes of one Q-learning task (``q`` (S, A) is learned in place); returns how many
     episodes ran (fewer than ``episodes`` only when ``step_budget`` > 0 runs out).
 
     ``learner`` is (alpha, gamma, epsilon, ties broken by the advice). Per episode ``out``
     receives: moves, success, advice given and decisions made at the states it acted in (one
     per move), mean P(M1 | H) over those decisions. ``rule`` is PAPER or GUIDE (then
-    ``guide`` is read, as :func:`episode` reads it)."""
+    ``guide`` is read, as :func:`episode` reads it; one floor only). The domain's A actions
+    (``next_state``'s columns): four, a constant in the loop compiled for it, or any other
+    (as :func:`observe_stream`)."""
+    if next_state.shape[1] == 4:
+        return q_loop(
+            next_state, start, goal, episodes, max_steps, step_budget, learner, advised,
+            keep_history, kappa, window, period, tables, rule, guide, rng, q, out, 4,
+        )  # fmt: skip
+    return q_loop(
+        next_state, start, goal, episodes, max_steps, step_budget, learner, advised,
+        keep_history, kappa, window, period, tables, rule, guide, rng, q, out,
+        next_state.shape[1],
+    )  # fmt: skip
+
+
+@njit(cache=True, inline="always")
+def q_loop(
+    next_state: IntArray,
+    start: int,
+    goal: int,
+    episodes: int,
+    max_steps: int,
+    step_budget: int,
+    learner: tuple[float, float, float, bool],
+    advised: bool,
+    keep_history: bool,
+    kappa: float,
+    window: int,
+    period: int,
+    tables: Tables,
+    rule: int,
+    guide: tuple[GuideArrays, GuideParams, IntArray],
+    rng: np.random.Generator,
+    q: FloatArray,
+    out: tuple[IntArray, BoolArray, IntArray, IntArray, FloatArray],
+    n_actions: int,
+) -> int:  # pragma: no cover - compiled
+    """:func:`q_learning`'s episodes over ``n_actions`` actions."""
     alpha, gamma, epsilon, ties_advice = learner
     steps_out, success_out, advice_out, decisions_out, p_mean_out = out
     log_probs, _, _, theta, _ = tables
@@ -1751,8 +1813,8 @@ def q_learning(
     z = np.empty(n_models)
     pos = 0
     appended = 0  # pairs in this advisor session
-    all_moves = np.ones(4, dtype=np.bool_)
-    best = np.zeros(4, dtype=np.bool_)
+    all_moves = np.ones(n_actions, dtype=np.bool_)
+    best = np.zeros(n_actions, dtype=np.bool_)
     gmap, gparams, g_goals = guide
     n_dest = g_goals.shape[0] if rule == GUIDE else 0
     g_ll = np.zeros(4 + 3 * n_dest + 2)
@@ -1795,8 +1857,11 @@ def q_learning(
                 )  # fmt: skip
                 row = theta_w
             else:
-                kl, p = decide(loglik, tables, s, z)
-                row = theta[s * 4 : s * 4 + 4]
+                if n_actions == 4:  # a constant in the loop compiled for four
+                    kl, p = decide(loglik, tables, s, z)
+                else:
+                    kl, p = decide_any_call(loglik, tables, s, z, n_actions)
+                row = theta[s * n_actions : s * n_actions + n_actions]
                 allowed = True
             advise = kl >= kappa and allowed
             n_advice += advise
@@ -1804,21 +1869,21 @@ def q_learning(
             give = advised and advise
             if rng.random() < epsilon:
                 u = rng.random()
-                a = sample_action(row, u, all_moves, 4) if give else int(u * 4)
+                a = sample_action(row, u, all_moves, n_actions) if give else int(u * n_actions)
             else:
                 qmax = q[s].max()
                 n_best = 0
                 a = 0
-                for b in range(4):
+                for b in range(n_actions):
                     best[b] = q[s, b] == qmax
                     if best[b]:
                         n_best += 1
                         a = b
                 if n_best > 1:
                     if give and ties_advice:
-                        a = sample_action(row, rng.random(), best, 4)
+                        a = sample_action(row, rng.random(), best, n_actions)
                     else:
-                        a = uniform_choice(best, rng.random(), 4)
+                        a = uniform_choice(best, rng.random(), n_actions)
             s2 = next_state[s, a]
             t += 1
             if s2 == goal:
@@ -1833,7 +1898,7 @@ def q_learning(
                     g_heading, g_pi, g_rows, True, g_comply, g_came,
                 )  # fmt: skip
             else:
-                pos = push(ring, loglik, pos, appended, period, log_probs, s, a, 4)
+                pos = push(ring, loglik, pos, appended, period, log_probs, s, a, n_actions)
             s = s2
             if step_budget > 0 and total_steps + t >= step_budget:
                 break

@@ -23,14 +23,15 @@ from app.advice.advisor import Advisor
 from app.advice.models import AdviceTables
 from app.advice.priors import ActionPrior
 from app.agents.experts import train_prior
+from app.domain.building import Domain
 from app.domain.grid import GridDomain
 from app.domain.maps import DEFAULT_MAP
 from app.strategies.stream import StreamAdvisor
 from benchmarks._report import command_line, machine, median_of, write_section
 
 
-def random_walk(domain: GridDomain, rng: np.random.Generator, n: int) -> tuple[list[int], ...]:
-    a = rng.integers(0, 4, n)
+def random_walk(domain: Domain, rng: np.random.Generator, n: int) -> tuple[list[int], ...]:
+    a = rng.integers(0, domain.n_actions, n)
     s = np.empty(n + 1, dtype=np.int64)
     s[0] = domain.start
     nxt = domain.next_state
@@ -39,7 +40,7 @@ def random_walk(domain: GridDomain, rng: np.random.Generator, n: int) -> tuple[l
     return s[:-1].tolist(), a.tolist(), s[1:].tolist()
 
 
-def bench_single(tables: AdviceTables, domain: GridDomain, repeats: int) -> tuple[float, float]:
+def bench_single(tables: AdviceTables, domain: Domain, repeats: int) -> tuple[float, float]:
     """(median us per observe+decide over whole runs, median of per-call times in us)."""
     s, a, s2 = random_walk(domain, np.random.default_rng(1), 50_000)
 
@@ -65,14 +66,14 @@ def bench_single(tables: AdviceTables, domain: GridDomain, repeats: int) -> tupl
 
 
 def compiled_rate(
-    tables: AdviceTables, domain: GridDomain, repeats: int, n: int = 10_000, steps: int = 600,
+    tables: AdviceTables, domain: Domain, repeats: int, n: int = 10_000, steps: int = 600,
     window: int = 300,
 ) -> float:  # fmt: skip
     """Decisions per CPU second of the compiled form (the service's ``StreamAdvisor``): ``n``
     explorers, each advised on its ``steps`` moves (random states and actions) in one call."""
     rng = np.random.default_rng(2)
     states = rng.integers(0, domain.n_states, (n, steps + 1))
-    actions = rng.integers(0, 4, (n, steps))
+    actions = rng.integers(0, domain.n_actions, (n, steps))
     nxt = domain.next_state[states[:, :-1], actions]
     before = np.ascontiguousarray(states[:, :-1])
 

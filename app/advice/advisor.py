@@ -348,15 +348,31 @@ class Advisor:
         t = self.tables
         n_actions = t.n_actions
         b = state * n_actions
-        post = self.posterior()  # eq. (5)
-        mix = self._mixture(post, state)  # eq. (4)
-        th = t.theta_flat
-        log = math.log
-        cross = th[b] * log(mix[0])
-        for a in range(1, n_actions):
-            cross += th[b + a] * log(mix[a])
+        loglik = self._loglik
+        if len(loglik) == 2:  # the paper's two models, unrolled as in _divergence
+            weights, probs = t.log_weight_list, t.probs_flat
+            z0, z1 = loglik[0] + weights[0], loglik[1] + weights[1]
+            if z0 >= z1:
+                e0, e1 = 1.0, math.exp(z1 - z0)
+            else:
+                e0, e1 = math.exp(z0 - z1), 1.0
+            tot = e0 + e1
+            p0, p1 = e0 / tot, e1 / tot
+            q0, q1, th, log = probs[0], probs[1], t.theta_flat, math.log
+            # KL[theta_s || mixture], eq. (6), each action's mixture (eq. (4)) as it goes
+            cross = th[b] * log(p0 * q0[b] + p1 * q1[b])
+            for i in range(b + 1, b + n_actions):
+                cross += th[i] * log(p0 * q0[i] + p1 * q1[i])
+        else:
+            post = self.posterior()  # eq. (5)
+            p0 = post[0]
+            mix = self._mixture(post, state)  # eq. (4)
+            th, log = t.theta_flat, math.log
+            cross = th[b] * log(mix[0])
+            for a in range(1, n_actions):
+                cross += th[b + a] * log(mix[a])
         kl = t.neg_entropy_list[state] - cross  # eq. (6)
-        return (kl * t.kl_scale if kl > 0.0 else 0.0), post[0]
+        return (kl * t.kl_scale if kl > 0.0 else 0.0), p0
 
     def decide(self, state: int) -> Decision:
         """Decide for the explorer now at ``state`` and account for the cost."""

@@ -23,7 +23,6 @@ from app.advice.advisor import Advisor, Decision
 from app.agents.explorers import FixedPolicyExplorer, in_sight, read_position
 from app.agents.qlearning import GOAL_REWARD, QLearningExplorer
 from app.domain.building import Domain
-from app.domain.grid import GridDomain
 from app.domain.paths import walked_cells
 
 
@@ -147,7 +146,7 @@ def run_episode(
 
 
 def run_learning(
-    domain: GridDomain,
+    domain: Domain,
     learner: QLearningExplorer,
     advisor: Advisor,
     goal: int,

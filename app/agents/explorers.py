@@ -1,10 +1,10 @@
 """Explorers: the agents the advisor watches (Section V-B), as readable reference classes.
 
 Every explorer moves on a :class:`~app.domain.grid.GridDomain` with the four compass actions
-``N, E, S, W`` (0..3) and knows its own goal; the advisor does not. ``random``,
-``random-avoid`` and ``optimal`` also walk a building of several floors
-(:class:`~app.domain.building.Building`, six actions: ``U, D`` 4 and 5) in the reference loop;
-the compass walkers do not yet (:data:`FLOORS_EXPLORERS`). One step::
+``N, E, S, W`` (0..3) and knows its own goal; the advisor does not. Every one also walks a
+building of several floors (:class:`~app.domain.building.Building`, six actions: ``U, D`` 4
+and 5), as the table says: a heading is always a compass move (a ride leaves it as it was),
+and the compass walkers take the stairs and lifts as below. One step::
 
     action = explorer.act(state, rng, advice)   # advice: theta_s, or None when not advised
     next_state = domain.next_state[state, action]
@@ -28,18 +28,27 @@ random-avoid   uniform over the moves that do not hit a wall (in a building: up 
                a stop that has a floor above or below)
 left           wall follower: keeps a heading and takes the first open direction among
                left, straight, right, back (relative to the heading); the heading becomes
-               every move that changed the cell. The first heading is drawn uniformly.
+               every move that changed the cell. The first heading is drawn uniformly. In a
+               building it follows the walls of its floor and never rides (a hand on the
+               wall finds no way up): it reaches another floor only when advised there.
 bug            greedy on coordinates: of the (at most two) moves that reduce the row or
                column difference to its goal, it tries the one on the axis with the larger
                difference first (that move most reduces the straight-line distance); equal
                differences: random order. If neither is open it moves uniformly among the
-               open moves (it has no memory, so it can be caught in a pocket).
+               open moves (it has no memory, so it can be caught in a pocket). In a
+               building, on another floor than its goal's, it heads the same way for the
+               nearest stop of its floor with a way up (its goal above) or down
+               (``Building.nearest_stops``: by row plus column difference, as a sign to the
+               lifts points) and rides there, a floor at a time; with no such stop on its
+               floor it moves uniformly among the open moves.
 optimal        a shortest path to its goal (uniform among tied shortest-path moves; in a
                building a quickest one, rides timed: :mod:`app.domain.paths`)
 corridor       never turns back but in a dead end: uniform over the open moves other than
                back (back only where nothing else is open); the heading is its last move
-               that changed the cell, the first drawn uniformly
-straight       keeps its heading while the way ahead is open; else as ``corridor``
+               that changed the cell, the first drawn uniformly. In a building a ride from
+               a stop is one more way on (uniform with the others)
+straight       keeps its heading while the way ahead is open; else as ``corridor`` (so it
+               rides only where the way ahead is shut)
 =============  ===========================================================================
 
 The first five are the paper's explorers (:data:`FIXED_EXPLORERS`); ``corridor`` and
@@ -72,8 +81,8 @@ import numpy as np
 import numpy.typing as npt
 
 from app.arrays import BoolArray, FloatArray
-from app.domain.building import Building, Domain
-from app.domain.grid import N_ACTIONS, GridDomain
+from app.domain.building import Building, Domain, U
+from app.domain.grid import N_ACTIONS
 from app.domain.paths import optimal_actions
 
 #: Names of the fixed-policy explorers, in the order used by the experiments and kernels.
@@ -165,7 +174,7 @@ class LeftExplorer(FixedPolicyExplorer):
 
     name = "left"
 
-    def __init__(self, domain: GridDomain):
+    def __init__(self, domain: Domain):
         super().__init__(domain)
         self.heading = 0
 
@@ -182,7 +191,7 @@ class LeftExplorer(FixedPolicyExplorer):
         return self.heading  # a cell with no open move: nothing to do but bump
 
     def observe(self, state: int, action: int, next_state: int) -> None:
-        if next_state != state:
+        if next_state != state and action < N_ACTIONS:  # a ride keeps the heading
             self.heading = action
 
 
@@ -193,16 +202,30 @@ class BugExplorer(FixedPolicyExplorer):
     vertical one towards the goal (if ``dr != 0``) and the horizontal one (if ``dc != 0``).
     It tries the axis with the larger ``|d|`` first (ties: random order from one ``u``) and
     takes the first open candidate. With no open candidate it moves uniformly among the open
-    moves.
+    moves. In a building, on another floor than its goal's, it heads so for the nearest stop
+    with a way towards the goal's floor (:attr:`Building.nearest_stops`) and rides from it.
     """
 
     name = "bug"
-    domain: GridDomain  # a goal's row and column: one floor (:data:`FLOORS_EXPLORERS`)
 
-    def candidates(self, state: int, rng: np.random.Generator) -> list[int]:
-        """Moves towards the goal, in the order they are tried."""
-        (r, c), (gr, gc) = self.domain.cell(state), self.domain.cell(self.goal)
-        dr, dc = gr - r, gc - c
+    def aim(self, state: int) -> tuple[int, int]:
+        """(the cell it heads for, the ride it takes there: ``U``, ``D`` or -1): its goal,
+        or on another floor of a building the nearest stop with a way towards the goal's
+        floor (-1, -1: its floor has none)."""
+        d = self.domain
+        if isinstance(d, Building):
+            here, there = int(d.cells[state, 0]), int(d.cells[self.goal, 0])
+            if here != there:
+                k = 0 if there > here else 1
+                return int(d.nearest_stops[state, k]), U + k
+        return self.goal, -1
+
+    def candidates(self, state: int, rng: np.random.Generator, aim: int = -1) -> list[int]:
+        """Moves towards ``aim`` (the goal by default), in the order they are tried."""
+        cells = self.domain.cells
+        target = self.goal if aim < 0 else aim
+        dr = int(cells[target, -2]) - int(cells[state, -2])  # row, column: the last two
+        dc = int(cells[target, -1]) - int(cells[state, -1])
         vertical = [2 if dr > 0 else 0] if dr != 0 else []  # S or N
         horizontal = [1 if dc > 0 else 3] if dc != 0 else []  # E or W
         if abs(dr) > abs(dc):
@@ -215,9 +238,13 @@ class BugExplorer(FixedPolicyExplorer):
 
     def policy(self, state: int, rng: np.random.Generator) -> int:
         open_moves = self.domain.open_moves[state]
-        for a in self.candidates(state, rng):
-            if open_moves[a]:
-                return a
+        aim, ride = self.aim(state)
+        if aim == state and ride >= 0:  # at the stop: up or down
+            return ride
+        if aim >= 0:
+            for a in self.candidates(state, rng, aim):
+                if open_moves[a]:
+                    return a
         return uniform_choice(open_moves, rng.random())
 
 
@@ -284,21 +311,11 @@ EXPLORER_CLASSES: dict[str, type[FixedPolicyExplorer]] = {
 }  # fmt: skip
 
 
-#: the explorers that walk a building of several floors (the others keep a compass heading or
-#: a goal's row and column on one floor)
-FLOORS_EXPLORERS: tuple[str, ...] = ("random", "random-avoid", "optimal")
-
-
 def check_walker(name: str, domain: Domain) -> None:
-    """ValueError unless ``name`` is one of :data:`WALKERS` that walks ``domain`` (on a
-    building of several floors, one of :data:`FLOORS_EXPLORERS`)."""
+    """ValueError unless ``name`` is one of :data:`WALKERS` (each walks ``domain``, whatever
+    its floors)."""
     if name not in EXPLORER_CLASSES:
         raise ValueError(f"unknown explorer {name!r}: use one of {', '.join(WALKERS)}")
-    if isinstance(domain, Building) and name not in FLOORS_EXPLORERS:
-        raise ValueError(
-            f"explorer {name!r} walks one floor by the compass in this version: on a building "
-            f"of several floors use one of {', '.join(FLOORS_EXPLORERS)}"
-        )
 
 
 def make_explorer(name: str, domain: Domain) -> FixedPolicyExplorer:

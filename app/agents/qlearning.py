@@ -4,7 +4,8 @@ Reward 1000 on reaching its goal (the episode ends), 0 otherwise; Q starts at 0.
 with ``u1 = rng.random()``:
 
 * ``u1 < epsilon`` (explore): sample the advice theta_s if the advisor advised at this state,
-  else a uniform move (one more draw).
+  else a uniform action of the domain's (one more draw: four, or six in a building of
+  several floors, whose ``U`` and ``D`` it learns as any move).
 * otherwise (exploit): the action with the largest Q(s, .). When several actions tie (always
   the case before the first reward reaches s), one more draw breaks the tie: with
   ``ties="advice"`` by sampling the advice restricted to the tied actions when advice was
@@ -28,7 +29,7 @@ import numpy as np
 
 from app.agents.explorers import sample_action, uniform_choice
 from app.arrays import FloatArray
-from app.domain.grid import N_ACTIONS, GridDomain
+from app.domain.building import Domain
 
 TieRule = Literal["advice", "uniform"]
 TIE_RULES: tuple[str, ...] = ("advice", "uniform")
@@ -42,7 +43,7 @@ class QLearningExplorer:
 
     def __init__(
         self,
-        domain: GridDomain,
+        domain: Domain,
         alpha: float = 0.1,
         gamma: float = 0.95,
         epsilon: float = 0.1,
@@ -61,18 +62,18 @@ class QLearningExplorer:
         self.epsilon = epsilon
         self.ties = ties
         self.goal = domain.goals[0]
-        self.q = np.zeros((domain.n_states, N_ACTIONS))
+        self.q = np.zeros((domain.n_states, domain.n_actions))
 
     def reset(self, goal: int, rng: np.random.Generator) -> None:
         """A new task: forget what was learned."""
         self.goal = goal
-        self.q = np.zeros((self.domain.n_states, N_ACTIONS))
+        self.q = np.zeros((self.domain.n_states, self.domain.n_actions))
 
     def act(self, state: int, rng: np.random.Generator, advice: FloatArray | None = None) -> int:
         if rng.random() < self.epsilon:
             if advice is not None:
                 return sample_action(advice, rng.random())
-            return int(rng.random() * N_ACTIONS)
+            return int(rng.random() * self.domain.n_actions)
         q = self.q[state]
         best = q == q.max()
         if best.sum() == 1:

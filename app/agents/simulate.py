@@ -29,7 +29,7 @@ from app.agents.episodes import run_episode
 from app.agents.explorers import FEEDS, check_walker, make_explorer
 from app.agents.qlearning import TIE_RULES
 from app.arrays import BoolArray, FloatArray, IntArray
-from app.domain.building import Domain
+from app.domain.building import Building, Domain
 from app.domain.paths import optimal_actions
 from app.strategies import AdvisorSettings, DomainData, Need, Strategy
 
@@ -49,6 +49,8 @@ _NO_GUIDE: kernels.GuideArrays = (
 )  # fmt: skip
 _NO_GOALS = np.zeros(0, dtype=np.int64)
 _NO_OPTIMAL = np.zeros((0, 4), dtype=np.bool_)  # read by the optimal explorer only
+#: what the episode kernel reads of the domain (:func:`app.kernels.episode`'s ``world``)
+World = tuple[IntArray, BoolArray, IntArray, BoolArray, IntArray]
 _UNREAD_RNG = np.random.default_rng(0)  # the readings' generator where nothing is misread
 
 
@@ -156,7 +158,11 @@ class Simulator:
         self.next_state = np.ascontiguousarray(domain.next_state)
         self.open_moves = np.ascontiguousarray(domain.open_moves)
         self.cells = np.ascontiguousarray(domain.cells)
-        self._worlds: dict[int, tuple[IntArray, BoolArray, IntArray, BoolArray]] = {}
+        self.stops = (  # the bug's way to another floor; not read on one floor
+            np.ascontiguousarray(domain.nearest_stops) if isinstance(domain, Building)
+            else np.zeros((0, 2), dtype=np.int64)
+        )  # fmt: skip
+        self._worlds: dict[int, World] = {}
 
     def settings(
         self, strategy: str, kappa: float, window: int, params: StrategyParams | None
@@ -184,16 +190,16 @@ class Simulator:
     def optimal(self, goal: int) -> BoolArray:
         return self._world(goal)[3]
 
-    def _walls(self) -> tuple[IntArray, BoolArray, IntArray, BoolArray]:
+    def _walls(self) -> World:
         """The world of every explorer but the optimal one (which alone reads the optimal
         moves to its goal): no search per goal, so any free cell can be a goal."""
-        return (self.next_state, self.open_moves, self.cells, _NO_OPTIMAL)
+        return (self.next_state, self.open_moves, self.cells, _NO_OPTIMAL, self.stops)
 
-    def _world(self, goal: int) -> tuple[IntArray, BoolArray, IntArray, BoolArray]:
+    def _world(self, goal: int) -> World:
         """What the episode kernel reads of the maze for ``goal`` (made once per goal)."""
         if goal not in self._worlds:
             optimal = np.ascontiguousarray(optimal_actions(self.domain, goal))
-            self._worlds[goal] = (self.next_state, self.open_moves, self.cells, optimal)
+            self._worlds[goal] = (self.next_state, self.open_moves, self.cells, optimal, self.stops)
         return self._worlds[goal]
 
     def fixed(
@@ -351,7 +357,7 @@ class Simulator:
                 f"({', '.join(e.name for e in strategies.STRATEGIES.values() if e.learns)}), "
                 f"not {strategy!r}"
             )
-        q = np.zeros((self.domain.n_states, 4))
+        q = np.zeros((self.domain.n_states, self.domain.n_actions))
         steps = np.zeros(episodes, dtype=np.int64)
         success = np.zeros(episodes, dtype=np.bool_)
         advice = np.zeros(episodes, dtype=np.int64)

@@ -265,6 +265,29 @@ class Building:
         out.setflags(write=False)
         return out
 
+    @cached_property
+    def nearest_stops(self) -> IntArray:
+        """``nearest_stops[s, k]``: the stop on ``s``'s floor nearest to it by row plus column
+        difference (walls aside: as the crow flies on a grid, the way a sign to the lifts
+        points) from which ``U`` (k = 0) or ``D`` (k = 1) leaves the floor; the lowest state
+        on a tie, -1 where the floor has none. The bug's way to another floor
+        (:mod:`app.agents.explorers`)."""
+        out = np.full((self.n_states, 2), -1, dtype=np.int64)
+        floor, rc = self.cells[:, 0], self.cells[:, 1:]
+        for k, action in enumerate((U, D)):
+            leaves = self.next_state[:, action] != np.arange(self.n_states)
+            for f in range(self.n_floors):
+                here = np.flatnonzero(floor == f)
+                stops = here[leaves[here]]  # in state order: argmin keeps the lowest
+                if stops.size == 0:
+                    continue
+                for lo in range(0, here.size, 512):  # 512 x stops (<= 4,096) a block
+                    part = here[lo : lo + 512]
+                    d = np.abs(rc[part, None, :] - rc[None, stops, :]).sum(axis=2)
+                    out[part, k] = stops[np.argmin(d, axis=1)]
+        out.setflags(write=False)
+        return out
+
     def distances_to(self, target: int | Iterable[int]) -> IntArray:
         """The fewest actions from every state to ``target`` (a state or several; -1: none)."""
         sources = [target] if isinstance(target, int | np.integer) else list(target)

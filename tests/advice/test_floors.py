@@ -160,7 +160,58 @@ def test_the_paper_s_rule_leads_random_walkers_upstairs_and_leaves_the_quickest_
             == b.times_to(goal)[b.start]  # fmt: skip
 
 
-def test_compass_explorers_say_they_walk_one_floor(hospital: Building) -> None:
-    for name in ("left", "bug", "corridor", "straight"):
-        with pytest.raises(ValueError, match=f"explorer '{name}' walks one floor by the compass"):
-            make_explorer(name, hospital)
+def test_nearest_stops_are_the_nearest_by_row_and_column(hospital: Building) -> None:
+    """Building.nearest_stops against a search over every cell of the floor."""
+    b = hospital
+    for s in np.random.default_rng(0).choice(b.n_states, 200, replace=False).tolist():
+        f, r, c = b.cell(s)
+        for k, action in enumerate((U, D)):
+            stops = [t for t in range(b.n_states)
+                     if b.cell(t)[0] == f and b.step(t, action) != t]  # fmt: skip
+            if not stops:
+                assert b.nearest_stops[s, k] == -1
+                continue
+            near = min(stops, key=lambda t: (abs(b.cell(t)[1] - r) + abs(b.cell(t)[2] - c), t))
+            assert b.nearest_stops[s, k] == near
+    top = b.n_floors - 1
+    assert (b.nearest_stops[b.cells[:, 0] == top, 0] == -1).all()  # no way up from the top
+    assert (b.nearest_stops[b.cells[:, 0] == 0, 1] == -1).all()  # nor down from the ground
+
+
+def test_compass_walkers_in_a_building(hospital: Building) -> None:
+    """The wall follower keeps to its floor, a ride keeps a heading, the bug heads for the
+    nearest way up and rides it, and a corridor walker takes a stair or lift as a way on."""
+    b = hospital
+    upstairs = next(g for g in b.goals if b.cell(g)[0] == 2)
+    stop = int(b.nearest_stops[b.start, 0])
+    near = stop  # a few cells west along the corridor from the way up: in sight of it
+    for _ in range(3):
+        near = b.step(near, 3)
+    assert near != stop and b.nearest_stops[near, 0] == stop
+    floors_seen = {}
+    for name, start in (("left", b.start), ("corridor", b.start), ("bug", near)):
+        e = make_explorer(name, b)
+        rng = np.random.default_rng(4)
+        e.reset(upstairs, rng)
+        s, seen = start, set()
+        for _ in range(3000):
+            a = e.act(s, rng)
+            s2 = b.step(s, a)
+            e.observe(s, a, s2)
+            seen.add(b.cell(s2)[0])
+            s = s2
+            if s == upstairs:
+                break
+        floors_seen[name] = seen
+    assert floors_seen["left"] == {0}  # a hand on the wall finds no way up
+    assert len(floors_seen["corridor"]) > 1
+    assert {0, 1, 2} <= floors_seen["bug"]  # up a floor at a time, to its goal's
+    bug = make_explorer("bug", b)
+    rng = np.random.default_rng(0)
+    bug.reset(upstairs, rng)
+    assert bug.policy(stop, rng) == U  # at the nearest way up it rides
+    left = make_explorer("left", b)
+    left.reset(upstairs, rng)
+    heading = left.heading  # type: ignore[attr-defined]
+    left.observe(stop, U, b.step(stop, U))
+    assert left.heading == heading  # type: ignore[attr-defined]
