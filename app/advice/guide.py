@@ -39,6 +39,19 @@ its next action ``a`` at ``s`` (docs/ARCHITECTURE.md has the equations beside th
   destinations' models, and a walker led one move in six was soon taken for one on its way
   and left alone).
 
+**A building of several floors** (six actions, ``U`` and ``D`` the rides): the same models
+over every action (each ``/4`` above reads ``/A``: L4, the bumps, the slack, the spread, and
+delta4's ``n_open / A``). Distances are BFS moves, a ride one move, so guide leads by the
+connection nearest in moves, stairs or lift, and not the quickest in time where the two differ
+(the experts' counts weight the ways among the fewest moves). A heading is a compass move (a
+ride keeps it), so the wall followers WL and WR never ride; C_g is the bug's rule on floors
+(``Building.compass_aims``: on another floor than g's, the nearest stop with a way towards g's
+floor, and there the ride), and its detours the same search over it. :meth:`GuideMap.apart`
+adds the row plus column difference only where rides keep row and column. Readable only in
+this version: the compiled kernels take one floor (:attr:`GuideMap.arrays` refuses a
+building), so the experiments run this advisor on a building, and the service, which serves
+one floor, never meets one.
+
 The evidence fades with time constant W, the session's window::
 
     L_k  <-  lam L_k + log P(a | s, k)            lam = 1 - 1/W
@@ -156,7 +169,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from itertools import pairwise
 
 import numpy as np
@@ -280,9 +293,16 @@ class GuideMap:
     dist: IntArray  # (G, S), -1 where unreachable
     detour: IntArray  # (G, S) fewest moves against the compass on a way there, -1: none
     goal_of_state: IntArray  # (S,) destination index, -1 elsewhere
-    counts: FloatArray  # (G, S * 4) experts' goal counts
+    counts: FloatArray  # (G, S * A) experts' goal counts
     goals: tuple[int, ...]
     marks: IntArray  # (L, S) distances to MARKS landmarks (:func:`landmarks`), -1: none
+    #: a building of several floors (None, None on one floor): each state's floor, and
+    #: ``Building.nearest_stops``, the compass's way to another floor (:meth:`compass_moves`)
+    floor: IntArray | None = None
+    stops: IntArray | None = None
+    #: whether a walk's row plus column difference bounds its moves (:meth:`apart`): on one
+    #: floor, and in a building whose rides keep row and column
+    cells_bound: bool = True
 
     @classmethod
     def of(
@@ -296,11 +316,6 @@ class GuideMap:
         :attr:`GridDomain.goal_distances` and :func:`compass_detours_each`. ``distances``:
         the searches of the landmarks (:func:`landmarks`), by default
         :func:`~app.domain.grid.bfs_distances_each`."""
-        if isinstance(domain, Building):
-            raise GuideError(
-                f"guide leads on one floor in this version: {domain.name!r} has "
-                f"{domain.n_floors} floors"
-            )
         goals = tuple(int(g) for g in domain.goals)
         if not goals:
             raise GuideError("guide advice needs the map's destinations: this map has no goal")
@@ -313,23 +328,32 @@ class GuideMap:
         s = domain.n_states
         of_state = np.full(s, -1, dtype=np.int64)
         of_state[list(goals)] = np.arange(len(goals))
-        if searches is None:
+        if isinstance(domain, Building):  # readable searches: the compiled ones are one floor's
+            dist = bfs_distances_each(domain.next_state, goals)
+            detour = compass_detours_each(
+                domain.next_state, domain.cells, goals, takes=domain.compass_takes
+            )
+        elif searches is None:
             dist = domain.goal_distances
             detour = compass_detours_each(domain.next_state, domain.cells, goals)
         else:
             dist, detour = searches(domain.next_state, domain.cells, goals)
             if dist.shape != (len(goals), s) or detour.shape != (len(goals), s):
                 raise ValueError("searches must give (destinations, states) arrays")
+        building = domain if isinstance(domain, Building) else None
         plain = cls(
             np.ascontiguousarray(domain.next_state, dtype=np.int64),
             np.ascontiguousarray(domain.open_moves.sum(axis=1), dtype=np.int64),
-            np.ascontiguousarray(domain.cells, dtype=np.int64),
+            np.ascontiguousarray(domain.cells[:, -2:], dtype=np.int64),  # row, column
             np.ascontiguousarray(dist, dtype=np.int64),
             np.ascontiguousarray(detour, dtype=np.int64),
             of_state,
-            np.zeros((len(goals), s * N_ACTIONS)),
+            np.zeros((len(goals), s * domain.n_actions)),
             goals,
             landmarks(domain.next_state, dist, MARKS, distances or _bfs_each),
+            None if building is None else np.ascontiguousarray(building.cells[:, 0]),
+            None if building is None else np.ascontiguousarray(building.nearest_stops),
+            True if building is None else building.rides_keep_cells,
         )
         return plain if goal_priors is None else plain.replace_counts(goal_priors)
 
@@ -342,10 +366,19 @@ class GuideMap:
         return len(self.goals)
 
     @property
+    def n_actions(self) -> int:
+        return int(self.next_state.shape[1])
+
+    @property
     def arrays(
         self,
     ) -> tuple[IntArray, IntArray, IntArray, IntArray, IntArray, FloatArray, IntArray, IntArray]:
-        """As app/kernels.py reads it."""
+        """As app/kernels.py reads it (one floor: :class:`GuideError` for a building)."""
+        if self.floor is not None:
+            raise GuideError(
+                "guide's compiled form leads on one floor in this version: a building of "
+                "several floors is guided by the readable advisor"
+            )
         return (
             self.next_state, self.n_open, self.cells, self.dist, self.goal_of_state, self.counts,
             self.detour, self.marks,
@@ -368,30 +401,38 @@ class GuideMap:
                 gi = goal_priors.goal_index.get(cell)
                 if gi is not None:
                     counts[i] = goal_priors.goal_counts[gi].reshape(-1)
-        return GuideMap(
-            self.next_state, self.n_open, self.cells, self.dist, self.detour, self.goal_of_state,
-            counts, self.goals, self.marks,
-        )  # fmt: skip
+        return replace(self, counts=counts)
 
     def policy(self, g: int, s: int) -> list[float]:
         """pi_g(. | s): the shortest moves towards destination g, weighted 1 + expert count."""
         d = int(self.dist[g, s])
         if d > 0:
-            w = [0.0, 0.0, 0.0, 0.0]
+            n = self.n_actions
+            w = [0.0] * n
             tot = 0.0
-            for a in range(N_ACTIONS):
+            for a in range(n):
                 if int(self.dist[g, int(self.next_state[s, a])]) == d - 1:
-                    w[a] = 1.0 + float(self.counts[g, s * N_ACTIONS + a])
+                    w[a] = 1.0 + float(self.counts[g, s * n + a])
                     tot += w[a]
-            return [w[0] / tot, w[1] / tot, w[2] / tot, w[3] / tot]
+            return [v / tot for v in w]
         return self.open_policy(s)
 
     def compass_moves(self, g: int, s: int) -> list[int]:
         """The moves of someone at ``s`` heading for destination g as the crow flies (the
         paper's bug): along the axis of the larger row or column difference if that way is
         open, else along the other axis if that way is open and brings it closer; both when
-        the differences are equal; none at g or where neither way is open."""
+        the differences are equal; none at g or where neither way is open. In a building, on
+        another floor than g's, the same towards the nearest stop with a way towards g's
+        floor, and at it the ride (``Building.compass_aims``); none where there is no such
+        stop."""
         gs = self.goals[g]
+        if self.floor is not None and self.stops is not None and self.floor[s] != self.floor[gs]:
+            k = 0 if self.floor[gs] > self.floor[s] else 1
+            gs = int(self.stops[s, k])
+            if gs == s:
+                return [4 + k]  # U or D
+            if gs < 0:
+                return []
         dr = int(self.cells[gs, 0]) - int(self.cells[s, 0])
         dc = int(self.cells[gs, 1]) - int(self.cells[s, 1])
         vert = 0 if dr < 0 else 2
@@ -410,7 +451,7 @@ class GuideMap:
         moves = self.compass_moves(g, s)
         if not moves:
             return self.open_policy(s)
-        return [1.0 / len(moves) if a in moves else 0.0 for a in range(N_ACTIONS)]
+        return [1.0 / len(moves) if a in moves else 0.0 for a in range(self.n_actions)]
 
     def compass_route(self, g: int, s: int) -> list[float]:
         """pc_g(. | s): the way to destination g for someone who heads there as the crow
@@ -420,26 +461,30 @@ class GuideMap:
         if s == self.goals[g] or int(self.detour[g, s]) < 0:
             return self.open_policy(s)
         own = self.compass_moves(g, s)
-        cost = [-1, -1, -1, -1]  # moves it would not make, counting this one
+        n = self.n_actions
+        cost = [-1] * n  # moves it would not make, counting this one
         best = -1
-        for a in range(N_ACTIONS):
+        for a in range(n):
             t = int(self.next_state[s, a])
             if t != s:
                 cost[a] = int(self.detour[g, t]) + (0 if a in own else 1)
                 if best < 0 or cost[a] < best:
                     best = cost[a]
-        pick = [a for a in range(N_ACTIONS) if cost[a] == best and a in own]
+        pick = [a for a in range(n) if cost[a] == best and a in own]
         if not pick:
-            pick = [a for a in range(N_ACTIONS) if cost[a] == best]
-        return [1.0 / len(pick) if a in pick else 0.0 for a in range(N_ACTIONS)]
+            pick = [a for a in range(n) if cost[a] == best]
+        return [1.0 / len(pick) if a in pick else 0.0 for a in range(n)]
 
     def apart(self, u: int, v: int) -> int:
         """A lower bound on the moves from ``u`` to ``v``: the larger of their row plus column
         difference and, over the destinations and the landmarks that both reach, the
         difference of their distances to it. A walk of that many moves between them is a
-        shortest path."""
-        far = abs(int(self.cells[u, 0]) - int(self.cells[v, 0]))
-        far += abs(int(self.cells[u, 1]) - int(self.cells[v, 1]))
+        shortest path. (In a building whose rides move row or column, the distances only:
+        ``cells_bound``.)"""
+        far = 0
+        if self.cells_bound:
+            far = abs(int(self.cells[u, 0]) - int(self.cells[v, 0]))
+            far += abs(int(self.cells[u, 1]) - int(self.cells[v, 1]))
         for rows in (self.dist, self.marks):
             for g in range(rows.shape[0]):
                 du, dv = int(rows[g, u]), int(rows[g, v])
@@ -455,7 +500,7 @@ class GuideMap:
             return 0.0
         n = 0
         change = 0
-        for a in range(N_ACTIONS):
+        for a in range(self.n_actions):
             u = int(self.next_state[s, a])
             if u != s:
                 n += 1
@@ -513,11 +558,11 @@ class GuideMap:
         return -1
 
     def open_policy(self, s: int) -> list[float]:
-        """Uniform over the open moves of s (over all four where none is open)."""
-        n = int(self.n_open[s])
+        """Uniform over the open moves of s (over every action where none is open)."""
+        n, k = int(self.n_open[s]), self.n_actions
         if n == 0:
-            return [0.25, 0.25, 0.25, 0.25]
-        return [1.0 / n if int(self.next_state[s, a]) != s else 0.0 for a in range(N_ACTIONS)]
+            return [1.0 / k] * k
+        return [1.0 / n if int(self.next_state[s, a]) != s else 0.0 for a in range(k)]
 
 
 @dataclass(frozen=True)
@@ -698,7 +743,8 @@ class GuideAdvisor(Advisor):
         self.doubt = [0] * self.guide.n_goals  # SET_ASIDE, BROUGHT_BACK or 0 (see rule_out)
         self._target = -1
         self._last = -1  # the state the last decision advised (-1: it did not advise)
-        self._last_advice = (0.25, 0.25, 0.25, 0.25)
+        n = self.guide.n_actions
+        self._last_advice = (1.0 / n,) * n
         self._heading = -1  # the last move that moved (-1: none yet)
         self._came = -1  # where the last move led on the map (-1: no move yet)
         self._comply = compliance_state()
@@ -765,8 +811,9 @@ class GuideAdvisor(Advisor):
         if advised:  # lost or not, it takes the advice or its own rule, half each
             took = self._last_advice[action]
             o_lo, o_la, o_ls = 0.5 * (o_lo + took), 0.5 * (o_la + took), 0.5 * (o_ls + took)
-        bump = LOST_BUMP / 4.0
-        ll[0] = lam * ll[0] + math.log(0.25)  # L4: any action, advised or not
+        n = g.n_actions
+        bump = LOST_BUMP / n
+        ll[0] = lam * ll[0] + math.log(1.0 / n)  # L4: any action, advised or not
         ll[1] = lam * ll[1] + math.log((1.0 - LOST_BUMP) * o_lo + bump)
         ll[-2] = lam * ll[-2] + math.log((1.0 - LOST_BUMP) * o_la + bump)
         ll[-1] = lam * ll[-1] + math.log((1.0 - LOST_BUMP) * o_ls + bump)
@@ -783,7 +830,7 @@ class GuideAdvisor(Advisor):
                 pa = 0.5 * (pa + self._last_advice[action])
                 ca = 0.5 * (ca + self._last_advice[action])
             k = N_LOST + 3 * i
-            ll[k] = lam * ll[k] + math.log((1.0 - slack) * pa + slack / 4.0)
+            ll[k] = lam * ll[k] + math.log((1.0 - slack) * pa + slack / n)
             ll[k + 1] = lam * ll[k + 1] + math.log((1.0 - slack) * pa + slack * lo)
             ll[k + 2] = lam * ll[k + 2] + math.log((1.0 - slack) * ca + slack * lo)
         gi = int(g.goal_of_state[state])
@@ -792,7 +839,7 @@ class GuideAdvisor(Advisor):
             # the last move cannot have led to, one cell off, say, rules nothing out)
             self._rule_out(gi)
         self._came = int(g.next_state[state, action])
-        if self._came != state:
+        if self._came != state and action < N_ACTIONS:  # a heading: a compass move
             self._heading = action
         self.steps += 1
 
@@ -821,7 +868,7 @@ class GuideAdvisor(Advisor):
         took = False  # the advised move, if advice was given
         if advised:
             best = 0
-            for a in range(N_ACTIONS):
+            for a in range(len(self._last_advice)):
                 if self._last_advice[a] > self._last_advice[best]:
                     best = a
             took = action == best
@@ -889,7 +936,7 @@ class GuideAdvisor(Advisor):
             back = (h + 2) % N_ACTIONS
             return [
                 1.0 / (n - 1) if a != back and int(g.next_state[s, a]) != s else 0.0
-                for a in range(N_ACTIONS)
+                for a in range(g.n_actions)
             ]
         return g.open_policy(s)
 
@@ -897,13 +944,14 @@ class GuideAdvisor(Advisor):
         """LS's rule at ``s``: on along the heading where it is open, else LA's."""
         g, h = self.guide, self._heading
         if h >= 0 and int(g.next_state[s, h]) != s:
-            return [1.0 if a == h else 0.0 for a in range(N_ACTIONS)]
+            return [1.0 if a == h else 0.0 for a in range(g.n_actions)]
         return self._ahead(s)
 
     @staticmethod
     def _bumped(o: list[float]) -> list[float]:
-        """A lost model's rule ``o`` with LOST_BUMP spread over the four actions."""
-        return [(1.0 - LOST_BUMP) * o[a] + LOST_BUMP / 4.0 for a in range(N_ACTIONS)]
+        """A lost model's rule ``o`` with LOST_BUMP spread over every action."""
+        n = len(o)
+        return [(1.0 - LOST_BUMP) * o[a] + LOST_BUMP / n for a in range(n)]
 
     def _alive(self) -> list[bool]:
         return self.alive if any(self.alive) else [True] * len(self.alive)
@@ -960,26 +1008,27 @@ class GuideAdvisor(Advisor):
             self._target = g.first_of_tour(state, alive)
         pi_t = g.open_policy(state)
         target_pi = pis[self._target] if self._target >= 0 else None
+        n = g.n_actions
         if target_pi is not None:  # r_T: one shortest move (the heaviest; the heading on a tie)
             pick = -1
-            for a in range(N_ACTIONS):
+            for a in range(n):
                 if (
                     pick < 0
                     or target_pi[a] > target_pi[pick]
                     or (target_pi[a] == target_pi[pick] and a == self._heading)
                 ):
                     pick = a
-            pi_t = [1.0 if a == pick else 0.0 for a in range(N_ACTIONS)]
+            pi_t = [1.0 if a == pick else 0.0 for a in range(n)]
         lo = self._lost_open(state)
         la, ls = self._bumped(self._ahead(state)), self._bumped(self._straight(state))
         wl, wr = g.wall(state, self._heading, 0), g.wall(state, self._heading, 1)
         slack, spread = self.slack, self.spread
-        theta = [0.0, 0.0, 0.0, 0.0]
-        chance = [0.0, 0.0, 0.0, 0.0]  # P(A | s, H): what the explorer does by itself
+        theta = [0.0] * n
+        chance = [0.0] * n  # P(A | s, H): what the explorer does by itself
         kl = 0.0
-        for a in range(N_ACTIONS):
+        for a in range(n):
             v = lost * pi_t[a]
-            m = post[0] * 0.25 + post[1] * lo[a]
+            m = post[0] * (1.0 / n) + post[1] * lo[a]
             m += post[2] * ((1.0 - slack) * (1.0 if a == wl else 0.0) + slack * lo[a])
             m += post[3] * ((1.0 - slack) * (1.0 if a == wr else 0.0) + slack * lo[a])
             m += post[-2] * la[a]
@@ -989,27 +1038,27 @@ class GuideAdvisor(Advisor):
                 if pi is not None and c is not None and pc is not None:
                     k = N_LOST + 3 * i
                     v += (post[k] + post[k + 1]) * pi[a] + post[k + 2] * pc[a]
-                    m += post[k] * ((1.0 - slack) * pi[a] + slack / 4.0)
+                    m += post[k] * ((1.0 - slack) * pi[a] + slack / n)
                     m += post[k + 1] * ((1.0 - slack) * pi[a] + slack * lo[a])
                     m += post[k + 2] * ((1.0 - slack) * c[a] + slack * lo[a])
-            th = (1.0 - spread) * v + spread / 4.0
+            th = (1.0 - spread) * v + spread / n
             theta[a] = th
             chance[a] = m
             if th > 0.0:
                 kl += th * (math.log(th) - math.log(m))
         if self._target >= 0:  # the value: weighted by what a lost explorer's move costs here
-            d = g.drift(self._target, state)  # over the open moves; L4's over all four
-            kl = kl * (1.0 + (lost - post[0]) * d + post[0] * (d * int(g.n_open[state]) / 4.0))
+            d = g.drift(self._target, state)  # over the open moves; L4's over every action
+            kl = kl * (1.0 + (lost - post[0]) * d + post[0] * (d * int(g.n_open[state]) / n))
         kl = kl if kl > 0.0 else 0.0
         best = 0  # the advice: theta's favourite move
-        for a in range(N_ACTIONS):
+        for a in range(n):
             if theta[a] > theta[best]:
                 best = a
         self._comply[CHANCE] = chance[best]  # its own move would be the advice this often
         self._comply[MODE] = float(best)
-        for a in range(N_ACTIONS):
-            theta[a] = (1.0 - spread) * (1.0 if a == best else 0.0) + spread / 4.0
-        row = (theta[0], theta[1], theta[2], theta[3])
+        for a in range(n):
+            theta[a] = (1.0 - spread) * (1.0 if a == best else 0.0) + spread / n
+        row = tuple(theta)
         # an explorer that ignores advice is left in peace, but for a piece now and then
         allowed = not self.holding_back or self._comply[SINCE] >= BACKOFF
         allowed = allowed and any(self.alive)  # none left: it is bound elsewhere

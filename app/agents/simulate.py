@@ -158,6 +158,7 @@ class Simulator:
         self.next_state = np.ascontiguousarray(domain.next_state)
         self.open_moves = np.ascontiguousarray(domain.open_moves)
         self.cells = np.ascontiguousarray(domain.cells)
+        self.floors = isinstance(domain, Building)
         self.stops = (  # the bug's way to another floor; not read on one floor
             np.ascontiguousarray(domain.nearest_stops) if isinstance(domain, Building)
             else np.zeros((0, 2), dtype=np.int64)
@@ -267,7 +268,8 @@ class Simulator:
                 positions=True,
                 jump=jump,
             )
-        if entry.kernel is None:
+        if entry.kernel is None or (self.floors and Need.GUIDE_MAP in entry.needs):
+            # guide's compiled form leads on one floor: a building is guided readably
             return self._fixed_readable(
                 entry, settings, explorer, goal, rng, advised, max_steps, visitor, readings
             )
@@ -356,6 +358,11 @@ class Simulator:
                 f"Q-learning runs with a strategy whose compiled form learns "
                 f"({', '.join(e.name for e in strategies.STRATEGIES.values() if e.learns)}), "
                 f"not {strategy!r}"
+            )
+        if self.floors and Need.GUIDE_MAP in entry.needs:
+            raise ValueError(
+                f"Q-learning runs compiled, and {strategy}'s compiled form leads on one floor in "
+                "this version: on a building of several floors use paper"
             )
         q = np.zeros((self.domain.n_states, self.domain.n_actions))
         steps = np.zeros(episodes, dtype=np.int64)

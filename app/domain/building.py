@@ -72,6 +72,7 @@ from app.domain.grid import (
     Placed,
     bfs_distances,
     check_rows,
+    compass_takes,
     moves_table,
     name_problem,
     names_in_order,
@@ -286,6 +287,42 @@ class Building:
                     d = np.abs(rc[part, None, :] - rc[None, stops, :]).sum(axis=2)
                     out[part, k] = stops[np.argmin(d, axis=1)]
         out.setflags(write=False)
+        return out
+
+    @cached_property
+    def rides_keep_cells(self) -> bool:
+        """Whether every ride leaves the row and column as they were (every connection's
+        stops stacked, as in a generated building): then a walk's row plus column difference
+        is at most its moves."""
+        lower, upper = self.rides[:, 0], self.rides[:, 1]
+        return bool((self.cells[lower, 1:] == self.cells[upper, 1:]).all())
+
+    def compass_aims(self, targets: IntArray, states: IntArray) -> tuple[IntArray, IntArray]:
+        """For each pair (``targets[i]``, ``states[i]``), where someone at the state heading
+        for the target as the crow flies makes for on its floor, and the ride it takes there:
+        the target itself on the target's floor (no ride, -1); on another floor the nearest
+        stop with a way towards the target's floor (:attr:`nearest_stops`; -1 where the
+        floor has none) and, once on it, ``U`` or ``D``. The bug's rule
+        (app/agents/explorers.py), as guide's compass model reads it."""
+        there, here = self.cells[targets, 0], self.cells[states, 0]
+        other = there != here
+        k = np.where(there > here, 0, 1)
+        aim = np.where(other, self.nearest_stops[states, k], targets)
+        ride = np.where(other & (aim == states), U + k, -1)
+        return aim, ride
+
+    def compass_takes(self, targets: IntArray, states: IntArray, a: int) -> BoolArray:
+        """For each pair, whether action ``a`` is one of the state's own moves towards the
+        target (:meth:`compass_aims`): the ride at the stop it makes for, else the compass's
+        moves on its floor towards where it makes for (:func:`~app.domain.grid.compass_takes`);
+        none where its floor has no way towards the target's."""
+        aim, ride = self.compass_aims(targets, states)
+        if a >= U:
+            out: BoolArray = ride == a
+            return out
+        walk = (ride < 0) & (aim >= 0)
+        out = np.zeros(len(states), dtype=np.bool_)
+        out[walk] = compass_takes(self.next_state, self.cells[:, 1:], aim[walk], states[walk], a)
         return out
 
     def distances_to(self, target: int | Iterable[int]) -> IntArray:

@@ -38,9 +38,9 @@ import math
 import re
 from array import array
 from collections import deque
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field, replace
-from functools import cached_property
+from functools import cached_property, partial
 from pathlib import Path
 from typing import Any
 
@@ -800,11 +800,11 @@ def compass_moves(next_state: IntArray, cells: IntArray, target: int) -> BoolArr
     states = np.arange(n)
     out = np.zeros((n, 4), dtype=np.bool_)
     for a in range(4):
-        out[:, a] = _compass_takes(next_state, cells, np.full(n, target), states, a)
+        out[:, a] = compass_takes(next_state, cells, np.full(n, target), states, a)
     return out
 
 
-def _compass_takes(
+def compass_takes(
     next_state: IntArray, cells: IntArray, targets: IntArray, states: IntArray, a: int
 ) -> BoolArray:
     """For each pair (``targets[i]``, ``states[i]``): move ``a`` is one of
@@ -831,15 +831,29 @@ def compass_detours(next_state: IntArray, cells: IntArray, target: int) -> IntAr
     return out
 
 
-def compass_detours_each(next_state: IntArray, cells: IntArray, targets: Sequence[int]) -> IntArray:
+#: the opposite of each action: N S, E W, and in a building of several floors U D
+OPPOSITE = (2, 3, 0, 1, 5, 4)
+#: (targets, states, a) -> for each pair, whether ``a`` is one of the state's own moves
+#: towards the target (:func:`compass_takes` on one floor)
+Takes = Callable[[IntArray, IntArray, int], BoolArray]
+
+
+def compass_detours_each(
+    next_state: IntArray, cells: IntArray, targets: Sequence[int], takes: Takes | None = None
+) -> IntArray:
     """``out[i, s]``: :func:`compass_detours` to ``targets[i]``, for every target at once.
 
     A 0-1 breadth-first search outward from each target, level by level: each level first
     takes in every state whose own move leads into the level (cost 0), then the next level
     starts from every free neighbour of it (cost 1). Moves are reversible on a grid: the
-    state ``u`` that move ``a`` of ``v`` reaches reaches ``v`` by the opposite move. The
-    searches advance together over (target, state) pairs, as in :func:`bfs_distances_each`.
+    state ``u`` that move ``a`` of ``v`` reaches reaches ``v`` by the opposite move
+    (:data:`OPPOSITE`; a ride up is undone by the ride down). The searches advance together
+    over (target, state) pairs, as in :func:`bfs_distances_each`. ``takes``: another rule of
+    one's own moves (a building's, over its six actions); by default the compass's on one
+    floor.
     """
+    if takes is None:
+        takes = partial(compass_takes, next_state, cells)
     n = next_state.shape[0]
     tgt = np.asarray(targets, dtype=np.int64)
     out = np.full((len(tgt), n), UNREACHABLE, dtype=np.int64)
@@ -853,12 +867,12 @@ def compass_detours_each(next_state: IntArray, cells: IntArray, targets: Sequenc
         while frontier.size:  # states whose own move leads into the level
             which, v = np.divmod(frontier, n)
             found = []
-            for a in range(4):
+            for a in range(next_state.shape[1]):
                 u = next_state[v, a]
-                back = (a + 2) % 4  # u's move into the frontier
+                back = OPPOSITE[a]  # u's move into the frontier
                 pair = which * n + u
                 hit = (u != v) & (flat[pair] == UNREACHABLE)
-                hit[hit] = _compass_takes(next_state, cells, tgt[which[hit]], u[hit], back)
+                hit[hit] = takes(tgt[which[hit]], u[hit], back)
                 found.append(pair[hit])
             cand = np.unique(np.concatenate(found))
             flat[cand] = level

@@ -11,15 +11,18 @@ import pytest
 
 from app.advice.advisor import Advisor, kl_divergence
 from app.advice.goals import GoalAwareAdvisor
+from app.advice.guide import GuideError, GuideMap
 from app.advice.models import AdviceTables
 from app.advice.params import StrategyParams
 from app.advice.rules import RULES
 from app.agents.episodes import run_episode
 from app.agents.experts import train_goal_priors, train_prior
 from app.agents.explorers import make_explorer
+from app.agents.simulate import Simulator
 from app.domain.building import Building, D, U
 from app.domain.floorplans import generate_floors
 from app.domain.paths import expert_trajectories
+from app.strategies import make_advisor
 from app.strategies.stream import StreamAdvisor
 
 
@@ -215,3 +218,66 @@ def test_compass_walkers_in_a_building(hospital: Building) -> None:
     heading = left.heading  # type: ignore[attr-defined]
     left.observe(stop, U, b.step(stop, U))
     assert left.heading == heading  # type: ignore[attr-defined]
+
+
+@pytest.mark.parametrize("floors", [2, 3])
+def test_guide_map_detours_are_the_compass_walker_s_fewest_shown_moves(floors: int) -> None:
+    """A building's compass detours (the vectorised search over Building.compass_takes)
+    against a plain relaxation over the readable rule (GuideMap.compass_moves): the fewest
+    moves on a way to each destination that the compass walker would not make by itself."""
+    b = generate_floors(20, 20, floors, np.random.default_rng(floors), n_goals=2, room=(3, 5))
+    g = GuideMap.of(b)
+    assert g.n_actions == 6 and g.floor is not None
+    for i, goal in enumerate(g.goals):
+        own = np.zeros((b.n_states, 6), dtype=bool)
+        for s in range(b.n_states):
+            own[s, g.compass_moves(i, s)] = True
+            aim, ride = b.compass_aims(np.array([goal]), np.array([s]))
+            assert set(g.compass_moves(i, s)) == {
+                a for a in range(6) if b.compass_takes(np.array([goal]), np.array([s]), a)[0]
+            }, (s, aim, ride)
+        best = np.full(b.n_states, np.iinfo(np.int64).max // 2)
+        best[goal] = 0
+        cost = np.where(own, 0, 1)
+        while True:
+            via = (best[b.next_state] + cost).min(axis=1)
+            via[goal] = 0
+            new = np.minimum(best, via)
+            if (new == best).all():
+                break
+            best = new
+        np.testing.assert_array_equal(g.detour[i], best)
+
+
+def test_guide_leads_lost_visitors_upstairs_and_leaves_the_quickest_alone() -> None:
+    """On a two-floor hospital, destinations upstairs: guide (the readable advisor: its
+    compiled form leads on one floor) leads random-avoid walkers and bugs there, advising the
+    ride up where it is; the optimal walker is never advised."""
+    b = generate_floors(24, 24, 2, np.random.default_rng(3), purpose="hospital", n_goals=2)
+    prior, goal_priors = train_goal_priors(b, np.random.default_rng(2), "start", 5, 1.0)
+    sim = Simulator(b, AdviceTables.paper(prior.theta()), goal_priors)
+    upstairs = [g for g in b.goals if b.cell(g)[0] == 1]
+    for explorer in ("random-avoid", "bug"):
+        alone, guided = 0, 0
+        for k in range(20):
+            goal, rng = upstairs[k % len(upstairs)], np.random.default_rng(k)
+            alone += sim.fixed(explorer, goal, rng, advised=False, max_steps=2000).success
+            run = sim.fixed(explorer, goal, np.random.default_rng(k), advised=True,
+                            strategy="guide", max_steps=2000)  # fmt: skip
+            guided += run.success
+            assert 100 * run.advice_count <= 45 * run.steps
+        assert guided >= 18 and guided >= alone + 10, (explorer, alone, guided)
+    advisor = make_advisor("guide", sim.tables, 0.5, 300, None, goal_priors, sim.guide)
+    rec = run_episode(b, make_explorer("random-avoid", b), advisor, upstairs[0],
+                      np.random.default_rng(0), advised=True, max_steps=2000)  # fmt: skip
+    assert rec.success
+    rides = [d for d in rec.decisions if d.advise and d.advice is not None
+             and int(np.argmax(d.advice)) == U]  # fmt: skip
+    assert rides and all(b.step(d.state, U) != d.state for d in rides)  # up, at a stop
+    for goal in upstairs:
+        run = sim.fixed("optimal", goal, np.random.default_rng(1), advised=True, strategy="guide")
+        assert run.success and run.advice_count == 0
+    with pytest.raises(GuideError, match="compiled form leads on one floor"):
+        _ = sim.guide.arrays if sim.guide is not None else None
+    with pytest.raises(ValueError, match="compiled form leads on one floor"):
+        sim.learning(upstairs[0], np.random.default_rng(0), advised=True, strategy="guide")

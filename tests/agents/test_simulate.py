@@ -336,7 +336,7 @@ def test_learning_kernel_follows_the_reference_q_learner_in_a_building(
     assert fast.advice_count.tolist() == [r.advice_count for r in ref]
     np.testing.assert_array_equal(fast.q, learner.q)
     goal_priors = train_goal_priors(b, np.random.default_rng(0), "start", 1, 1.0)[1]
-    with pytest.raises(ValueError, match="guide leads on one floor in this version"):
+    with pytest.raises(ValueError, match="guide's compiled form leads on one floor"):
         Simulator(b, tables, goal_priors).learning(
             goal, np.random.default_rng(0), advised=True, strategy="guide"
         )
@@ -452,8 +452,8 @@ def test_compiled_episode_follows_the_reference_loop_in_a_building(
 ) -> None:  # fmt: skip
     """A building of several floors (six actions, rides): the compiled episode makes the
     reference loop's draws, moves and decisions for every walker (the compass walkers' rides
-    and headings included), every strategy but guide, visitors' compliance, noise and sight;
-    guide is refused, saying why."""
+    and headings included), every strategy but guide (whose compiled form leads on one floor:
+    a building is guided by the readable advisor), visitors' compliance, noise and sight."""
     b = generate_floors(20, 20, floors, np.random.default_rng(seed), n_goals=2, room=(3, 5))
     prior, goal_priors = train_goal_priors(b, np.random.default_rng(seed), "start", 2, 1.0)
     tables = random_tables(np.random.default_rng(seed + 1), b.n_states, 2 + seed % 2,
@@ -478,5 +478,3 @@ def test_compiled_episode_follows_the_reference_loop_in_a_building(
         seen_rng=np.random.default_rng(seed + 7),
     )  # fmt: skip
     assert_same_run(fast, ref, strategy)
-    with pytest.raises(ValueError, match="guide leads on one floor in this version"):
-        sim.fixed(explorer, goal, rng, advised=True, strategy="guide")
