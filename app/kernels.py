@@ -25,8 +25,8 @@ kernel                    the readable form (and its test)
 
 Tables are passed as the tuple ``AdviceTables.arrays``: (log_probs (M, S*A), log_weights (M,),
 probs (M, S*A), theta (S*A,), neg_entropy (S,)), A the domain's actions (4 on one floor, 6 in
-a building of several floors: the paper's rule, goal-aware advice, the rules, the episodes of
-every explorer and Q-learning take any A, guide four); goal tables as (goal_of_state (S,),
+a building of several floors: every kernel but the one-floor searches ``guide_distances`` and
+``guide_detours`` takes any A); goal tables as (goal_of_state (S,),
 alpha0, unknown counts (S*A,), goal counts (S*A, G), each goal's log theta (S*A, G)).
 """
 
@@ -41,11 +41,24 @@ from app.arrays import BoolArray, ByteArray, FloatArray, IntArray, KeyArray
 
 Tables = tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]
 GoalTables = tuple[IntArray, float, FloatArray, FloatArray, FloatArray]
-#: (next_state (S, 4), open moves per state (S,), cells (S, 2), distance to each destination
-#: (G, S), destination of each state (S,), the experts' goal counts (G, S * 4), the fewest moves
-#: against the compass on a way to each destination (G, S), the distance to each landmark (L, S))
+#: (next_state (S, A), open moves per state (S,), cells (S, 2: row, column), distance to each
+#: destination (G, S), destination of each state (S,), the experts' goal counts (G, S * A), the
+#: fewest moves against the compass on a way to each destination (G, S), the distance to each
+#: landmark (L, S); in a building of several floors each state's floor (S,) and
+#: ``Building.nearest_stops`` (S, 2), (0,) and (0, 2) on one floor; whether the row plus column
+#: difference bounds a walk's moves): ``GuideMap.arrays``
 GuideArrays = tuple[
-    IntArray, IntArray, IntArray, IntArray, IntArray, FloatArray, IntArray, IntArray
+    IntArray,
+    IntArray,
+    IntArray,
+    IntArray,
+    IntArray,
+    FloatArray,
+    IntArray,
+    IntArray,
+    IntArray,
+    IntArray,
+    bool,
 ]
 #: (lam, p_lost, slack, spread, bump, the most destinations a tour is planned through)
 GuideParams = tuple[
@@ -570,26 +583,27 @@ def goal_stream(
 def guide_open(
     next_state: IntArray, n_open: IntArray, s: int, out: FloatArray
 ) -> None:  # pragma: no cover - compiled
-    """``GuideMap.open_policy``: uniform over the open moves of ``s`` into ``out`` (4,)."""
-    n, mask = n_open[s], guide_open_moves(next_state, s)
-    for a in range(4):
-        out[a] = guide_open_share(n, mask, a)
+    """``GuideMap.open_policy``: uniform over the open moves of ``s`` into ``out`` (A,)."""
+    n, mask, k = n_open[s], guide_open_moves(next_state, s), next_state.shape[1]
+    for a in range(k):
+        out[a] = guide_open_share(n, mask, a, k)
 
 
 @njit(cache=True)
 def guide_open_moves(next_state: IntArray, s: int) -> int:  # pragma: no cover - compiled
     """The open moves of ``s`` as bits (bit a: move a leaves ``s``)."""
     mask = 0
-    for a in range(4):
+    for a in range(next_state.shape[1]):
         if next_state[s, a] != s:
             mask |= 1 << a
     return mask
 
 
 @njit(cache=True)
-def guide_open_share(n: int, mask: int, a: int) -> float:  # pragma: no cover - compiled
-    """``GuideMap.open_policy`` of move ``a`` at a state with ``n`` open moves, ``mask``."""
-    return 0.25 if n == 0 else (1.0 / n if (mask >> a) & 1 == 1 else 0.0)
+def guide_open_share(n: int, mask: int, a: int, k: int) -> float:  # pragma: no cover
+    """``GuideMap.open_policy`` of move ``a`` at a state with ``n`` open moves, ``mask``, of
+    ``k`` actions."""
+    return 1.0 / k if n == 0 else (1.0 / n if (mask >> a) & 1 == 1 else 0.0)
 
 
 @njit(cache=True)
@@ -612,37 +626,57 @@ def guide_own_moves(dr: int, dc: int, mask: int) -> tuple[int, int]:  # pragma: 
 
 
 @njit(cache=True, inline="always")
+def guide_compass(
+    gmap: GuideArrays, goal: int, s: int, mask: int
+) -> tuple[int, int]:  # pragma: no cover - compiled
+    """``GuideMap.compass_moves`` of someone at ``s`` heading for ``goal``: up to two moves
+    (-1: none); in a building, on another floor than the goal's, towards the nearest stop
+    with a way towards the goal's floor, and at it the ride (``Building.compass_aims``)."""
+    cells, floor, stops = gmap[2], gmap[8], gmap[9]
+    aim = goal
+    if floor.shape[0] > 0 and floor[s] != floor[goal]:
+        k = 0 if floor[goal] > floor[s] else 1
+        aim = stops[s, k]
+        if aim == s:
+            return 4 + k, -1  # U or D
+        if aim < 0:
+            return -1, -1
+    return guide_own_moves(cells[aim, 0] - cells[s, 0], cells[aim, 1] - cells[s, 1], mask)
+
+
+@njit(cache=True, inline="always")
 def guide_fill_rows(
     gmap: GuideArrays, goals: IntArray, s: int, rows: FloatArray
 ) -> None:  # pragma: no cover - compiled  # fmt: skip
-    """Fill ``rows`` (2 G, 4) with every destination's pi_g(. | s) (``GuideMap.policy``),
+    """Fill ``rows`` (2 G, A) with every destination's pi_g(. | s) (``GuideMap.policy``),
     then its c_g(. | s) (``GuideMap.compass``). One loop, the arrays read in it (a compiled
     call per destination that takes arrays costs more than the arithmetic)."""
-    next_state, n_open, cells, dist, _, counts, _, _ = gmap
+    next_state, n_open, _, dist, _, counts, _, _, _, _, _ = gmap
     n_goals = goals.shape[0]
     n = n_open[s]
+    k = next_state.shape[1]
     mask = guide_open_moves(next_state, s)
     for g in range(n_goals):
         d = dist[g, s]  # pi_g: the shortest moves, weighted 1 + the experts' count
         if d > 0:
             tot = 0.0
-            for a in range(4):
+            for a in range(k):
                 if dist[g, next_state[s, a]] == d - 1:
-                    rows[g, a] = 1.0 + counts[g, s * 4 + a]
+                    rows[g, a] = 1.0 + counts[g, s * k + a]
                     tot += rows[g, a]
                 else:
                     rows[g, a] = 0.0
-            for a in range(4):
+            for a in range(k):
                 rows[g, a] = rows[g, a] / tot
         else:
-            for a in range(4):
-                rows[g, a] = guide_open_share(n, mask, a)
-        goal = goals[g]  # c_g: uniform over its own moves, the open moves where it has none
-        m0, m1 = guide_own_moves(cells[goal, 0] - cells[s, 0], cells[goal, 1] - cells[s, 1], mask)
+            for a in range(k):
+                rows[g, a] = guide_open_share(n, mask, a, k)
+        # c_g: uniform over its own moves, the open moves where it has none
+        m0, m1 = guide_compass(gmap, goals[g], s, mask)
         r = n_goals + g
-        for a in range(4):
+        for a in range(k):
             if m0 < 0:
-                rows[r, a] = guide_open_share(n, mask, a)
+                rows[r, a] = guide_open_share(n, mask, a, k)
             else:
                 rows[r, a] = (1.0 / (1 if m1 < 0 else 2)) if a in (m0, m1) else 0.0
 
@@ -656,20 +690,21 @@ def guide_route_rows(
     ruled out (every one when none is left): the open moves after which the fewest moves it
     would not make by itself remain, its own moves first (at g, or where g cannot be
     reached, the open moves)."""
-    next_state, n_open, cells, _, _, _, detour, _ = gmap
+    next_state, n_open, _, _, _, _, detour, _, _, _, _ = gmap
     n = n_open[s]
+    k = next_state.shape[1]
     mask = guide_open_moves(next_state, s)
     for g in range(goals.shape[0]):
         if not (alive[g] or not any_alive):
             continue
         goal = goals[g]
         if s == goal or detour[g, s] < 0:
-            for a in range(4):
-                pcs[g, a] = guide_open_share(n, mask, a)
+            for a in range(k):
+                pcs[g, a] = guide_open_share(n, mask, a, k)
             continue
-        m0, m1 = guide_own_moves(cells[goal, 0] - cells[s, 0], cells[goal, 1] - cells[s, 1], mask)
+        m0, m1 = guide_compass(gmap, goal, s, mask)
         best = -1
-        for a in range(4):  # pcs[g, a]: moves it would not make, counting this one (-1: shut)
+        for a in range(k):  # pcs[g, a]: moves it would not make, counting this one (-1: shut)
             pcs[g, a] = -1.0
             t = next_state[s, a]
             if t != s:
@@ -680,12 +715,12 @@ def guide_route_rows(
                     best = cost
         n_own = 0
         n_any = 0
-        for a in range(4):
+        for a in range(k):
             if pcs[g, a] >= 0.0 and math.floor(pcs[g, a]) == best:
                 n_any += 1
                 if pcs[g, a] == best:
                     n_own += 1
-        for a in range(4):
+        for a in range(k):
             c = pcs[g, a]
             if c >= 0.0 and math.floor(c) == best and (n_own == 0 or c == best):
                 pcs[g, a] = 1.0 / (n_own if n_own > 0 else n_any)
@@ -701,7 +736,7 @@ def guide_append(
 ) -> tuple[int, int]:  # pragma: no cover - compiled  # fmt: skip
     """``GuideAdvisor.append``: fade the evidence, add log P(a | s, k), rule out a destination
     the explorer stood on. ``goals`` holds each destination's state; ``advised``: the last
-    decision, for ``s``, gave ``advice`` (4,); ``pi`` is scratch (4,). ``rows`` (2 G, 4):
+    decision, for ``s``, gave ``advice`` (A,); ``pi`` is scratch (A,). ``rows`` (2 G, A):
     every destination's pi_g(. | s), then its c_g(. | s), as :func:`guide_decide` leaves them
     in its scratch (:func:`guide_rows`); ``known``: they are already there for ``s`` (a
     decision for ``s`` came just before), else they are made here. ``comply``
@@ -712,11 +747,12 @@ def guide_append(
     lam, slack, bump = params[0], params[2], params[4]
     next_state = gmap[0]
     n_goals = alive.shape[0]
+    n_actions = next_state.shape[1]
     guide_observe_compliance(params, comply, advised, advice, a, s, next_state[s, a])
     if not known:
         guide_fill_rows(gmap, goals, s, rows)
     guide_open(next_state, gmap[1], s, pi)
-    lo = (1.0 - bump) * pi[a] + bump / 4.0
+    lo = (1.0 - bump) * pi[a] + bump / n_actions
     # LO, LA and LS: their rule (bump 0), with a bump now and then
     o_lo = pi[a]
     o_la = guide_ahead(next_state, gmap[1], s, heading, a, 0.0)
@@ -727,11 +763,11 @@ def guide_append(
             0.5 * (o_la + advice[a]),
             0.5 * (o_ls + advice[a]),
         )
-    ll[0] = lam * ll[0] + math.log(0.25)  # L4: any action, advised or not
-    ll[1] = lam * ll[1] + math.log((1.0 - bump) * o_lo + bump / 4.0)
+    ll[0] = lam * ll[0] + math.log(1.0 / n_actions)  # L4: any action, advised or not
+    ll[1] = lam * ll[1] + math.log((1.0 - bump) * o_lo + bump / n_actions)
     last = ll.shape[0] - 1  # LA, then LS
-    ll[last - 1] = lam * ll[last - 1] + math.log((1.0 - bump) * o_la + bump / 4.0)
-    ll[last] = lam * ll[last] + math.log((1.0 - bump) * o_ls + bump / 4.0)
+    ll[last - 1] = lam * ll[last - 1] + math.log((1.0 - bump) * o_la + bump / n_actions)
+    ll[last] = lam * ll[last] + math.log((1.0 - bump) * o_ls + bump / n_actions)
     for w in range(2):  # the left-hand (w = 0) and right-hand wall followers
         rule = guide_wall(next_state, s, heading, w)
         ind = 1.0 if a == rule else 0.0
@@ -745,14 +781,14 @@ def guide_append(
             pa = 0.5 * (pa + advice[a])
             ca = 0.5 * (ca + advice[a])
         k = 4 + 3 * g
-        ll[k] = lam * ll[k] + math.log((1.0 - slack) * pa + slack / 4.0)
+        ll[k] = lam * ll[k] + math.log((1.0 - slack) * pa + slack / n_actions)
         ll[k + 1] = lam * ll[k + 1] + math.log((1.0 - slack) * pa + slack * lo)
         ll[k + 2] = lam * ll[k + 2] + math.log((1.0 - slack) * ca + slack * lo)
     gi = gmap[4][s]
     if gi >= 0 and (came < 0 or came == s):  # a reading one cell off rules nothing out
         guide_rule_out(alive, doubt, gi)
     to = next_state[s, a]
-    return (a if to != s else heading), to
+    return (a if to != s and a < 4 else heading), to  # a heading: a compass move
 
 
 @njit(cache=True, inline="always")
@@ -763,14 +799,15 @@ def guide_ahead(
     ``GuideAdvisor._bumped`` spreads LOST_BUMP): uniform over the open moves but back (against
     ``heading``) where another is open and it has moved, over the open moves otherwise."""
     n = n_open[s]
+    k: int = next_state.shape[1]
     back = (heading + 2) % 4
     if heading >= 0 and n > 1 and next_state[s, back] != s:
         o = 1.0 / (n - 1) if a != back and next_state[s, a] != s else 0.0
     elif n == 0:
-        o = 0.25
+        o = 1.0 / k
     else:
         o = 1.0 / n if next_state[s, a] != s else 0.0
-    return (1.0 - bump) * o + bump / 4.0
+    return (1.0 - bump) * o + bump / k
 
 
 @njit(cache=True, inline="always")
@@ -780,7 +817,8 @@ def guide_straight(
     """LS's move (``GuideAdvisor._straight(s)[a]``, ``bump`` as in :func:`guide_ahead`): on
     along ``heading`` where it is open, else LA's."""
     if heading >= 0 and next_state[s, heading] != s:
-        return (1.0 - bump) * (1.0 if a == heading else 0.0) + bump / 4.0
+        k: int = next_state.shape[1]
+        return (1.0 - bump) * (1.0 if a == heading else 0.0) + bump / k
     return guide_ahead(next_state, n_open, s, heading, a, bump)
 
 
@@ -825,7 +863,7 @@ def guide_observe_compliance(
     took = False  # the advised move, if advice was given
     if advised:
         best = 0
-        for b in range(4):
+        for b in range(advice.shape[0]):
             if advice[b] > advice[best]:
                 best = b
         took = a == best
@@ -944,7 +982,7 @@ def guide_drift(gmap: GuideArrays, t: int, s: int) -> float:  # pragma: no cover
         return 0.0
     n = 0
     change = 0
-    for a in range(4):
+    for a in range(next_state.shape[1]):
         u = next_state[s, a]
         if u != s:
             n += 1
@@ -1008,11 +1046,11 @@ def guide_decide(
     target: int, heading: int, s: int, theta: FloatArray, scratch: FloatArray,
     comply: FloatArray, run: IntArray, fresh: bool,
 ) -> tuple[float, float, int, bool]:  # pragma: no cover - compiled  # fmt: skip
-    """``GuideAdvisor.decide``: fills ``theta`` (4,) with the advice; returns (the value
+    """``GuideAdvisor.decide``: fills ``theta`` (A,) with the advice; returns (the value
     compared with kappa, 1 - P(lost | H), the target, whether advice may be given at all: not
     to an explorer that ignores it, advice held back, within ``BACKOFF`` decisions of the
     last piece).
-    ``heading``: the last move that moved (-1: none). ``scratch`` is (6 + 3 G + 12 G + 4,);
+    ``heading``: the last move that moved (-1: none). ``scratch`` is (6 + 3 G + 3 G A + A,);
     ``comply`` as :func:`guide_observe_compliance` keeps it; ``run`` (:func:`guide_run_push`)
     the states decided for since the last piece of advice, ``s`` added here; ``fresh``: no
     advice yet this session. A caller that advises restarts ``run`` and spends a piece
@@ -1021,6 +1059,7 @@ def guide_decide(
     backoff = params[10]
     dist = gmap[3]
     n_goals = alive.shape[0]
+    n_actions = gmap[0].shape[1]
     n_models = 4 + 3 * n_goals + 2  # LA and LS last
     la_k, ls_k = n_models - 2, n_models - 1
     any_alive = False
@@ -1060,24 +1099,25 @@ def guide_decide(
         post[k] = post[k] / tot
     lost = post[0] + post[1] + post[2] + post[3] + post[la_k] + post[ls_k]
     # each destination's policies here, and the target
-    rows = guide_rows(scratch, n_goals)  # pi_g and c_g for every one (guide_append reads them)
+    rows = guide_rows(scratch, n_goals, n_actions)  # pi_g and c_g (guide_append reads them)
     guide_fill_rows(gmap, goals, s, rows)
     pis, cs = rows[:n_goals], rows[n_goals:]
-    pcs = scratch[n_models + 8 * n_goals : n_models + 12 * n_goals].reshape((n_goals, 4))
+    at = n_models + 2 * n_goals * n_actions
+    pcs = scratch[at : at + n_goals * n_actions].reshape((n_goals, n_actions))
     guide_route_rows(gmap, goals, alive, any_alive, s, pcs)
     if target < 0 or not (alive[target] or not any_alive):
         target = guide_first_of_tour(dist, goals, alive, any_alive, s, max_tour)
-    pi_t = scratch[n_models + 12 * n_goals :]
+    pi_t = scratch[at + n_goals * n_actions :]
     if target >= 0:  # r_T: one shortest move (the heaviest; the heading on a tie)
         pick = -1
-        for a in range(4):
+        for a in range(n_actions):
             if (
                 pick < 0
                 or pis[target, a] > pis[target, pick]
                 or (pis[target, a] == pis[target, pick] and a == heading)
             ):
                 pick = a
-        for a in range(4):
+        for a in range(n_actions):
             pi_t[a] = 1.0 if a == pick else 0.0
     else:
         guide_open(gmap[0], gmap[1], s, pi_t)
@@ -1087,10 +1127,10 @@ def guide_decide(
     wr = guide_wall(gmap[0], s, heading, 1)
     kl = 0.0
     chance = pi_t  # P(A | s, H), written over r_T once r_T is read
-    for a in range(4):
-        lo = (1.0 - bump) * op[a] + bump / 4.0
+    for a in range(n_actions):
+        lo = (1.0 - bump) * op[a] + bump / n_actions
         v = lost * pi_t[a]
-        m = post[0] * 0.25 + post[1] * lo
+        m = post[0] * (1.0 / n_actions) + post[1] * lo
         m += post[2] * ((1.0 - slack) * (1.0 if a == wl else 0.0) + slack * lo)
         m += post[3] * ((1.0 - slack) * (1.0 if a == wr else 0.0) + slack * lo)
         m += post[la_k] * guide_ahead(gmap[0], gmap[1], s, heading, a, bump)
@@ -1099,34 +1139,34 @@ def guide_decide(
             if alive[g] or not any_alive:
                 k = 4 + 3 * g
                 v += (post[k] + post[k + 1]) * pis[g, a] + post[k + 2] * pcs[g, a]
-                m += post[k] * ((1.0 - slack) * pis[g, a] + slack / 4.0)
+                m += post[k] * ((1.0 - slack) * pis[g, a] + slack / n_actions)
                 m += post[k + 1] * ((1.0 - slack) * pis[g, a] + slack * lo)
                 m += post[k + 2] * ((1.0 - slack) * cs[g, a] + slack * lo)
-        th = (1.0 - spread) * v + spread / 4.0
+        th = (1.0 - spread) * v + spread / n_actions
         theta[a] = th
         chance[a] = m
         if th > 0.0:
             kl += th * (math.log(th) - math.log(m))
     if target >= 0:  # the value: weighted by what a lost explorer's move costs here
-        d = guide_drift(gmap, target, s)  # over the open moves; L4's over all four
-        kl = kl * (1.0 + (lost - post[0]) * d + post[0] * (d * gmap[1][s] / 4.0))
+        d = guide_drift(gmap, target, s)  # over the open moves; L4's over every action
+        kl = kl * (1.0 + (lost - post[0]) * d + post[0] * (d * gmap[1][s] / n_actions))
     kl = kl if kl > 0.0 else 0.0
     best = 0  # the advice: theta's favourite move
-    for a in range(4):
+    for a in range(n_actions):
         if theta[a] > theta[best]:
             best = a
     n_levels = params[11]
     comply[n_levels] = chance[best]  # its own move would be the advice this often
     comply[n_levels + 9] = float(best)
-    for a in range(4):
-        theta[a] = (1.0 - spread) * (1.0 if a == best else 0.0) + spread / 4.0
+    for a in range(n_actions):
+        theta[a] = (1.0 - spread) * (1.0 if a == best else 0.0) + spread / n_actions
     # an explorer that ignores advice is left in peace, but for a piece now and then
     held = comply[n_levels + 2] != 0.0 or comply[n_levels + 6] >= params[14]
     allowed = not held or comply[n_levels + 1] >= backoff
     allowed = allowed and any_alive  # none left: it is bound elsewhere
     guide_run_push(run, s)
     on_lead = comply[n_levels + 10] != 0.0
-    purpose = guide_purposeful(gmap[2], dist, gmap[7], run, fresh, on_lead, params, target)
+    purpose = guide_purposeful(gmap, run, fresh, on_lead, params, target)
     allowed = allowed and not purpose  # it walks a way of its own
     # the advice budget: a piece more saved each 1 / ADVICE_RATE decisions (params[21], up to
     # ADVICE_BURST, params[22]), the value divided by the price of the pieces saved
@@ -1194,11 +1234,14 @@ def guide_advised(
 
 @njit(cache=True)
 def guide_apart(
-    cells: IntArray, dist: IntArray, marks: IntArray, u: int, v: int
+    cells: IntArray, dist: IntArray, marks: IntArray, bound: bool, u: int, v: int
 ) -> int:  # pragma: no cover - compiled
-    """``GuideMap.apart``: a lower bound on the moves from ``u`` to ``v`` (the destinations'
-    distances ``dist``, then the landmarks' ``marks``)."""
-    far = int(abs(cells[u, 0] - cells[v, 0]) + abs(cells[u, 1] - cells[v, 1]))
+    """``GuideMap.apart``: a lower bound on the moves from ``u`` to ``v`` (the row plus column
+    difference where it ``bound``s them, the destinations' distances ``dist``, then the
+    landmarks' ``marks``)."""
+    far = 0
+    if bound:
+        far = int(abs(cells[u, 0] - cells[v, 0]) + abs(cells[u, 1] - cells[v, 1]))
     for rows in (dist, marks):
         for g in range(rows.shape[0]):
             du, dv = rows[g, u], rows[g, v]
@@ -1209,9 +1252,7 @@ def guide_apart(
 
 @njit(cache=True, inline="always")
 def guide_purposeful(
-    cells: IntArray,
-    dist: IntArray,
-    marks: IntArray,
+    gmap: GuideArrays,
     run: IntArray,
     fresh: bool,
     on_lead: bool,
@@ -1229,6 +1270,7 @@ def guide_purposeful(
     k_run, k_slack, k_long, long_slack, part = (
         params[15], params[16], params[17], params[18], params[20],
     )  # fmt: skip
+    cells, dist, marks, bound = gmap[2], gmap[3], gmap[7], gmap[10]
     m = run[0]
     if m == 0 or (m <= k_run and not fresh):
         return False
@@ -1251,7 +1293,7 @@ def guide_purposeful(
             k, slack = min(k_long, n), long_slack
         else:
             k, slack = n, max(long_slack, n // part)
-        apart = guide_apart(cells, dist, marks, run[2 + (newest - k + size) % size], now)
+        apart = guide_apart(cells, dist, marks, bound, run[2 + (newest - k + size) % size], now)
         if not k - slack <= apart <= k:
             return False
     return True
@@ -1259,19 +1301,22 @@ def guide_purposeful(
 
 @njit(cache=True)
 def guide_buffers(
-    n_goals: int,
+    n_goals: int, n_actions: int
 ) -> tuple[FloatArray, FloatArray, FloatArray]:  # pragma: no cover - compiled
     """What :func:`guide_decide` and :func:`guide_append` need besides the session's state:
-    its scratch (6 + 3 G + 12 G + 4,), ``pi`` (4,) and ``theta`` (4,)."""
-    return np.empty(6 + 15 * n_goals + 4), np.empty(4), np.empty(4)
+    its scratch (6 + 3 G + 3 G A + A,), ``pi`` (A,) and ``theta`` (A,)."""
+    size = 6 + 3 * n_goals + 3 * n_goals * n_actions + n_actions
+    return np.empty(size), np.empty(n_actions), np.empty(n_actions)
 
 
 @njit(cache=True)
-def guide_rows(scratch: FloatArray, n_goals: int) -> FloatArray:  # pragma: no cover - compiled
+def guide_rows(
+    scratch: FloatArray, n_goals: int, n_actions: int
+) -> FloatArray:  # pragma: no cover - compiled
     """The rows of :func:`guide_decide`'s scratch holding every destination's pi_g, then its
-    c_g, at the state of the last decision: (2 G, 4), what :func:`guide_append` reads."""
+    c_g, at the state of the last decision: (2 G, A), what :func:`guide_append` reads."""
     start = 6 + 3 * n_goals
-    return scratch[start : start + 8 * n_goals].reshape((2 * n_goals, 4))
+    return scratch[start : start + 2 * n_goals * n_actions].reshape((2 * n_goals, n_actions))
 
 
 @njit(cache=True)
@@ -1297,17 +1342,18 @@ def guide_stream(
     out: tuple[FloatArray, FloatArray, BoolArray, IntArray, FloatArray, FloatArray],
 ) -> tuple[int, int, int, int, int, float]:  # pragma: no cover - compiled
     """A batch of ``GuideAdvisor.observe``; ``last`` is the state the last decision advised
-    (-1 if it did not), ``advice`` (4,) that advice, updated in place, ``heading`` the last
+    (-1 if it did not), ``advice`` (A,) that advice, updated in place, ``heading`` the last
     move that moved, ``came`` where the last move led on the map (-1: none), ``comply`` the
     compliance evidence (:func:`guide_observe_compliance`) and ``run`` the states decided for
     since the last piece of advice (:func:`guide_run_push`), updated in place. Fills ``out``
-    (kl, p_normal, advise, count, benefit, advice (n, 4)); returns (target, last, heading,
+    (kl, p_normal, advise, count, benefit, advice (n, A)); returns (target, last, heading,
     came, advice count, benefit)."""
     states, actions, next_states = moves
     kl_out, p_out, advise_out, count_out, benefit_out, advice_out = out
     n_goals = alive.shape[0]
-    scratch, pi, theta = guide_buffers(n_goals)
-    rows = guide_rows(scratch, n_goals)
+    n_actions = gmap[0].shape[1]
+    scratch, pi, theta = guide_buffers(n_goals, n_actions)
+    rows = guide_rows(scratch, n_goals, n_actions)
     for i in range(states.shape[0]):
         known = i > 0 and states[i] == next_states[i - 1]  # decided there just before
         heading, came = guide_append(
@@ -1324,12 +1370,12 @@ def guide_stream(
             advise_out[i] = True
             last = next_states[i]
             guide_advised(params, comply, run, last)
-            for a in range(4):
+            for a in range(n_actions):
                 advice[a] = theta[a]
         else:
             advise_out[i] = False
             last = -1
-        for a in range(4):
+        for a in range(n_actions):
             advice_out[i, a] = theta[a]
         kl_out[i] = kl
         p_out[i] = p0
@@ -1635,7 +1681,7 @@ def episode(
     goal_ll = np.zeros(n_goals)
     alive = np.ones(n_goals, dtype=np.bool_)
     w = np.empty(n_goals)
-    theta_w = np.empty(n_actions)  # guide: one floor, four
+    theta_w = np.empty(n_actions)
     gmap, gparams, g_goals = guide
     n_dest = g_goals.shape[0] if rule == GUIDE else 0
     g_ll = np.zeros(4 + 3 * n_dest + 2)
@@ -1645,8 +1691,8 @@ def episode(
     g_heading = -1
     g_comply = guide_compliance_state(gparams)
     g_came = -1
-    g_scratch, g_pi, _ = guide_buffers(n_dest)
-    g_rows = guide_rows(g_scratch, n_dest)
+    g_scratch, g_pi, _ = guide_buffers(n_dest, n_actions)
+    g_rows = guide_rows(g_scratch, n_dest, n_actions)
     g_run = guide_run_new(gparams)
     heading = 0
     has_heading = kind in (LEFT, CORRIDOR, STRAIGHT)
@@ -1766,44 +1812,9 @@ def q_learning(
     ``learner`` is (alpha, gamma, epsilon, ties broken by the advice). Per episode ``out``
     receives: moves, success, advice given and decisions made at the states it acted in (one
     per move), mean P(M1 | H) over those decisions. ``rule`` is PAPER or GUIDE (then
-    ``guide`` is read, as :func:`episode` reads it; one floor only). The domain's A actions
-    (``next_state``'s columns): four, a constant in the loop compiled for it, or any other
-    (as :func:`observe_stream`)."""
-    if next_state.shape[1] == 4:
-        return q_loop(
-            next_state, start, goal, episodes, max_steps, step_budget, learner, advised,
-            keep_history, kappa, window, period, tables, rule, guide, rng, q, out, 4,
-        )  # fmt: skip
-    return q_loop(
-        next_state, start, goal, episodes, max_steps, step_budget, learner, advised,
-        keep_history, kappa, window, period, tables, rule, guide, rng, q, out,
-        next_state.shape[1],
-    )  # fmt: skip
-
-
-@njit(cache=True, inline="always")
-def q_loop(
-    next_state: IntArray,
-    start: int,
-    goal: int,
-    episodes: int,
-    max_steps: int,
-    step_budget: int,
-    learner: tuple[float, float, float, bool],
-    advised: bool,
-    keep_history: bool,
-    kappa: float,
-    window: int,
-    period: int,
-    tables: Tables,
-    rule: int,
-    guide: tuple[GuideArrays, GuideParams, IntArray],
-    rng: np.random.Generator,
-    q: FloatArray,
-    out: tuple[IntArray, BoolArray, IntArray, IntArray, FloatArray],
-    n_actions: int,
-) -> int:  # pragma: no cover - compiled
-    """:func:`q_learning`'s episodes over ``n_actions`` actions."""
+    ``guide`` is read, as :func:`episode` reads it). The domain's A actions:
+    ``next_state``'s columns."""
+    n_actions = next_state.shape[1]
     alpha, gamma, epsilon, ties_advice = learner
     steps_out, success_out, advice_out, decisions_out, p_mean_out = out
     log_probs, _, _, theta, _ = tables
@@ -1824,8 +1835,8 @@ def q_loop(
     g_heading = -1
     g_comply = guide_compliance_state(gparams)
     g_came = -1
-    g_scratch, g_pi, theta_w = guide_buffers(n_dest)
-    g_rows = guide_rows(g_scratch, n_dest)
+    g_scratch, g_pi, theta_w = guide_buffers(n_dest, n_actions)
+    g_rows = guide_rows(g_scratch, n_dest, n_actions)
     g_run = guide_run_new(gparams)
     g_given = 0  # advice in this advisor session
     total_steps = 0

@@ -47,10 +47,10 @@ connection nearest in moves, stairs or lift, and not the quickest in time where 
 ride keeps it), so the wall followers WL and WR never ride; C_g is the bug's rule on floors
 (``Building.compass_aims``: on another floor than g's, the nearest stop with a way towards g's
 floor, and there the ride), and its detours the same search over it. :meth:`GuideMap.apart`
-adds the row plus column difference only where rides keep row and column. Readable only in
-this version: the compiled kernels take one floor (:attr:`GuideMap.arrays` refuses a
-building), so the experiments run this advisor on a building, and the service, which serves
-one floor, never meets one.
+adds the row plus column difference only where rides keep row and column. The compiled
+kernels read the floors and stops in :attr:`GuideMap.arrays` and make the same decisions; a
+building's guide map is searched by the readable code (its compass detours are not the
+compiled one-floor search's), and the service, which serves one floor, never meets one.
 
 The evidence fades with time constant W, the session's window::
 
@@ -278,6 +278,11 @@ def landmarks(next_state: IntArray, dist: IntArray, n: int, distances: Distances
     return np.ascontiguousarray(np.array(out, dtype=np.int64).reshape(shape))
 
 
+#: a one-floor map's floors and stops, as app/kernels.py reads them (none)
+_NO_FLOOR = np.zeros(0, dtype=np.int64)
+_NO_STOPS = np.zeros((0, 2), dtype=np.int64)
+
+
 class GuideError(ValueError):
     """The domain cannot be guided (no destination, or too many destinations x states)."""
 
@@ -351,8 +356,11 @@ class GuideMap:
             np.zeros((len(goals), s * domain.n_actions)),
             goals,
             landmarks(domain.next_state, dist, MARKS, distances or _bfs_each),
-            None if building is None else np.ascontiguousarray(building.cells[:, 0]),
-            None if building is None else np.ascontiguousarray(building.nearest_stops),
+            # writeable, as a one-floor map's arrays are (numba compiles read-only ones anew)
+            None if building is None else np.require(building.cells[:, 0], requirements=["C", "W"]),
+            None
+            if building is None
+            else np.require(building.nearest_stops, requirements=["C", "W"]),
             True if building is None else building.rides_keep_cells,
         )
         return plain if goal_priors is None else plain.replace_counts(goal_priors)
@@ -372,16 +380,16 @@ class GuideMap:
     @property
     def arrays(
         self,
-    ) -> tuple[IntArray, IntArray, IntArray, IntArray, IntArray, FloatArray, IntArray, IntArray]:
-        """As app/kernels.py reads it (one floor: :class:`GuideError` for a building)."""
-        if self.floor is not None:
-            raise GuideError(
-                "guide's compiled form leads on one floor in this version: a building of "
-                "several floors is guided by the readable advisor"
-            )
+    ) -> tuple[
+        IntArray, IntArray, IntArray, IntArray, IntArray, FloatArray, IntArray, IntArray,
+        IntArray, IntArray, bool,
+    ]:  # fmt: skip
+        """As app/kernels.py reads it (``GuideArrays``)."""
+        floor = _NO_FLOOR if self.floor is None else self.floor
+        stops = _NO_STOPS if self.stops is None else self.stops
         return (
             self.next_state, self.n_open, self.cells, self.dist, self.goal_of_state, self.counts,
-            self.detour, self.marks,
+            self.detour, self.marks, floor, stops, self.cells_bound,
         )  # fmt: skip
 
     @property

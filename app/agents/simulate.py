@@ -46,6 +46,7 @@ _NO_GUIDE: kernels.GuideArrays = (
     np.zeros((0, 4), dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, 2), dtype=np.int64),
     np.zeros((0, 0), dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, 0)),
     np.zeros((0, 0), dtype=np.int64), np.zeros((0, 0), dtype=np.int64),
+    np.zeros(0, dtype=np.int64), np.zeros((0, 2), dtype=np.int64), True,
 )  # fmt: skip
 _NO_GOALS = np.zeros(0, dtype=np.int64)
 _NO_OPTIMAL = np.zeros((0, 4), dtype=np.bool_)  # read by the optimal explorer only
@@ -156,12 +157,12 @@ class Simulator:
             self.guide, self._no_guide = None, exc
         self.data = DomainData(tables, goal_priors, self.guide)
         self.next_state = np.ascontiguousarray(domain.next_state)
-        self.open_moves = np.ascontiguousarray(domain.open_moves)
-        self.cells = np.ascontiguousarray(domain.cells)
-        self.floors = isinstance(domain, Building)
+        # writeable as a one-floor map's are: numba compiles read-only arrays anew
+        self.open_moves = np.require(domain.open_moves, requirements=["C", "W"])
+        self.cells = np.require(domain.cells, requirements=["C", "W"])
         self.stops = (  # the bug's way to another floor; not read on one floor
-            np.ascontiguousarray(domain.nearest_stops) if isinstance(domain, Building)
-            else np.zeros((0, 2), dtype=np.int64)
+            np.require(domain.nearest_stops, requirements=["C", "W"])
+            if isinstance(domain, Building) else np.zeros((0, 2), dtype=np.int64)
         )  # fmt: skip
         self._worlds: dict[int, World] = {}
 
@@ -268,8 +269,7 @@ class Simulator:
                 positions=True,
                 jump=jump,
             )
-        if entry.kernel is None or (self.floors and Need.GUIDE_MAP in entry.needs):
-            # guide's compiled form leads on one floor: a building is guided readably
+        if entry.kernel is None:
             return self._fixed_readable(
                 entry, settings, explorer, goal, rng, advised, max_steps, visitor, readings
             )
@@ -358,11 +358,6 @@ class Simulator:
                 f"Q-learning runs with a strategy whose compiled form learns "
                 f"({', '.join(e.name for e in strategies.STRATEGIES.values() if e.learns)}), "
                 f"not {strategy!r}"
-            )
-        if self.floors and Need.GUIDE_MAP in entry.needs:
-            raise ValueError(
-                f"Q-learning runs compiled, and {strategy}'s compiled form leads on one floor in "
-                "this version: on a building of several floors use paper"
             )
         q = np.zeros((self.domain.n_states, self.domain.n_actions))
         steps = np.zeros(episodes, dtype=np.int64)

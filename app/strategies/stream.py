@@ -38,7 +38,6 @@ from app.advice.guide import (
 from app.advice.models import AdviceTables
 from app.advice.rules import RuleAdvisor
 from app.arrays import BoolArray, FloatArray, IntArray
-from app.domain.grid import N_ACTIONS
 
 _NO_RING = np.zeros((0, 0))  # no value kept: the window's values are those of the tables
 
@@ -450,7 +449,7 @@ class StreamGuide(GuideAdvisor):
         last_advice = np.array(self._last_advice, dtype=np.float64)
         comply = np.array(self._comply, dtype=np.float64)
         run = run_ring(self._run)
-        out, rows = columns(n), np.empty((n, N_ACTIONS))
+        out, rows = columns(n), np.empty((n, g.n_actions))
         params = kernel_params(self.window, GuideParams(self.p_lost, self.slack, self.spread))
         got = kernels.guide_stream(
             g.arrays, params, g.goal_states, ll, alive, doubt, self._target, self._last,
@@ -463,6 +462,5 @@ class StreamGuide(GuideAdvisor):
         self._loglik = ll.tolist()
         self.alive = alive.tolist()
         self.doubt = doubt.tolist()
-        a = last_advice.tolist()
-        self._last_advice = (a[0], a[1], a[2], a[3])
+        self._last_advice = tuple(last_advice.tolist())
         return decided(self, next_states, out, rows[out[2]], (count_before, benefit_before), None)

@@ -11,7 +11,7 @@ import pytest
 
 from app.advice.advisor import Advisor, kl_divergence
 from app.advice.goals import GoalAwareAdvisor
-from app.advice.guide import GuideError, GuideMap
+from app.advice.guide import GuideMap
 from app.advice.models import AdviceTables
 from app.advice.params import StrategyParams
 from app.advice.rules import RULES
@@ -250,9 +250,9 @@ def test_guide_map_detours_are_the_compass_walker_s_fewest_shown_moves(floors: i
 
 
 def test_guide_leads_lost_visitors_upstairs_and_leaves_the_quickest_alone() -> None:
-    """On a two-floor hospital, destinations upstairs: guide (the readable advisor: its
-    compiled form leads on one floor) leads random-avoid walkers and bugs there, advising the
-    ride up where it is; the optimal walker is never advised."""
+    """On a two-floor hospital, destinations upstairs: guide leads random-avoid walkers and
+    bugs there (compiled), advising the ride up where it is (the readable advisor); the
+    optimal walker is never advised."""
     b = generate_floors(24, 24, 2, np.random.default_rng(3), purpose="hospital", n_goals=2)
     prior, goal_priors = train_goal_priors(b, np.random.default_rng(2), "start", 5, 1.0)
     sim = Simulator(b, AdviceTables.paper(prior.theta()), goal_priors)
@@ -277,7 +277,20 @@ def test_guide_leads_lost_visitors_upstairs_and_leaves_the_quickest_alone() -> N
     for goal in upstairs:
         run = sim.fixed("optimal", goal, np.random.default_rng(1), advised=True, strategy="guide")
         assert run.success and run.advice_count == 0
-    with pytest.raises(GuideError, match="compiled form leads on one floor"):
-        _ = sim.guide.arrays if sim.guide is not None else None
-    with pytest.raises(ValueError, match="compiled form leads on one floor"):
-        sim.learning(upstairs[0], np.random.default_rng(0), advised=True, strategy="guide")
+
+
+def test_apart_bounds_the_moves_between_cells_of_a_building(hospital: Building) -> None:
+    """``GuideMap.apart`` on floors (row and column where the rides keep them, the
+    destinations' and landmarks' moves) never exceeds the moves between two cells, and the
+    compiled ``guide_apart`` gives the same numbers."""
+    from app import kernels
+
+    gm = GuideMap.of(hospital)
+    assert gm.cells_bound  # a generated building's stops are stacked
+    rng = np.random.default_rng(0)
+    for v in rng.integers(0, hospital.n_states, 6).tolist():
+        dist = hospital.distances_to(v)
+        for u in rng.integers(0, hospital.n_states, 30).tolist():
+            assert 0 <= gm.apart(u, v) <= dist[u]
+            got = kernels.guide_apart(gm.cells, gm.dist, gm.marks, gm.cells_bound, u, v)
+            assert got == gm.apart(u, v)

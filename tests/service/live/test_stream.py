@@ -134,19 +134,23 @@ def test_every_form_reads_the_same_log_weights() -> None:
     batches=st.lists(st.integers(0, 300), min_size=1, max_size=6),
     taking=st.sampled_from([0.0, 0.5, 1.0]),
     straight=st.booleans(),
+    floors=st.sampled_from([1, 1, 2, 3]),
 )
 def test_guide_batches_equal_the_core_guide(
     seed: int, building: bool, window: int, kappa: float, follow: bool, batches: list[int],
-    taking: float, straight: bool,
+    taking: float, straight: bool, floors: int,
 ) -> None:  # fmt: skip
     """StreamGuide's compiled batches against GuideAdvisor.observe, on moves that follow the
     map (and, with ``follow`` off, jump anywhere, as a client's reports may), by explorers
     that take a piece of advice with probability ``taking`` (the compliance they learn), with
     new expert counts mid-session, mixed with single events. With ``straight`` their own
     moves go straight on while they can (often a shortest path: the runs guide leaves
-    alone)."""
+    alone). ``floors`` > 1: a building of that many floors (six actions, rides)."""
     rng = np.random.default_rng(seed)
-    if building:
+    d: Domain
+    if floors > 1:
+        d = generate_floors(20, 20, floors, rng, n_goals=1 + seed % 3, room=(3, 5))
+    elif building:
         d = generate_building_domain(20, 24, seed % 1000, n_goals=1 + seed % 6)
     else:
         d = generate_domain(9, 9, seed % 1000, braid=0.3, n_goals=1 + seed % 4)
@@ -169,13 +173,13 @@ def test_guide_batches_equal_the_core_guide(
         decided: list[Decision] = []
         heading = int(rng.integers(4))
         for _ in range(n):
-            a = int(rng.integers(4))
+            a = int(rng.integers(d.n_actions))
             if straight and int(d.next_state[s, heading]) != s:
                 a = heading
             heading = a
             last = decided[-1] if decided else None
             if last is not None and last.advise and rng.random() < taking:  # takes the advice
-                a = max(range(4), key=lambda b: (last.advice[b], -b))  # type: ignore[index]
+                a = max(range(d.n_actions), key=lambda b: (last.advice[b], -b))  # type: ignore[index]
             if follow or rng.random() < 0.8:
                 s2 = int(d.next_state[s, a])
             else:
