@@ -345,7 +345,10 @@ class GuideMap:
             dist, detour = searches(domain.next_state, domain.cells, goals)
             if dist.shape != (len(goals), s) or detour.shape != (len(goals), s):
                 raise ValueError("searches must give (destinations, states) arrays")
-        building = domain if isinstance(domain, Building) else None
+        floor = stops = None  # writeable, as a one-floor map's arrays are (numba compiles
+        if isinstance(domain, Building):  # read-only arrays anew)
+            floor = np.require(domain.cells[:, 0], requirements=["C", "W"])
+            stops = np.require(domain.nearest_stops, requirements=["C", "W"])
         plain = cls(
             np.ascontiguousarray(domain.next_state, dtype=np.int64),
             np.ascontiguousarray(domain.open_moves.sum(axis=1), dtype=np.int64),
@@ -356,12 +359,9 @@ class GuideMap:
             np.zeros((len(goals), s * domain.n_actions)),
             goals,
             landmarks(domain.next_state, dist, MARKS, distances or _bfs_each),
-            # writeable, as a one-floor map's arrays are (numba compiles read-only ones anew)
-            None if building is None else np.require(building.cells[:, 0], requirements=["C", "W"]),
-            None
-            if building is None
-            else np.require(building.nearest_stops, requirements=["C", "W"]),
-            True if building is None else building.rides_keep_cells,
+            floor,
+            stops,
+            domain.rides_keep_cells if isinstance(domain, Building) else True,
         )
         return plain if goal_priors is None else plain.replace_counts(goal_priors)
 
