@@ -8,9 +8,11 @@ as many free cells (the table gives both counts). On each, the paper's tables fr
 walking from every cell (``anywhere``, 10 per destination), then the measurements of
 ``bench_core.py``: the readable core's observe + decide for one explorer, and the compiled form
 the service runs (``StreamAdvisor.observe_batch``: 10,000 explorers x 600 random moves a
-call, window 300). The two domains are measured in turn within each repeat (this machine is
-shared and noisy); each figure is the median over ``--repeats``, and each ratio the median of
-the repeats' ratios.
+call, window 300); and guide's compiled batch (``bench_guide.py``'s: 500-event batches of one
+random walk, CPU time), the one-floor building with as many destinations as the hospital.
+The two domains are measured in turn within each repeat (this machine is shared and noisy);
+each figure is the median over ``--repeats``, and each ratio the median of the repeats'
+ratios.
 
     .venv/bin/python benchmarks/bench_floors.py [--floors 4] [--side 64] [--repeats 5]
         [--write docs/PERFORMANCE.md]
@@ -21,19 +23,23 @@ from __future__ import annotations
 import math
 import statistics
 import sys
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from app.advice.guide import GuideMap, GuideParams
 from app.advice.models import AdviceTables
-from app.agents.experts import train_prior
+from app.agents.experts import train_goal_priors, train_prior
 from app.domain.building import Domain
 from app.domain.floorplans import generate_floors
 from app.domain.generate import generate_building_domain
+from app.strategies.stream import StreamGuide
 from benchmarks._report import arguments, command_line, machine, write_section
 from benchmarks.bench_core import bench_single, compiled_rate
+from benchmarks.bench_guide import per_decision, walk_batches
 
 #: the cost ratio the issue allows a building of several floors
 MOST = 1.6
@@ -57,11 +63,18 @@ def main() -> None:
         args.side, args.side, args.floors, np.random.default_rng(1), purpose="hospital"
     )
     side = round(args.side * math.sqrt(args.floors))
-    flat = generate_building_domain(side, side, 1)
+    flat = generate_building_domain(side, side, 1, n_goals=len(building.goals))
     domains: dict[str, Domain] = {"one floor": flat, "building": building}
     tables = {k: tables_of(d) for k, d in domains.items()}
-    got: dict[str, dict[str, list[float]]] = {k: {"single": [], "call": [], "batch": []}
-                                              for k in domains}  # fmt: skip
+    guides = {}
+    for k, d in domains.items():  # guide's compiled batch, as bench_guide.py measures it
+        rng = np.random.default_rng(0)
+        prior, goals = train_goal_priors(d, rng, "start", 3, 1.0)
+        make = partial(StreamGuide, AdviceTables.paper(prior.theta()), GuideMap.of(d, goals),
+                       params=GuideParams.of())  # fmt: skip
+        guides[k] = (make, walk_batches(d, rng, 21))
+    got: dict[str, dict[str, list[float]]] = {k: {"single": [], "call": [], "batch": [],
+                                                  "guide": []} for k in domains}  # fmt: skip
     for k, d in domains.items():  # compiled (or read from numba's cache) before timing
         compiled_rate(tables[k], d, 1, n=10, steps=10)
     for _ in range(args.repeats):
@@ -70,22 +83,25 @@ def main() -> None:
             got[k]["single"].append(run)
             got[k]["call"].append(call)
             got[k]["batch"].append(1e6 / compiled_rate(tables[k], d, 1))  # us a decision
+            make, batches = guides[k]
+            got[k]["guide"].append(per_decision(d, batches, make, 1))
     med = {k: {m: statistics.median(v) for m, v in by.items()} for k, by in got.items()}
     ratio = {
         m: statistics.median(
             b / f for b, f in zip(got["building"][m], got["one floor"][m], strict=True)
         )
-        for m in ("single", "call", "batch")
+        for m in ("single", "call", "batch", "guide")
     }
     what = {
         "single": "readable core, observe + decide (mean per call)",
         "call": "readable core, observe + decide (median of 20k timed calls)",
         "batch": "compiled, 10,000 explorers x 600 moves a call (CPU time per decision)",
+        "guide": f"guide, compiled, 20 batches of 500 moves, {len(building.goals)} destinations",
     }
     lines = [
         f"| {what[m]} | {med['one floor'][m]:.3f} us | {med['building'][m]:.3f} us | "
         f"{ratio[m]:.2f} | <= {MOST} |"
-        for m in ("single", "call", "batch")
+        for m in ("single", "call", "batch", "guide")
     ]
     table = (
         "| per decision | one floor | building | ratio | target |\n|---|---|---|---|---|\n"
@@ -100,7 +116,8 @@ def main() -> None:
         f"(seed 1; {building.n_states:,} free cells, 6 actions, "
         f"{len(building.goals)} destinations) and a generated one-floor building of {side} x "
         f"{side} (seed 1; {flat.n_states:,} free cells, 4 actions, {len(flat.goals)} "
-        "destinations); the paper's tables from experts walking from every cell.\n\n"
+        "destinations); the paper's tables from experts walking from every cell (guide's from "
+        "experts walking from the start, 3 a destination).\n\n"
         f"{table}\n"
     )
     print(body)

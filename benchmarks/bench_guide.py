@@ -28,8 +28,8 @@ from app.advice.advisor import Advisor
 from app.advice.guide import GuideMap, GuideParams
 from app.advice.models import AdviceTables
 from app.agents.experts import train_goal_priors
+from app.domain.building import Domain
 from app.domain.generate import generate_building_domain
-from app.domain.grid import GridDomain
 from app.strategies.stream import StreamAdvisor, StreamGuide
 from benchmarks._report import arguments, command_line, machine, median_of, write_section
 
@@ -40,12 +40,13 @@ GOALS = (1, 2, 4, 8)
 Batch = tuple[np.ndarray, np.ndarray, np.ndarray]
 
 
-def walk_batches(domain: GridDomain, rng: np.random.Generator, n: int) -> list[Batch]:
-    """``n`` consecutive 500-event batches of one random walk from the start."""
+def walk_batches(domain: Domain, rng: np.random.Generator, n: int) -> list[Batch]:
+    """``n`` consecutive 500-event batches of one random walk from the start (over the
+    domain's actions)."""
     out = []
     s = domain.start
     for _ in range(n):
-        actions = rng.integers(0, 4, BATCH)
+        actions = rng.integers(0, domain.n_actions, BATCH)
         states = np.empty(BATCH, dtype=np.int64)
         nexts = np.empty(BATCH, dtype=np.int64)
         for i, a in enumerate(actions.tolist()):
@@ -57,7 +58,7 @@ def walk_batches(domain: GridDomain, rng: np.random.Generator, n: int) -> list[B
 
 
 def per_decision(
-    domain: GridDomain, batches: list[Batch], advisor_of: Callable[[], Advisor], repeats: int
+    domain: Domain, batches: list[Batch], advisor_of: Callable[[], Advisor], repeats: int
 ) -> float:
     """Median CPU microseconds a decision over ``repeats`` runs of every batch in turn, by a
     new advisor of ``advisor_of`` each run."""
