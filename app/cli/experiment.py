@@ -77,7 +77,11 @@ def _panel(cls: type, name: str) -> str:
     return "Options"
 
 
-PANELS = {"CommonArgs": "Every experiment", "LearningArgs": "The Q-learner"}
+PANELS = {
+    "CommonArgs": "Every experiment",
+    "LearningArgs": "The Q-learner",
+    "SuiteArgs": "The maps",
+}
 
 
 def _shown(default: Any) -> str | bool:

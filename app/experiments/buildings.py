@@ -1,11 +1,21 @@
 """Advice in buildings: does a lost visitor who follows the advice arrive, and at what cost?
 
-Beyond the paper. A suite of building-like maps: generated rooms-and-corridors floors
-(``--buildings``: sizes, each with its own seed) and any map files (``--mazes``, the project's
-text format, e.g. written by ``maze import`` from a public benchmark map; ``--maze`` too when
-it is not the shipped maze). On each map, experts walk from the start to every destination
-(``--per-goal``, ``--experts``), as the service's PUT ``experts`` does, so most cells of a big
-map have no expert data.
+Beyond the paper. A suite of building-like maps (:mod:`app.experiments.suite`): generated
+rooms-and-corridors floors (``--buildings``: sizes, each with its own seed; ``--buildings 0``:
+none), generated hospitals of several floors (``--hospitals FxS``: F floors of S x S cells,
+lifts and stairs, ``--hospital-goals`` named destinations a floor, each with its own seed),
+the project's IMDF venue (``--imdf``: app/mapio/imdf/sample.py's three-level hospital,
+imported whole as ``maze import`` imports it) and any map files of one floor or several
+(``--mazes``, the project's text format, e.g. written by ``maze import`` from a public
+benchmark map; ``--maze`` too when it is not the shipped maze). On each map, experts walk from
+the start to every destination (``--per-goal``, ``--experts``), as the service's PUT
+``experts`` does, so most cells of a big map have no expert data.
+
+On a map of several floors the actions are six (``U`` and ``D`` the rides), distances and
+steps count actions (a ride is one), and the KL the paper's rule and goal_aware compare with
+kappa is in four actions' units (``AdviceTables.kl_scale``: log 4 / log 6), so their kappa
+levels mean the same on one floor and on several; the report says so and names each map's
+floors and free cells.
 
 For every fixed-policy explorer, ``--tasks`` one-shot tasks per map (the goal drawn uniformly
 from the map's destinations, start at 'S', at most ``--steps`` moves), without advice and
@@ -27,6 +37,7 @@ on every map; left, optimal and Q-learning never significantly worse than withou
 random-avoid, guide's curve above paper's and goal_aware's over the advice rates both reach.
 
     python -m app experiment buildings --mazes den312d.txt --mazes den308d.txt
+    python -m app experiment buildings --buildings 0 --hospitals 3x64 --hospitals 5x128 --imdf
 """
 
 from __future__ import annotations
@@ -35,7 +46,6 @@ import itertools
 import math
 from dataclasses import asdict, dataclass, field
 from functools import partial
-from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
@@ -48,9 +58,7 @@ from app.agents.experts import train_goal_priors
 from app.agents.explorers import FIXED_EXPLORERS
 from app.agents.simulate import Simulator
 from app.arrays import FloatArray
-from app.domain.generate import generate_building_domain
-from app.domain.grid import GridDomain, compass_detours_each
-from app.domain.maps import DEFAULT_MAP
+from app.domain.building import Domain
 from app.experiments.common import (
     CommonArgs,
     LearningArgs,
@@ -71,6 +79,15 @@ from app.experiments.curves import (
 )
 from app.experiments.curves import configs as curve_configs
 from app.experiments.output import RunDir, header, markdown_table
+from app.experiments.suite import (
+    MapSpec,
+    SuiteArgs,
+    compass_detours,
+    goal_moves,
+    load_map,
+    map_suite,
+    plan_of,
+)
 
 #: the strategies compared by default, and their kappa levels here (guide's are its entry's)
 STRATEGIES = ("paper", "goal_aware", "guide")
@@ -86,17 +103,13 @@ UNHARMED = ("left", "optimal")
 
 
 @dataclass
-class Args(CommonArgs, LearningArgs, StrategyOptions):  # type: ignore[valid-type,misc]
+class Args(CommonArgs, LearningArgs, StrategyOptions, SuiteArgs):  # type: ignore[valid-type,misc]
     """Buildings arguments (``--tasks``: tasks per map, explorer and configuration)."""
 
     tasks: int = 100
     """One-shot tasks per map and explorer; every configuration sees the same tasks."""
     steps: int = 5000
-    """Step limit of a one-shot task."""
-    buildings: tuple[int, ...] = (64, 64, 128, 128)
-    """Generated buildings: the side of each (rows = columns), each with its own seed."""
-    mazes: tuple[Path, ...] = ()
-    """More maps of the suite: map files in the project's text format (``maze import``)."""
+    """Step limit of a one-shot task (actions: a ride is one)."""
     candidate: str = "guide"
     """The strategy the targets are about (its curve against the others', its defaults)."""
     q_tasks: int = 20
@@ -118,67 +131,26 @@ class Args(CommonArgs, LearningArgs, StrategyOptions):  # type: ignore[valid-typ
             raise ValueError("need steps >= 1, workers >= 1, q-tasks >= 0 and episodes >= 1")
         if self.episode_steps < 0:
             raise ValueError("episode-steps must be >= 0 (0: from --q-reach)")
-        if any(b < 16 for b in self.buildings):
-            raise ValueError("a generated building needs a side of at least 16")
         if not (math.isfinite(self.q_reach) and self.q_reach >= 1.0):
             raise ValueError("q-reach must be at least 1")
-        if not self.buildings and not self.map_files():
-            raise ValueError("the suite is empty: give --buildings sizes or --mazes files")
+        self.check_suite()
         check_strategies(self)
         if self.candidate not in self.strategies:
             raise ValueError(f"{self.candidate} is not among the strategies run")
-        for p in self.map_files():
-            if not p.is_file():
-                raise ValueError(f"no map file {p}")
 
     def learners(self) -> tuple[str, ...]:
         """The strategies compared whose compiled form also advises a Q-learner."""
         return tuple(n for n in self.strategies if strategies.get(n).learns)
-
-    def map_files(self) -> list[Path]:
-        extra = [self.maze] if Path(self.maze) != DEFAULT_MAP else []
-        return [Path(p) for p in (*extra, *self.mazes)]
 
 
 def configs(args: Args) -> list[Config]:
     return curve_configs(args)
 
 
-@dataclass(frozen=True)
-class MapSpec:
-    index: int
-    kind: Literal["building", "file"]
-    size: int  # the side of a generated building (0 for a file)
-    seed: int  # the generator's seed (-1 for a file)
-    path: str  # the file ("" for a generated building)
-
-    @property
-    def name(self) -> str:
-        if self.kind == "file":
-            return Path(self.path).stem
-        return f"building-{self.size}-s{self.seed}"
-
-
-def map_suite(args: Args) -> list[MapSpec]:
-    out: list[MapSpec] = []
-    for i, size in enumerate(args.buildings):
-        seed = int(rng_for(args.seed, "buildings-maps", i).integers(2**31))
-        out.append(MapSpec(len(out), "building", size, seed, ""))
-    for p in args.map_files():
-        out.append(MapSpec(len(out), "file", 0, -1, str(p)))
-    return out
-
-
-def load_map(spec: MapSpec) -> GridDomain:
-    if spec.kind == "file":
-        return GridDomain.from_file(spec.path)
-    return generate_building_domain(spec.size, spec.size, spec.seed)
-
-
 @dataclass
 class World:
     spec: MapSpec
-    domain: GridDomain
+    domain: Domain
     sim: Simulator
     goals: list[int]
     states_with_data: int
@@ -197,7 +169,7 @@ def prepare_world(args: Args, spec: MapSpec) -> World:
         np.array(domain.goals, dtype=np.int64), size=args.tasks
     )
     with_data = int((prior.pooled_increments_.sum(axis=1) > 0).sum())
-    far = int(domain.goal_distances[:, domain.start].max())
+    far = int(goal_moves(domain)[:, domain.start].max())
     q_steps = args.episode_steps or math.ceil(args.q_reach * far)
     return World(spec, domain, sim, goals.tolist(), with_data, q_steps)
 
@@ -433,26 +405,38 @@ def bug_floor(world: World) -> float:
     with fewest of them (``compass_detours``), over the BFS distance. An advised bug walking
     about as far as the shortest way cannot get less advice per 100 steps than this."""
     d = world.domain
-    detours = compass_detours_each(d.next_state, d.cells, d.goals)[:, d.start]
-    floors = {
-        g: 100.0 * int(detours[i]) / max(1, int(d.goal_distances[i, d.start]))
-        for i, g in enumerate(d.goals)
-    }
+    detours, moves = compass_detours(d)[:, d.start], goal_moves(d)[:, d.start]
+    floors = {g: 100.0 * int(detours[i]) / max(1, int(moves[i])) for i, g in enumerate(d.goals)}
     return float(np.mean([floors[g] for g in world.goals]))
 
 
 def map_info(world: World) -> dict[str, Any]:
     d = world.domain
     return {
-        **asdict(world.spec), "name": world.spec.name, "rows": d.shape[0], "cols": d.shape[1],
-        "states": d.n_states, "goals": len(d.goals),
-        "states_with_expert_data": world.states_with_data,
-        "farthest_goal": int(d.goal_distances[:, d.start].max()), "q_steps": world.q_steps,
+        **asdict(world.spec), "name": world.spec.name, **plan_of(d), "actions": d.n_actions,
+        "goals": len(d.goals), "states_with_expert_data": world.states_with_data,
+        "farthest_goal": int(goal_moves(d)[:, d.start].max()), "q_steps": world.q_steps,
         "bug_advice_floor_per_100": bug_floor(world),
     }  # fmt: skip
 
 
 # ---- the report -------------------------------------------------------------------------------
+def floors_note(maps: list[dict[str, Any]]) -> list[str]:
+    """What a suite with maps of several floors counts differently, as report lines."""
+    several = [m["name"] for m in maps if m["floors"] > 1]
+    if not several:
+        return []
+    return [
+        f"Maps of several floors ({', '.join(several)}): six actions (U and D the rides); "
+        "distances, steps and the step limits count actions (a ride is one, its time is not "
+        "counted). The KL the paper's rule and goal_aware compare with kappa is multiplied by "
+        "log 4 / log 6 there (AdviceTables.kl_scale), so a certain theta against a lost "
+        "explorer is worth log 4 on every map and their kappa levels mean the same on one "
+        "floor and on several; guide's value is its own (not so multiplied).",
+        "",
+    ]
+
+
 def plots(results: Results, table: list[dict[str, Any]], args: Args) -> Figure:
     """Success against advice per 100 steps as kappa varies: a panel per map (and the suite)
     and explorer, a curve per strategy; the cross is the unadvised explorer."""
@@ -500,15 +484,17 @@ def markdown(
         "# Advice in buildings", "",
         protocol(args, "explorer", elapsed), "",
         markdown_table(
-            ["map", "rows x cols", "cells", "destinations", "cells with expert data",
-             "farthest destination", "Q episode length", "bug's advice floor / 100"],
-            [[m["name"], f"{m['rows']} x {m['cols']}", m["states"], m["goals"],
+            ["map", "floors", "rows x cols (a floor)", "free cells", "destinations",
+             "cells with expert data", "farthest destination", "Q episode length",
+             "bug's advice floor / 100"],
+            [[m["name"], m["floors"], f"{m['rows']} x {m['cols']}", m["states"], m["goals"],
               m["states_with_expert_data"], m["farthest_goal"], m["q_steps"],
               f"{m['bug_advice_floor_per_100']:.1f}"] for m in maps],
         ), "",
         "The bug's advice floor: the fewest pieces of advice any advisor can give the bug, per "
         "100 moves of a shortest walk (the moves it would not make by itself on the way with "
         "fewest of them, over the BFS distance), averaged over the tasks.", "",
+        *floors_note(maps),
         f"## At the default kappa ({args.kappa:g}): success (advice per 100 steps)", "",
     ]  # fmt: skip
     scopes = [m["name"] for m in maps] + ["suite"]

@@ -1,8 +1,9 @@
 """Visitors as they are: the buildings suite with visitor models beside the paper's explorers.
 
 Beyond the paper. The maps, experts and destination tasks of ``experiment buildings`` (the
-same options: ``--buildings``, ``--mazes``, ``--maze``, ``--per-goal``, ``--experts``,
-``--seed``, ``--tasks``): the same generated buildings, the same expert data, the same goals.
+same options: ``--buildings``, ``--hospitals``, ``--hospital-goals``, ``--imdf``, ``--mazes``,
+``--maze``, ``--per-goal``, ``--experts``, ``--seed``, ``--tasks``): the same generated
+buildings, hospitals of several floors and map files, the same expert data, the same goals.
 A visitor (``--visitors``, one spec each, :class:`app.agents.explorers.Visitor`) is a walker
 (random, random-avoid, left, bug, optimal, corridor, straight) with any of: ``p=P``, takes a
 piece of advice with probability P (else its own move); ``q=Q``, the advisor reads its cell
@@ -38,7 +39,6 @@ import itertools
 import math
 from dataclasses import asdict, dataclass, replace
 from functools import partial
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -47,10 +47,8 @@ from numpy.lib.stride_tricks import sliding_window_view
 
 from app.agents.explorers import Visitor
 from app.arrays import FloatArray, IntArray
-from app.domain.grid import GridDomain
-from app.domain.maps import DEFAULT_MAP
+from app.domain.building import Domain
 from app.experiments import buildings
-from app.experiments.buildings import MapSpec
 from app.experiments.common import CommonArgs, fill, rng_for, run_jobs, timed, wilson
 from app.experiments.curves import (
     Z95,
@@ -62,6 +60,7 @@ from app.experiments.curves import (
 )
 from app.experiments.curves import configs as curve_configs
 from app.experiments.output import RunDir, header, markdown_table
+from app.experiments.suite import MapSpec, SuiteArgs, goal_moves, map_suite, plan_of
 
 #: every model the visitors' issue names: the paper's explorers, walkers with a purpose,
 #: compliance (one who ignores every piece too), positions read one cell off (with their
@@ -85,18 +84,13 @@ PALETTE = ("tab:green", "tab:blue", "tab:red", "tab:purple", "tab:brown")
 
 
 @dataclass
-class Args(CommonArgs, StrategyOptions):  # type: ignore[valid-type,misc]
+class Args(CommonArgs, StrategyOptions, SuiteArgs):  # type: ignore[valid-type,misc]
     """Visitors arguments (``--tasks``: tasks per map, visitor and configuration)."""
 
     tasks: int = 100
     """One-shot tasks per map and visitor; every configuration sees the same tasks."""
     steps: int = 5000
     """Step limit of a one-shot task."""
-    buildings: tuple[int, ...] = (64, 64, 128, 128)
-    """Generated buildings: the side of each (rows = columns), each with its own seed (the
-    buildings experiment's)."""
-    mazes: tuple[Path, ...] = ()
-    """More maps of the suite: map files in the project's text format (``maze import``)."""
     visitors: tuple[str, ...] = DEFAULT_VISITORS
     """Visitor models, one spec each: a walker, then any of p=P (compliance), q=Q (position
     read one cell off), j=J (a wrong reading up to J moves off), r=R (sight), anywhere (any
@@ -109,33 +103,25 @@ class Args(CommonArgs, StrategyOptions):  # type: ignore[valid-type,misc]
         self.check_trajectories("visitors")
         if self.steps < 1 or self.workers < 1:
             raise ValueError("need steps >= 1 and workers >= 1")
-        if any(b < 16 for b in self.buildings):
-            raise ValueError("a generated building needs a side of at least 16")
-        if not self.buildings and not self.map_files():
-            raise ValueError("the suite is empty: give --buildings sizes or --mazes files")
+        self.check_suite()
         if not self.visitors:
             raise ValueError("no visitors: give --visitors specs, e.g. 'random p=0.5'")
         names = [v.name for v in self.models()]  # ValueError naming a bad spec
         if len(set(names)) != len(names):
             raise ValueError(f"a visitor is given twice: {', '.join(names)}")
         check_strategies(self)
-        for p in self.map_files():
-            if not p.is_file():
-                raise ValueError(f"no map file {p}")
 
     def models(self) -> list[Visitor]:
         return [Visitor.parse(spec) for spec in self.visitors]
-
-    def map_files(self) -> list[Path]:
-        extra = [self.maze] if Path(self.maze) != DEFAULT_MAP else []
-        return [Path(p) for p in (*extra, *self.mazes)]
 
     def suite(self) -> Any:  # buildings.Args (its bases are made at run time)
         """The buildings experiment's arguments that make the same maps, experts and tasks."""
         return buildings.Args(
             maze=self.maze, seed=self.seed, tasks=self.tasks, alpha0=self.alpha0,
             window=self.window, experts=self.experts, per_goal=self.per_goal, progress=False,
-            buildings=self.buildings, mazes=self.mazes, q_tasks=0, workers=1,
+            buildings=self.buildings, hospitals=self.hospitals,
+            hospital_goals=self.hospital_goals, imdf=self.imdf, mazes=self.mazes, q_tasks=0,
+            workers=1,
         )  # fmt: skip
 
 
@@ -168,7 +154,7 @@ def place(args: Args, spec: MapSpec) -> Place:
     return _PLACES[key]
 
 
-def min_latency_order(domain: GridDomain) -> tuple[list[int], list[int]] | None:
+def min_latency_order(domain: Domain) -> tuple[list[int], list[int]] | None:
     """The order of the destinations that minimises the mean arrival (over destinations drawn
     uniformly) of a walker from the start along shortest paths, and the arrival at each
     destination (by index) on it: exact, a dynamic programme over subsets (latency: each leg
@@ -176,7 +162,7 @@ def min_latency_order(domain: GridDomain) -> tuple[list[int], list[int]] | None:
     n = len(domain.goals)
     if n == 0 or n > MAX_FLOOR_GOALS:
         return None
-    dist = domain.goal_distances  # (G, S): moves from a cell to destination g
+    dist = goal_moves(domain)  # (G, S): moves from a cell to destination g
     leg = [[int(dist[j, domain.goals[i]]) for j in range(n)] for i in range(n)]
     first = [int(dist[j, domain.start]) for j in range(n)]
     full = (1 << n) - 1
@@ -260,7 +246,7 @@ class Results(SuiteRuns[MapSpec]):
 
 
 def run_all(args: Args) -> Results:
-    suite, todo, models = buildings.map_suite(args.suite()), configs(args), args.models()
+    suite, todo, models = map_suite(args.suite()), configs(args), args.models()
     runs = {
         v.name: {c.key: {m: np.zeros((len(suite), args.tasks)) for m in MEASURES} for c in todo}
         for v in models
@@ -401,10 +387,9 @@ def map_info(args: Args, spec: MapSpec, floor: dict[str, Any]) -> dict[str, Any]
     world = place(args, spec).world
     d = world.domain
     return {
-        **asdict(spec), "name": spec.name, "rows": d.shape[0], "cols": d.shape[1],
-        "states": d.n_states, "goals": len(d.goals),
+        **asdict(spec), "name": spec.name, **plan_of(d), "goals": len(d.goals),
         "states_with_expert_data": world.states_with_data,
-        "farthest_goal": int(d.goal_distances[:, d.start].max()), **floor,
+        "farthest_goal": int(goal_moves(d)[:, d.start].max()), **floor,
     }  # fmt: skip
 
 
@@ -457,9 +442,10 @@ def markdown(table: list[dict[str, Any]], maps: list[dict[str, Any]], results: R
         "# Visitors as they are", "",
         buildings.protocol(args, "visitor", elapsed, f"kappa {args.kappa:g}; "), "",
         markdown_table(
-            ["map", "rows x cols", "cells", "destinations", "farthest destination",
-             "floor (mean arrival)", "floor on these tasks", "order of the floor"],
-            [[m["name"], f"{m['rows']} x {m['cols']}", m["states"], m["goals"],
+            ["map", "floors", "rows x cols (a floor)", "free cells", "destinations",
+             "farthest destination", "floor (mean arrival)", "floor on these tasks",
+             "order of the floor"],
+            [[m["name"], m["floors"], f"{m['rows']} x {m['cols']}", m["states"], m["goals"],
               m["farthest_goal"], _ratio(m["floor"]), _ratio(m["floor_on_tasks"]),
               " ".join(f"G{j}" for j in m["order"]) if m["order"] else "-"] for m in maps],
         ), "",
@@ -468,6 +454,7 @@ def markdown(table: list[dict[str, Any]], maps: list[dict[str, Any]], results: R
         "programme over subsets, BFS distances); no advisor that does not know the goal can "
         "do better. 'On these tasks': the mean of that walker's arrivals at the destinations "
         "the tasks drew.", "",
+        *buildings.floors_note(maps),
         "Per map and visitor: success (Wilson 95%); steps / shortest path over the tasks that "
         "arrived (the change over the tasks that arrived both ways); advice per 100 steps "
         f"and per task, and per 100 steps after a task's first {LATE_AFTER} pieces (pooled "

@@ -16,7 +16,7 @@ from typer.testing import CliRunner
 from app.cli import cli
 from app.domain.generate import generate_building_domain, generate_domain
 from app.domain.grid import GridDomain
-from app.experiments import buildings, visitors
+from app.experiments import buildings, suite, visitors
 from app.experiments.output import RunDir
 
 VISITORS = (
@@ -93,7 +93,7 @@ def find_row(rows: list[dict[str, Any]], scope: str, visitor: str) -> dict[str, 
 def test_a_plain_walker_repeats_the_buildings_tasks(floor: Path) -> None:
     """The same maps, experts, goals and walker streams as ``experiment buildings``."""
     args = visitors.Args(mazes=(floor,), **{**TINY, "buildings": ()})
-    spec = buildings.map_suite(args.suite())[0]
+    spec = suite.map_suite(args.suite())[0]
     mine = visitors.run_job(args, spec, "random")
     theirs = buildings.run_fixed(
         buildings.Args(mazes=(floor,), buildings=(), tasks=3, steps=300, strategies=("guide",),
