@@ -421,7 +421,8 @@ class GoalPriors:
 
     def copy(self, alpha0: float | None = None) -> GoalPriors:
         """The same counts (optionally under another ``alpha0``), in arrays of its own."""
-        out = GoalPriors(self.n_states, self.goals, self.alpha0 if alpha0 is None else alpha0)
+        alpha = self.alpha0 if alpha0 is None else alpha0
+        out = GoalPriors(self.n_states, self.goals, alpha, self.n_actions)
         out.goal_counts = self.goal_counts.copy()
         out.unknown_counts = self.unknown_counts.copy()
         return out

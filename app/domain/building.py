@@ -218,6 +218,25 @@ class Building:
             raise ValueError(f"cell [{floor}, {row}, {col}] is a wall")
         return s
 
+    @cached_property
+    def rows_text(self) -> tuple[str, ...]:
+        """Which map this is, as a one-floor map's rows say it: each floor's index and rows,
+        then each connection's kind, cost and stops (not the floors' names and elevations, the
+        destinations' names or the frame: the same states and moves, however they are named).
+        A service keeps a domain's data over a PUT of the map of the same ``rows_text``."""
+        out: list[str] = []
+        for f, floor in enumerate(self.floors):
+            out += [f"floor {f}", *floor.rows]
+        for c in self.connections:
+            stops = " ".join(f"{f}:{r},{col}" for f, r, col in c.stops)
+            out.append(f"{c.kind} {c.cost} {stops}")
+        return tuple(out)
+
+    @property
+    def width(self) -> int:
+        """A cell's coordinates: 3, ``[floor, row, col]``."""
+        return 3
+
     def cell(self, state: int) -> tuple[int, int, int]:
         """(floor, row, col) of ``state``."""
         f, r, c = self.cells[state]

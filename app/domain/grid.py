@@ -597,6 +597,11 @@ class GridDomain:
         return N_ACTIONS
 
     @property
+    def width(self) -> int:
+        """A cell's coordinates: 2, ``[row, col]``."""
+        return 2
+
+    @property
     def shape(self) -> tuple[int, int]:
         return (len(self.rows_text), len(self.rows_text[0]))
 

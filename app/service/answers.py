@@ -21,13 +21,14 @@ import numpy as np
 import orjson
 
 from app.advice.models import AdviceTables
-from app.domain.grid import ACTIONS, GridDomain
+from app.domain.building import Domain
 from app.service.cache import once
 from app.service.data.domains import DomainState, PriorView
 from app.service.public import domain_public
 
 NUMPY = orjson.OPT_SERIALIZE_NUMPY
-WALL = b"[null,null,null,null]"  # orjson writes NaN as null: a wall's row, never a free cell's
+#: orjson writes NaN as null: a wall's row (4 or 6 actions), never a free cell's
+WALLS = {n: b"[" + b",".join([b"null"] * n) + b"]" for n in (4, 6)}
 
 _theta: weakref.WeakKeyDictionary[AdviceTables, bytes] = weakref.WeakKeyDictionary()
 _domains: weakref.WeakKeyDictionary[DomainState, tuple[PriorView, bytes]] = (
@@ -35,12 +36,12 @@ _domains: weakref.WeakKeyDictionary[DomainState, tuple[PriorView, bytes]] = (
 )
 
 
-def theta_json(grid: GridDomain, tables: AdviceTables) -> bytes:
-    """*Worker thread.* theta as rows x cols x 4, ``null`` for walls."""
-    rows, cols = grid.shape
-    full = np.full((rows, cols, 4), np.nan)
-    full[grid.cells[:, 0], grid.cells[:, 1]] = tables.theta
-    return orjson.dumps(full, option=NUMPY).replace(WALL, b"null")
+def theta_json(grid: Domain, tables: AdviceTables) -> bytes:
+    """*Worker thread.* theta as rows x cols x 4 (floors x rows x cols x 6 on a map of
+    several floors), ``null`` for walls."""
+    full = np.full((*grid.shape, grid.n_actions), np.nan)
+    full[tuple(grid.cells.T)] = tables.theta
+    return orjson.dumps(full, option=NUMPY).replace(WALLS[grid.n_actions], b"null")
 
 
 async def prior(d: DomainState, agent_type: str | None) -> bytes:
@@ -53,7 +54,7 @@ async def prior(d: DomainState, agent_type: str | None) -> bytes:
         theta = await once(("theta", id(tables)), lambda: theta_json(d.domain, tables))
         _theta[tables] = theta
     head = orjson.dumps({
-        "domain": d.name, "agent_type": agent_type, "table": key, "actions": list(ACTIONS),
+        "domain": d.name, "agent_type": agent_type, "table": key, "actions": list(d.domain.actions),
         "alpha0": view.alpha0, "trajectories": view.trajectories.get(key, 0),
     })  # fmt: skip
     return b"".join((head[:-1], b',"theta":', theta, b"}"))

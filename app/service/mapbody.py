@@ -1,8 +1,8 @@
 """A domain PUT's map, whichever way it came: rows (``map``, with ``resolution``, ``origin`` and
 ``destinations`` as fields) or a map file's text (``text``, or a ``text/plain`` body: its header
 lines give the resolution, origin and the destinations' names). Errors are ``maze check``'s,
-naming the line and column of the text. A map of several floors (``floor:`` lines) is read and
-checked, then refused (:func:`refuse_floors`): this version serves one-floor maps."""
+naming the line and column of the text. A map of several floors (``floor:`` lines, in a text
+only) is read into a :class:`~app.domain.building.Building` (:func:`building_of`)."""
 
 from __future__ import annotations
 
@@ -11,9 +11,6 @@ from app.domain.floors import is_floors_text, read_floors
 from app.domain.grid import Frame, Header, MapError, NamedCell, split_text
 from app.service.problems import BadInput
 from app.service.schemas import DomainPut
-
-#: how many floors and connections a refusal of a map of several floors names
-LISTED = 6
 
 
 def map_of(body: DomainPut) -> tuple[Header, list[str]]:
@@ -48,13 +45,12 @@ def text_of(raw: bytes) -> str:
         ) from None
 
 
-def refuse_floors(body: DomainPut, max_cells: int) -> None:
-    """*Worker thread.* Nothing for a one-floor map. A map text of several floors is read and
+def building_of(body: DomainPut, max_cells: int, name: str) -> Building | None:
+    """*Worker thread.* None for a one-floor map. A map text of several floors read and
     checked as ``maze check`` checks it (its errors naming the floor, line and column; past
-    ``max_cells`` cells in all, refused before the check), then refused naming what it holds:
-    the advisor serves one floor in this version."""
+    ``max_cells`` cells in all, refused before the check): the building, named ``name``."""
     if body.text is None or not is_floors_text(body.text):
-        return
+        return None
     try:
         parts = read_floors(body.text)
         cells = sum(len(f.rows) * max((len(r) for r in f.rows), default=0) for f in parts.floors)
@@ -63,17 +59,6 @@ def refuse_floors(body: DomainPut, max_cells: int) -> None:
                 f"map: {len(parts.floors)} floors of {cells} cells in all: this service takes "
                 f"maps of at most {max_cells} cells (ADVISOR_MAX_MAP_CELLS)"
             )
-        b = Building.from_parts(parts.floors, parts.connections, parts.names, parts.frame)
+        return Building.from_parts(parts.floors, parts.connections, parts.names, parts.frame, name)
     except MapError as exc:
         raise BadInput(f"map: {exc}") from None
-    floors = ", ".join(f.label for f in b.floors[:LISTED])
-    floors += f" and {b.n_floors - LISTED} more" if b.n_floors > LISTED else ""
-    ways = ", ".join(f"{c.kind} {c.name!r}" for c in b.connections[:LISTED])
-    ways += f" and {len(b.connections) - LISTED} more" if len(b.connections) > LISTED else ""
-    joined = f"{len(b.connections)} connection(s) ({ways})" if b.connections else "no connection"
-    raise BadInput(
-        f"map: a map of {b.n_floors} floors ({floors}) with {joined} and {len(b.goals)} "
-        "destination(s), read and checked: this version of the service serves maps of one "
-        "floor only (advice across floors comes later); put one floor (`maze import --level "
-        "ORDINAL` writes one level of a building)"
-    )

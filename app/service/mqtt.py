@@ -613,8 +613,14 @@ def _first_state(payload: bytes) -> list[int]:
         raise Refused(422, f"the message is not JSON: {exc}") from None
     first = body[0] if isinstance(body, list) and body else body
     state = first.get("state") if isinstance(first, dict) else None
-    if not (isinstance(state, list) and len(state) == 2 and all(type(v) is int for v in state)):
-        raise Refused(422, "event 0: state must be a cell [row, col]")
+    if not (
+        isinstance(state, list) and len(state) in (2, 3) and all(type(v) is int for v in state)
+    ):
+        raise Refused(
+            422,
+            "event 0: state must be a cell [row, col] ([floor, row, col] on a map of "
+            "several floors)",
+        )
     return state
 
 

@@ -21,6 +21,7 @@ from app.advice.models import AdviceTables
 from app.advice.params import StrategyParams
 from app.advice.priors import GoalPriors
 from app.arrays import IntArray
+from app.domain.building import Building, Domain
 from app.domain.grid import ACTIONS, GridDomain, MapError
 from app.domain.paths import expert_trajectories, walked_cells
 from app.service.data.domains import DomainNotFound, DomainState, compiled_searches, needed
@@ -37,7 +38,7 @@ from app.service.live.registry import (
     TooManySessions,
 )
 from app.service.live.replay import StepConflict
-from app.service.mapbody import map_of, refuse_floors
+from app.service.mapbody import building_of, map_of
 from app.service.metrics import METRICS, ingested
 from app.service.problems import BadInput
 from app.service.public import (
@@ -56,7 +57,7 @@ from app.service.schemas import (
 )
 from app.service.state import ServiceState
 from app.service.wire.encode import batch_binary, batch_json, decision_json
-from app.service.wire.events import read_move, read_moves, share_lists
+from app.service.wire.events import cell_words, read_move, read_moves, share_lists
 from app.service.wire.warm import warm
 from app.strategies import DomainData, Need
 
@@ -64,7 +65,9 @@ from app.strategies import DomainData, Need
 EXPERT_MAX_STEPS = 10_000
 
 
-def cell_state(domain: GridDomain, cell: Cell, what: str) -> int:
+def cell_state(domain: Domain, cell: Cell, what: str) -> int:
+    if len(cell) != domain.width:
+        raise BadInput(f"{what}: {list(cell)}: {cell_words(domain)}")
     try:
         return domain.state(*cell)
     except ValueError as exc:
@@ -243,6 +246,21 @@ async def apply_positions(state: ServiceState, session: LiveSession, body: Posit
     return batch_json(out, session.domain.domain)
 
 
+def point_state(grid: Domain, point: list[float]) -> int:
+    """The state holding a reading: ``[x, y]`` in metres, on a map of several floors ``[x, y,
+    floor]`` (the floor's index); ValueError says why there is none."""
+    if isinstance(grid, Building):
+        if len(point) != 3 or not float(point[2]).is_integer():
+            raise ValueError(
+                f"this map has {grid.n_floors} floors: a position is [x, y, floor], floor the "
+                "index of its floor (0 the lowest)"
+            )
+        return grid.state_at(int(point[2]), point[0], point[1])
+    if len(point) != 2:
+        raise ValueError("this map has one floor: a position is [x, y]")
+    return grid.state_at(point[0], point[1])
+
+
 def position_moves(
     state: ServiceState, session: LiveSession, body: PositionsIn
 ) -> tuple[IntArray, IntArray, IntArray] | None:
@@ -257,18 +275,18 @@ def position_moves(
     limit, most = state.settings.max_jump, state.settings.max_batch_events
     here = session.position
     visited: list[int] = [here]
-    for i, (x, y) in enumerate(body.positions):
+    for i, point in enumerate(body.positions):
+        x, y = point[:2]
         try:
-            target = grid.state_at(x, y)
+            target = point_state(grid, point)
         except ValueError as exc:
             raise BadInput(f"positions[{i}]: {exc}") from None
         walk = walked_cells(grid, here, target, limit)
         if walk is None:
-            r, c = grid.cell(target)
-            r0, c0 = grid.cell(here)
             raise BadInput(
-                f"positions[{i}]: ({x:g}, {y:g}) m is cell [{r}, {c}], more than {limit} "
-                f"moves from the last cell [{r0}, {c0}]: a jump this far is refused "
+                f"positions[{i}]: ({x:g}, {y:g}) m is cell {list(grid.cell(target))}, more "
+                f"than {limit} moves from the last cell {list(grid.cell(here))}: a jump this "
+                "far is refused "
                 "(send the readings in between, or start a new session)"
             )
         visited.extend(walk)
@@ -290,15 +308,17 @@ def put_domain(state: ServiceState, name: str, body: DomainPut) -> tuple[DomainS
     is built before the answer (:meth:`DomainCatalog.prepare_all`: a map whose needs would
     pass ``ADVISOR_MAX_DOMAIN_MEMORY`` is refused first), and what the event paths read of it
     (:func:`app.service.wire.warm.warm`), so that no session or event builds them."""
-    refuse_floors(body, state.settings.max_map_cells)  # read, checked, not served yet
-    header, rows = map_of(body)  # rows, or a map file's text
     old = state.catalog.find(name)
-    try:
-        grid = state.catalog.parse_map(rows, name, header.frame, header.names)
-    except MapError as exc:
-        raise BadInput(f"map: {exc.below(header.lines)}") from None
-    if old is not None and grid is not old.domain and grid.rows_text is old.domain.rows_text:
-        share_lists(old.domain, grid)  # the same map in another frame
+    grid: Domain | None = building_of(body, state.settings.max_map_cells, name)
+    if grid is None:
+        header, rows = map_of(body)  # rows, or a map file's text
+        try:
+            grid = state.catalog.parse_map(rows, name, header.frame, header.names)
+        except MapError as exc:
+            raise BadInput(f"map: {exc.below(header.lines)}") from None
+        same = old is not None and grid.rows_text is old.domain.rows_text
+        if old is not None and isinstance(old.domain, GridDomain) and same:
+            share_lists(old.domain, grid)  # the same map in another frame
     goals, most = len(grid.goals), state.settings.max_goal_cells
     if goals * grid.n_states > most:
         raise BadInput(
@@ -324,7 +344,7 @@ def put_domain(state: ServiceState, name: str, body: DomainPut) -> tuple[DomainS
     return domain, created, kept
 
 
-def _keeps_data(state: ServiceState, name: str, grid: GridDomain) -> bool:
+def _keeps_data(state: ServiceState, name: str, grid: Domain) -> bool:
     """Whether a put of ``grid`` as ``name`` keeps trajectories (the same map, with data)."""
     try:
         old = state.catalog.get(name)
@@ -334,7 +354,7 @@ def _keeps_data(state: ServiceState, name: str, grid: GridDomain) -> bool:
     return same and old.view.trajectories.get(POOLED, 0) > 0
 
 
-def simulated_experts(grid: GridDomain, experts: ExpertsIn, max_pairs: int) -> list[Trajectory]:
+def simulated_experts(grid: Domain, experts: ExpertsIn, max_pairs: int) -> list[Trajectory]:
     """*Worker thread.* The experts' trajectories, each with its goal; BadInput when they
     would be more than ``max_pairs`` pairs (bounded before any is walked)."""
     n = experts.per_goal * len(grid.goals)

@@ -8,34 +8,47 @@ import numpy as np
 
 from app import strategies
 from app.advice.advisor import Decision
-from app.domain.grid import ACTIONS, GridDomain
+from app.domain.building import Building, Domain
 from app.service.data.domains import DomainState
 from app.service.data.store import POOLED
 from app.service.live.registry import Aggregate, LiveSession, SessionSnapshot
 from app.service.schemas import (
+    ConnectionPublic,
     DecisionPublic,
     DomainPublic,
+    FloorPublic,
     GoalBelief,
     PriorPublic,
     SessionCreated,
     SessionPublic,
 )
-from app.service.wire.encode import decision_dict
-
-
-def _cell(domain: GridDomain, state: int) -> tuple[int, int]:
-    return domain.cell(state)
+from app.service.wire.encode import advice_dict, decision_dict
 
 
 def domain_public(d: DomainState) -> DomainPublic:
     g = d.domain
-    rows, cols = g.shape
+    rows, cols = g.shape[-2:]
+    floors = connections = None
+    if isinstance(g, Building):
+        floors = [
+            FloorPublic(index=i, ordinal=f.ordinal, name=f.name, elevation=f.elevation,
+                        map=list(f.rows))
+            for i, f in enumerate(g.floors)
+        ]  # fmt: skip
+        connections = [
+            ConnectionPublic(
+                kind=c.kind, name=c.name, cost=c.cost, stops=[list(x) for x in c.stops]
+            )
+            for c in g.connections
+        ]
     return DomainPublic(
-        name=d.name, rows=rows, cols=cols, map=list(g.rows_text),
+        name=d.name, rows=rows, cols=cols,
+        map=list(g.floors[0].rows if isinstance(g, Building) else g.rows_text),
+        floors=floors, connections=connections,
         resolution=g.frame.resolution if g.frame else None,
-        origin=list(g.frame.origin) if g.frame else None, start=_cell(g, g.start),
-        goals=[_cell(g, s) for s in g.goals],
-        goal_names=list(g.goal_names or (None,) * len(g.goals)), actions=list(ACTIONS),
+        origin=list(g.frame.origin) if g.frame else None, start=list(g.cell(g.start)),
+        goals=[list(g.cell(s)) for s in g.goals],
+        goal_names=list(g.goal_names or (None,) * len(g.goals)), actions=list(g.actions),
         alpha0=d.view.alpha0, n_states=g.n_states,
         trajectories=d.view.trajectories.get(POOLED, 0),
         agent_types=sorted(k for k in d.view.tables if k != POOLED),
@@ -47,18 +60,23 @@ def prior_public(d: DomainState, agent_type: str | None) -> PriorPublic:
     view = d.view
     key = view.resolve(agent_type)
     g = d.domain
-    rows, cols = g.shape
-    grid = np.full((rows, cols, 4), np.nan)
-    grid[g.cells[:, 0], g.cells[:, 1]] = view.tables[key].theta
-    theta = [[None if v[0] != v[0] else v for v in row] for row in grid.tolist()]  # NaN: wall
+    grid = np.full((*g.shape, g.n_actions), np.nan)
+    grid[tuple(g.cells.T)] = view.tables[key].theta
     return PriorPublic(
-        domain=d.name, agent_type=agent_type, table=key, actions=list(ACTIONS),
-        alpha0=view.alpha0, trajectories=view.trajectories.get(key, 0), theta=theta,
+        domain=d.name, agent_type=agent_type, table=key, actions=list(g.actions),
+        alpha0=view.alpha0, trajectories=view.trajectories.get(key, 0), theta=_walls(grid.tolist()),
     )  # fmt: skip
 
 
+def _walls(rows: Any) -> Any:
+    """A wall's row (NaNs) as one None, at any depth."""
+    if not isinstance(rows[0], list):
+        return None if rows[0] != rows[0] else rows
+    return [_walls(r) for r in rows]
+
+
 def decision_public(
-    d: Decision, domain: GridDomain, leads_to: dict[str, Any] | None = None
+    d: Decision, domain: Domain, leads_to: dict[str, Any] | None = None
 ) -> DecisionPublic:
     out = decision_dict(d, domain)
     if leads_to is not None:
@@ -119,7 +137,7 @@ def overview_session(s: SessionSnapshot) -> dict[str, Any]:
     last = None
     if s.advice:
         step, cell, advice = s.advice[-1]
-        last = {"step": step, "state": cell, "advice": dict(zip("NESW", advice, strict=True))}
+        last = {"step": step, "state": cell, "advice": advice_dict(advice)}
     return _session_figures(s) | {"last_advice": last}
 
 
@@ -138,7 +156,7 @@ def beliefs_dict(s: SessionSnapshot) -> dict[str, Any] | None:
     return {"figures": figures, "headline": b.headline, "leads_to": leads}
 
 
-def destination_dict(goal: int, cell: tuple[int, int], name: str | None) -> dict[str, Any]:
+def destination_dict(goal: int, cell: tuple[int, ...], name: str | None) -> dict[str, Any]:
     """A destination (``DestinationPublic``)."""
     return {"goal": goal, "cell": cell, "name": name}
 
@@ -168,7 +186,7 @@ def _goal_dicts(s: SessionSnapshot) -> list[dict[str, Any]] | None:
 def overview_domain(d: DomainState, agg: Aggregate | None) -> dict[str, Any]:
     """A domain as the overview shows it (``OverviewDomain``): its size, its data, and
     figures over its live sessions (no session's own)."""
-    rows, cols = d.domain.shape
+    rows, cols = d.domain.shape[-2:]
     agg = agg or Aggregate()
     per_100 = 100.0 * agg.advice / agg.decisions if agg.decisions else 0.0
     return {

@@ -37,23 +37,39 @@ Coordinate = Annotated[int, Field(strict=True, ge=0, lt=2**31)]
 Cell = Annotated[
     list[Coordinate],
     Field(
-        min_length=2, max_length=2, examples=[[28, 1]],
-        description="A cell as [row, col]; row 0 is the top row.",
+        min_length=2, max_length=3, examples=[[28, 1]],
+        description="A cell as [row, col]; row 0 is the top row. On a map of several floors "
+        "[floor, row, col], floor the index of the map's floor (0 the lowest).",
     ),
 ]  # fmt: skip
-ActionName = Literal["N", "E", "S", "W"]
+ActionName = Literal["N", "E", "S", "W", "U", "D"]
 ActionIn = Annotated[
     ActionName
-    | Annotated[int, Field(strict=True, ge=0, le=3)],  # strict: true and 1.0 are not moves
-    Field(description='A move: "N", "E", "S", "W" (or 0-3 in that order).'),
+    | Annotated[int, Field(strict=True, ge=0, le=5)],  # strict: true and 1.0 are not moves
+    Field(
+        description='A move: "N", "E", "S", "W" (or 0-3 in that order); on a map of several '
+        'floors also "U" and "D" (4, 5): up or down where a stair or lift is.'
+    ),
 ]
-ACTION_BRANCHES = frozenset({"literal['N','E','S','W']", "constrained-int"})
+ACTION_BRANCHES = frozenset({"literal['N','E','S','W','U','D']", "constrained-int"})
 #: an action as the schema reads it -> its code (-1: none given)
 ACTION_CODE: dict[str | int | None, int] = {
-    "N": 0, "E": 1, "S": 2, "W": 3, 0: 0, 1: 1, 2: 2, 3: 3, None: -1,
+    "N": 0, "E": 1, "S": 2, "W": 3, "U": 4, "D": 5, 0: 0, 1: 1, 2: 2, 3: 3, 4: 4, 5: 5,
+    None: -1,
 }  # fmt: skip
-ACTION_RULE = "an action is 'N', 'E', 'S', 'W' or an integer 0-3"
+ACTION_RULE = (
+    "an action is 'N', 'E', 'S', 'W' or an integer 0-3 ('U', 'D' or 4, 5 on a map of several "
+    "floors)"
+)
 Name = Annotated[str, StringConstraints(pattern=NAME_PATTERN), Field(examples=["default"])]
+
+
+def _absent(v: object) -> bool:
+    """A field written only when it has a value (``exclude_if``): fields added to an answer
+    leave the answers of the clients that never see them as they were."""
+    return v is None
+
+
 AgentType = Annotated[
     str,
     StringConstraints(pattern=NAME_PATTERN),
@@ -237,11 +253,39 @@ class DomainPut(DomainBase):
     )
 
 
+class FloorPublic(BaseModel):
+    """One floor of a map of several floors."""
+
+    index: int = Field(description="Its index: a cell's first coordinate (0 the lowest).")
+    ordinal: int = Field(description="Its ordinal (0 the ground floor, negative below).")
+    name: str
+    elevation: float | None = Field(description="Metres above ordinal 0 (null: not known).")
+    map: list[str] = Field(description="Its rows, as a one-floor map's.")
+
+
+class ConnectionPublic(BaseModel):
+    """Stairs, a lift, an escalator or a ramp between floors."""
+
+    kind: str
+    name: str
+    cost: int = Field(description="Moves of time a ride takes per floor travelled.")
+    stops: list[Cell] = Field(description="Its stops, [floor, row, col], lowest first.")
+
+
 class DomainPublic(BaseModel):
     name: str
     rows: int
     cols: int
-    map: list[str]
+    map: list[str] = Field(
+        description="The map's rows; on a map of several floors its lowest floor's (floors "
+        "holds each)."
+    )
+    floors: list[FloorPublic] | None = Field(
+        None, exclude_if=_absent, description="A map of several floors: each, lowest first."
+    )
+    connections: list[ConnectionPublic] | None = Field(
+        None, exclude_if=_absent, description="A map of several floors: its connections."
+    )
     resolution: float | None = Field(description="Metres per cell side (null: cells only).")
     origin: list[float] | None = Field(
         description="x, y (metres) of the lower-left corner of the lower-left cell, yaw."
@@ -291,8 +335,9 @@ class PriorPublic(BaseModel):
     actions: list[ActionName]
     alpha0: float
     trajectories: int
-    theta: list[list[list[float] | None]] = Field(
-        description="theta_s(a) as rows x cols x 4 (N, E, S, W); null for walls."
+    theta: list[list[list[float] | None]] | list[list[list[list[float] | None]]] = Field(
+        description="theta_s(a) as rows x cols x 4 (N, E, S, W); null for walls. On a map of "
+        "several floors floors x rows x cols x 6 (N, E, S, W, U, D)."
     )
 
 
@@ -455,10 +500,14 @@ class CostPublic(BaseModel):
 
 
 class AdvicePublic(BaseModel):
+    """theta_s, one number per action; ``U`` and ``D`` on a map of several floors only."""
+
     N: float
     E: float
     S: float
     W: float
+    U: float | None = Field(None, exclude_if=_absent, description="Up (several floors only).")
+    D: float | None = Field(None, exclude_if=_absent, description="Down (several floors only).")
 
 
 class DecisionPublic(BaseModel):
@@ -473,7 +522,7 @@ class DecisionPublic(BaseModel):
     cost: CostPublic
     leads_to: DestinationPublic | None = Field(
         None,
-        exclude_if=lambda v: v is None,  # absent, not null: the answers before it stay as they were
+        exclude_if=_absent,  # absent, not null: the answers before it stay as they were
         description="The destination the advice leads to (guide), in the answer to one event "
         "that advises and in a new session's first decision; absent otherwise (a batch's "
         "decisions: the session's beliefs.leads_to says it).",
@@ -503,7 +552,13 @@ class EventIn(TypedDict):
 
 Point = Annotated[
     list[Metres],
-    Field(min_length=2, max_length=2, description="[x, y] in metres.", examples=[[3.2, 7.9]]),
+    Field(
+        min_length=2,
+        max_length=3,
+        examples=[[3.2, 7.9]],
+        description="[x, y] in metres; on a map of several floors [x, y, floor], floor the "
+        "index of the floor it was read on (0 the lowest).",
+    ),
 ]
 
 
@@ -622,8 +677,9 @@ class ViewerSession(SessionBase):
 
     path: list[Cell] = Field(description="Recent cells within the retention, oldest first.")
     p_normal_history: list[float]
-    advice: list[tuple[int, Cell, tuple[float, float, float, float]]] = Field(
-        description="(step, cell, advice as N, E, S, W) of the recent advice, oldest first."
+    advice: list[tuple[int, Cell, list[float]]] = Field(
+        description="(step, cell, advice as N, E, S, W, and U, D on a map of several floors) "
+        "of the recent advice, oldest first."
     )
 
 

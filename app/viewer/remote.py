@@ -5,6 +5,11 @@ its prior, and the most recently active sessions; a domain's map (``GET /domains
 fetched when the domain is new or was PUT again, its prior (``GET /domains/{name}/prior``) when
 its version changes. The feed keeps nothing else: it turns answers into the plain snapshots of
 :mod:`app.viewer.state`, and a failed read fails that tick only (the pump goes on).
+
+A map of several floors (its answer has ``floors``) is rebuilt as a
+:class:`~app.domain.building.Building` from its parts (floors, connections, the destinations'
+names, the frame), checked as any map is; its cells are ``[floor, row, col]`` and its prior
+floors x rows x cols x 6.
 """
 
 from __future__ import annotations
@@ -15,7 +20,9 @@ import httpx
 import numpy as np
 import orjson
 
-from app.domain.grid import GridDomain, NamedCell
+from app.domain.building import Building, Domain
+from app.domain.floors import Connection, Floor, FloorName
+from app.domain.grid import Frame, GridDomain, NamedCell
 from app.viewer.state import Destination, DomainView, Figure, SessionView, Snapshot
 
 
@@ -26,8 +33,8 @@ class RemoteFeed:
     def __init__(self, http: httpx.Client, key: str):
         self.http = http
         self.key = key
-        # name -> (updated_at, the grid); (name, prior version) -> the view
-        self._grids: dict[str, tuple[str, GridDomain]] = {}
+        # name -> (updated_at, the domain); (name, prior version) -> the view
+        self._grids: dict[str, tuple[str, Domain]] = {}
         self._views: dict[str, DomainView] = {}
         self.last_tick: float | None = None  # sent with the next snapshot request
 
@@ -44,17 +51,22 @@ class RemoteFeed:
         r.raise_for_status()
         return orjson.loads(r.content)
 
-    def _grid(self, name: str, updated_at: str) -> GridDomain:
+    def _grid(self, name: str, updated_at: str) -> Domain:
+        """The domain's map: a grid, or a building (its answer has ``floors``)."""
         known = self._grids.get(name)
         if known is not None and known[0] == updated_at:
             return known[1]
         info = self._get(f"/domains/{name}")
-        names = [
-            NamedCell(int(cell[0]), int(cell[1]), given)
-            for cell, given in zip(info["goals"], info.get("goal_names") or (), strict=False)
-            if given is not None
-        ]
-        grid = GridDomain.from_strings(info["map"], name=name, names=names)
+        grid: Domain
+        if info.get("floors") is not None:
+            grid = building_of(info, name)
+        else:
+            names = [
+                NamedCell(int(cell[0]), int(cell[1]), given)
+                for cell, given in zip(info["goals"], info.get("goal_names") or (), strict=False)
+                if given is not None
+            ]
+            grid = GridDomain.from_strings(info["map"], name=name, names=names)
         self._grids[name] = (updated_at, grid)
         return grid
 
@@ -82,15 +94,48 @@ class RemoteFeed:
         return Snapshot(domains, [session_view(s) for s in snap["sessions"]], snap.get("kappa_max"))
 
 
-def theta_of(grid: GridDomain, theta: list[list[list[float] | None]]) -> np.ndarray:
-    """The prior's rows x cols x 4 answer (walls null) as (free cells, 4), in state order."""
-    rows = [theta[r][c] for r, c in grid.cells.tolist()]
+def building_of(info: dict[str, Any], name: str) -> Building:
+    """A building from its ``GET /domains/{name}`` answer: its floors (lowest first), its
+    connections (stops ``[floor, row, col]``, floor the index), its goals' names (as
+    ``destination:`` lines name them) and its frame, checked as a map text's parts are."""
+    floors = [
+        Floor(int(f["ordinal"]), f["name"], tuple(f["map"]), f["elevation"]) for f in info["floors"]
+    ]
+    connections = [
+        Connection(c["kind"], int(c["cost"]), tuple(_cell3(s) for s in c["stops"]), c["name"])
+        for c in info["connections"]
+    ]
+    names = [
+        FloorName(int(cell[0]), NamedCell(int(cell[1]), int(cell[2]), given))
+        for cell, given in zip(info["goals"], info.get("goal_names") or (), strict=False)
+        if given is not None
+    ]
+    resolution, origin = info.get("resolution"), info.get("origin")
+    frame = None
+    if resolution is not None:
+        frame = Frame(resolution, tuple(origin) if origin is not None else (0.0, 0.0, 0.0))
+    return Building.from_parts(floors, connections, names, frame, name)
+
+
+def theta_of(grid: Domain, theta: list[Any]) -> np.ndarray:
+    """The prior's rows x cols x 4 answer (floors x rows x cols x 6 on a building; walls
+    null) as (free cells, actions), in state order."""
+    rows = []
+    for cell in grid.cells.tolist():
+        at = theta
+        for i in cell:
+            at = at[i]
+        rows.append(at)
     out = np.array(rows, dtype=np.float64)
-    return out.reshape(grid.n_states, 4)
+    return out.reshape(grid.n_states, grid.n_actions)
 
 
-def _cell(c: list[int]) -> tuple[int, int]:
-    return (int(c[0]), int(c[1]))
+def _cell(c: list[int]) -> tuple[int, ...]:
+    return tuple(int(v) for v in c)
+
+
+def _cell3(c: list[int]) -> tuple[int, int, int]:
+    return (int(c[0]), int(c[1]), int(c[2]))
 
 
 def session_view(s: dict[str, Any]) -> SessionView:
@@ -110,7 +155,7 @@ def session_view(s: dict[str, Any]) -> SessionView:
         kappa=s["kappa"],
         path=[_cell(c) for c in s["path"]],
         p_normal_history=s["p_normal_history"],
-        advice=[(step, _cell(cell), (p[0], p[1], p[2], p[3])) for step, cell, p in s["advice"]],
+        advice=[(step, _cell(cell), tuple(p)) for step, cell, p in s["advice"]],
         agent_type=s["agent_type"],
         strategy=s["strategy"],
         goals=goals,

@@ -90,6 +90,8 @@ def test_goal_aware_advice_with_no_goal_told_apart_is_the_paper_s_on_six_actions
     b = hospital
     prior, goals = train_goal_priors(b, np.random.default_rng(6), "anywhere", 40)
     assert goals.goal_counts.shape == (len(b.goals), b.n_states, 6)
+    copied = goals.copy(alpha0=2.0)  # as the service copies them: six actions still
+    assert copied.n_actions == 6 and np.array_equal(copied.goal_counts, goals.goal_counts)
     tables = AdviceTables.paper(prior.theta())
     paper, aware = Advisor(tables, 0.3, 100), GoalAwareAdvisor(tables, goals, 0.3, 100)
     rng = np.random.default_rng(7)

@@ -37,15 +37,15 @@ def live(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[TestClient,
         yield client, client.app.state.service  # type: ignore[attr-defined]
 
 
-def core_tables(service: ServiceState) -> AdviceTables:
-    state = service.catalog.get("default")
-    trajs = [t.pairs for t in service.store.trajectories("default")]
-    prior = ActionPrior(alpha0=state.view.alpha0).fit(trajs, state.domain.n_states)
-    return AdviceTables.paper(prior.theta())
+def core_tables(service: ServiceState, name: str = "default") -> AdviceTables:
+    state = service.catalog.get(name)
+    trajs = [t.pairs for t in service.store.trajectories(name)]
+    prior = ActionPrior(alpha0=state.view.alpha0, n_actions=state.domain.n_actions)
+    return AdviceTables.paper(prior.fit(trajs, state.domain.n_states).theta())
 
 
 def event_of(
-    rng: np.random.Generator, cell: tuple[int, int], a: int, nxt: tuple[int, int]
+    rng: np.random.Generator, cell: tuple[int, ...], a: int, nxt: tuple[int, ...]
 ) -> dict[str, Any]:
     form = int(rng.integers(3))
     if form == 2 and nxt != cell:
@@ -55,8 +55,8 @@ def event_of(
     return {"state": cell, "action": int(a) if rng.random() < 0.3 else ACTIONS[a]}
 
 
-def expected_json(d: Decision, service: ServiceState) -> dict[str, Any]:
-    out = decision_dict(d, service.catalog.get("default").domain)
+def expected_json(d: Decision, service: ServiceState, name: str = "default") -> dict[str, Any]:
+    out = decision_dict(d, service.catalog.get(name).domain)
     wire: dict[str, Any] = json.loads(json.dumps(out))  # tuples -> lists, as on the wire
     return wire
 

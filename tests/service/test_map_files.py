@@ -242,7 +242,7 @@ def test_names_of_the_same_map_are_checked_as_a_new_map_s(
     ]  # fmt: skip
 
 
-#: a map of two floors: read and checked, not served by this version
+#: a map of two floors
 FLOORS = (
     "connection: lift 4 0:1,1 1:1,1 Lift 1\n"
     "floor: 0 Ground floor\n#####\n#.S.#\n#####\n"
@@ -250,36 +250,37 @@ FLOORS = (
 )
 
 
-def test_a_map_of_several_floors_is_read_checked_and_refused_plainly(
+def test_a_map_of_several_floors_is_read_checked_and_served(
     client: TestClient, admin: dict[str, str]
 ) -> None:
-    said = (
-        "map: a map of 2 floors (0 'Ground floor', 1 'First floor') with 1 connection(s) "
-        "(lift 'Lift 1') and 1 destination(s), read and checked: this version of the service "
-        "serves maps of one floor only"
-    )
     for body in ({"content": FLOORS, "headers": admin | TEXT},
                  {"json": {"text": FLOORS}, "headers": admin}):  # fmt: skip
         r = client.put("/domains/tower", **body)
-        assert r.status_code == 422, r.text
-        assert r.json()["detail"].startswith(said)
-        assert "`maze import --level ORDINAL`" in r.json()["detail"]
+        assert r.status_code in (200, 201), r.text
+        got = r.json()
+        assert got["actions"] == ["N", "E", "S", "W", "U", "D"]
+        assert got["start"] == [0, 1, 2] and got["goals"] == [[1, 1, 3]]
+        assert [f["name"] for f in got["floors"]] == ["Ground floor", "First floor"]
+        assert got["connections"] == [
+            {"kind": "lift", "name": "Lift 1", "cost": 4, "stops": [[0, 1, 1], [1, 1, 1]]}
+        ]
+        assert got["map"] == ["#####", "#.S.#", "#####"]  # the lowest floor's rows
     # a mistake in it is named as `maze check` names it: floor, line, column
-    bad = client.put("/domains/tower", content=FLOORS.replace("#..G#", "#..Gx"),
+    bad = client.put("/domains/tower2", content=FLOORS.replace("#..G#", "#..Gx"),
                      headers=admin | TEXT)  # fmt: skip
     assert bad.status_code == 422
     assert bad.json()["detail"] == (
         "map: floor 1 'First floor', line 8, column 5: unknown character 'x': use '#' wall, '.' "
         "free, 'S' start, 'G' goal"
     )
-    wall = client.put("/domains/tower", content=FLOORS.replace("1:1,1", "1:0,1"),
+    wall = client.put("/domains/tower2", content=FLOORS.replace("1:1,1", "1:0,1"),
                       headers=admin | TEXT)  # fmt: skip
     assert wall.status_code == 422
     assert wall.json()["detail"].startswith(
         "map: line 1, column 26: connection 'Lift 1': stop [0, 1] on floor 1 'First floor' is a "
         "wall"
     )
-    assert "tower" not in [d["name"] for d in client.get("/domains").json()]
+    assert "tower2" not in [d["name"] for d in client.get("/domains").json()]
 
 
 def test_a_map_of_several_floors_past_the_cells_limit_is_refused_before_its_check(

@@ -26,11 +26,13 @@ from paho.mqtt.enums import CallbackAPIVersion
 from paho.mqtt.packettypes import PacketTypes
 from paho.mqtt.properties import Properties
 
-from app.domain.grid import ACTIONS, GridDomain
+from app.domain.building import Domain
+from app.domain.grid import GridDomain
 from app.service.main import create_app
 from app.service.mqtt import Bridge, parse_url
 from tests.client.test_client import run_async
 from tests.service.conftest import make_settings, put_tiny
+from tests.service.test_strategies import put_tower
 
 MOSQUITTO = "/usr/sbin/mosquitto"
 HOST, PORT = "127.0.0.1", 1883
@@ -131,13 +133,15 @@ def connected(client: TestClient) -> bool:
     return bridge is not None and bridge.connected.is_set()
 
 
-def walk(n: int, seed: int) -> list[dict[str, Any]]:
-    client_grid = GridDomain.from_file(Path(__file__).parents[2] / "app/domain/maps/default.txt")
+def walk(n: int, seed: int, grid: Domain | None = None) -> list[dict[str, Any]]:
+    """``n`` random moves from the start of ``grid`` (the shipped maze by default)."""
+    if grid is None:
+        grid = GridDomain.from_file(Path(__file__).parents[2] / "app/domain/maps/default.txt")
     rng = np.random.default_rng(seed)
-    s, out = client_grid.start, []
-    for a in rng.integers(0, 4, n).tolist():
-        out.append({"state": list(client_grid.cell(s)), "action": ACTIONS[a]})
-        s = int(client_grid.next_state[s, a])
+    s, out = grid.start, []
+    for a in rng.integers(0, grid.n_actions, n).tolist():
+        out.append({"state": list(grid.cell(s)), "action": grid.actions[a]})
+        s = int(grid.next_state[s, a])
     return out
 
 
@@ -147,19 +151,24 @@ def prefix() -> str:
 
 
 @needs_broker
-def test_bridge_decisions_equal_the_rest_answers(tmp_path: Path, prefix: str) -> None:
-    events = walk(41, seed=3)
+@pytest.mark.parametrize("domain", ["default", "tower"])
+def test_bridge_decisions_equal_the_rest_answers(tmp_path: Path, prefix: str, domain: str) -> None:
+    """On the shipped maze and on a building of two floors."""
     with service(tmp_path, PORT, prefix) as client:
+        events = walk(41, seed=3)
+        if domain == "tower":
+            admin = {"X-API-Key": client.app.state.service.admin_key}  # type: ignore[attr-defined]
+            events = walk(41, seed=3, grid=put_tower(client, admin))
         wait_until(lambda: connected(client), what="the bridge to connect")
         peer = Peer(PORT, prefix)
         try:
-            peer.publish("default/e1/events", events[:40])  # a list: one message per decision
-            peer.publish("default/e1/events", events[40])  # one event
-            got = peer.wait("default/e1/decisions", 42)
+            peer.publish(f"{domain}/e1/events", events[:40])  # a list: one message per decision
+            peer.publish(f"{domain}/e1/events", events[40])  # one event
+            got = peer.wait(f"{domain}/e1/decisions", 42)
         finally:
             peer.close()
         created = client.post(
-            "/domains/default/sessions", json={"start": events[0]["state"]}
+            f"/domains/{domain}/sessions", json={"start": events[0]["state"]}
         ).json()
         auth = {"Authorization": f"Bearer {created['token']}"}
         sid = created["session_id"]

@@ -9,12 +9,13 @@ from typing import Any
 import numpy as np
 from fastapi.testclient import TestClient
 
-from app.domain.grid import ACTIONS, GridDomain
+from app.domain.building import Domain
+from app.domain.grid import ACTIONS
 from app.service.state import ServiceState
 from tests.service.conftest import open_session
 
 
-def _events(grid: GridDomain, n: int, first: int, seed: int) -> list[dict[str, Any]]:
+def _events(grid: Domain, n: int, first: int, seed: int) -> list[dict[str, Any]]:
     rng = np.random.default_rng(seed)
     s, out = grid.start, []
     for i, a in enumerate(rng.integers(0, 4, n).tolist()):

@@ -12,6 +12,7 @@ import json
 import math
 from collections.abc import Iterator
 from dataclasses import fields
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -27,7 +28,9 @@ from app.advice import guide as guide_module
 from app.advice.guide import GuideMap
 from app.advice.params import StrategyParams
 from app.advice.priors import GoalPriors
-from app.domain.grid import ACTIONS, GridDomain
+from app.domain.building import Building, Domain
+from app.domain.floorplans import generate_floors
+from app.domain.grid import ACTIONS
 from app.domain.paths import expert_trajectory
 from app.service.main import create_app
 from app.service.state import ServiceState
@@ -38,56 +41,74 @@ from tests.service.test_decisions_property import core_tables, expected_json
 STRATEGIES = names()
 
 
+#: a building of two floors (a lift bank, two stairwells, named destinations) served as
+#: ``tower`` beside the shipped maze, ``default``, with simulated experts' prior
+TOWER = generate_floors(20, 20, 2, np.random.default_rng(3), n_goals=3, purpose="hospital")
+
+
+def put_tower(client: TestClient, admin: dict[str, str], name: str = "tower") -> Building:
+    """``TOWER`` put as ``name``, its prior learnt from simulated experts (2 per goal)."""
+    body = {"text": TOWER.to_text(), "experts": {"per_goal": 2}}
+    r = client.put(f"/domains/{name}", json=body, headers=admin)
+    assert r.status_code in (200, 201), r.text
+    return TOWER
+
+
 @pytest.fixture(scope="module")
 def live(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[TestClient, ServiceState]]:
     with TestClient(create_app(make_settings(Path(tmp_path_factory.mktemp("data"))))) as client:
-        yield client, client.app.state.service  # type: ignore[attr-defined]
+        service: ServiceState = client.app.state.service  # type: ignore[attr-defined]
+        put_tower(client, {"X-API-Key": service.admin_key})
+        yield client, service
 
 
-def core_goal_priors(service: ServiceState) -> GoalPriors:
-    state = service.catalog.get("default")
+def core_goal_priors(service: ServiceState, name: str = "default") -> GoalPriors:
+    state = service.catalog.get(name)
     grid = state.domain
-    stored = service.store.trajectories("default")
+    stored = service.store.trajectories(name)
     index = [grid.goals.index(t.goal) if t.goal in grid.goals else None for t in stored]
-    priors = GoalPriors(grid.n_states, grid.goals, state.view.alpha0)
+    priors = GoalPriors(grid.n_states, grid.goals, state.view.alpha0, grid.n_actions)
     return priors.add([t.pairs for t in stored], index)
 
 
 def add_expert(
-    client: TestClient, service: ServiceState, grid: GridDomain, rng: np.random.Generator
-) -> None:
+    client: TestClient, service: ServiceState, grid: Domain, rng: np.random.Generator,
+    name: str = "default",
+) -> None:  # fmt: skip
     """One expert trajectory to a random goal, from a random cell, with its goal stated."""
     goal = grid.goals[int(rng.integers(len(grid.goals)))]
     pairs = expert_trajectory(grid, int(rng.integers(grid.n_states)), goal, rng)
-    steps = [{"state": grid.cell(p), "action": ACTIONS[q]} for p, q in pairs.tolist()]
+    steps = [{"state": grid.cell(p), "action": grid.actions[q]} for p, q in pairs.tolist()]
     if not steps:
         return
     body = {"trajectories": [{"steps": steps, "goal": grid.cell(goal)}]}
     headers = {"X-API-Key": service.admin_key}
-    r = client.post("/domains/default/trajectories", json=body, headers=headers)
+    r = client.post(f"/domains/{name}/trajectories", json=body, headers=headers)
     assert r.status_code == 201, r.text
 
 
-def moves(grid: GridDomain, s: int, rng: np.random.Generator) -> list[int]:
-    """Up to 80 moves from ``s``: random ones, or an expert's path to a random goal (where the
-    goals' priors disagree, so a goal posterior moves), with a few random moves mixed in."""
-    n = int(rng.integers(0, 80))
+def moves(grid: Domain, s: int, rng: np.random.Generator) -> list[int]:
+    """Up to 80 moves from ``s``: random ones (of every action of the map), or an expert's
+    path to a random goal (where the goals' priors disagree, so a goal posterior moves), with
+    a few random moves mixed in."""
+    n, a_n = int(rng.integers(0, 80)), grid.n_actions
     if rng.random() < 0.5:
-        return [int(a) for a in rng.integers(0, 4, n)]
+        return [int(a) for a in rng.integers(0, a_n, n)]
     goal = grid.goals[int(rng.integers(len(grid.goals)))]
     path = [int(a) for a in expert_trajectory(grid, s, goal, rng)[:, 1].tolist()]
     noise = rng.random(len(path)) < 0.1
-    return [int(rng.integers(4)) if k else a for a, k in zip(path, noise, strict=True)][:n]
+    return [int(rng.integers(a_n)) if k else a for a, k in zip(path, noise, strict=True)][:n]
 
 
-def led(decision: dict[str, Any], core: Any, grid: GridDomain) -> dict[str, Any]:
+def led(decision: dict[str, Any], core: Any, grid: Domain) -> dict[str, Any]:
     """A decision as one event's answer has it: with the destination guide's advice leads to
     (the core advisor's target) when it advises."""
     target = getattr(core, "target", -1)
     if not decision["advise"] or target < 0:
         return decision
+    name = grid.goal_names[target] if grid.goal_names is not None else None
     return decision | {"leads_to": {"goal": target, "cell": list(grid.cell(grid.goals[target])),
-                                    "name": None}}  # fmt: skip
+                                    "name": name}}  # fmt: skip
 
 
 @settings(max_examples=40, deadline=None)
@@ -109,6 +130,7 @@ def led(decision: dict[str, Any], core: Any, grid: GridDomain) -> dict[str, Any]
         }
     ),
     transport=st.sampled_from(["rest", "websocket", "binary"]),
+    domain=st.sampled_from(["default", "tower"]),
 )
 def test_strategy_sessions_decide_as_the_core(
     live: tuple[TestClient, ServiceState],
@@ -118,24 +140,28 @@ def test_strategy_sessions_decide_as_the_core(
     window: int,
     params: dict[str, Any],
     transport: str,
+    domain: str,
 ) -> None:
+    """On the shipped maze and on a building of two floors (cells [floor, row, col], six
+    actions, the binary frame's wide form)."""
     client, service = live
-    grid = service.catalog.get("default").domain
+    grid = service.catalog.get(domain).domain
     rng = np.random.default_rng(seed)
     start = grid.start if rng.random() < 0.5 else int(rng.integers(grid.n_states))
     given = {name: params[name] for name in strategies.get(strategy).reads}  # its own only
     sid, auth, created = open_session(
-        client, kappa=kappa, window=window, start=grid.cell(start), strategy=strategy,
+        client, domain, kappa=kappa, window=window, start=grid.cell(start), strategy=strategy,
         params=given,
     )  # fmt: skip
     assert created["strategy"] == strategy
     assert created["params"] == given  # exactly the parameters in force
-    goal_priors = core_goal_priors(service)
+    goal_priors = core_goal_priors(service, domain)
     core = make_advisor(
-        strategy, core_tables(service), kappa, window, StrategyParams(**params), goal_priors,
-        GuideMap.of(grid, goal_priors),
+        strategy, core_tables(service, domain), kappa, window, StrategyParams(**params),
+        goal_priors, GuideMap.of(grid, goal_priors),
     )  # fmt: skip
-    assert created["decision"] == led(expected_json(core.start(start), service), core, grid)
+    expect = partial(expected_json, service=service, name=domain)
+    assert created["decision"] == led(expect(core.start(start)), core, grid)
     token = auth["Authorization"].removeprefix("Bearer ")
     url = f"/sessions/{sid}/stream?token={token}" + ("&format=binary" * (transport == "binary"))
     ws = client.websocket_connect(url) if transport != "rest" else None
@@ -143,13 +169,13 @@ def test_strategy_sessions_decide_as_the_core(
     with ws or _Nothing():
         for _ in range(int(rng.integers(1, 5))):
             if rng.random() < 0.3:  # new expert data: the session follows it from now on
-                add_expert(client, service, grid, rng)
-                core.use_tables(core_tables(service), core_goal_priors(service))
+                add_expert(client, service, grid, rng, domain)
+                core.use_tables(core_tables(service, domain), core_goal_priors(service, domain))
             events, expected = [], []
             for a in moves(grid, s, rng):
                 s2 = int(grid.next_state[s, a])
-                events.append({"state": grid.cell(s), "action": ACTIONS[a]})
-                expected.append(expected_json(core.observe(s, a, s2), service))
+                events.append({"state": grid.cell(s), "action": grid.actions[a]})
+                expected.append(expect(core.observe(s, a, s2)))
                 s = s2
             if ws is not None and transport == "binary":
                 ws.send_text(json.dumps(events))

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Iterator
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -39,7 +40,7 @@ from tests.service.conftest import (
     redis_problem,
 )
 from tests.service.test_decisions_property import core_tables, expected_json
-from tests.service.test_strategies import add_expert, core_goal_priors, led, moves
+from tests.service.test_strategies import add_expert, core_goal_priors, led, moves, put_tower
 
 STRATEGIES = names()
 
@@ -67,7 +68,9 @@ def start_workers(tmp: Path, n: int, **overrides: Any) -> tuple[list[TestClient]
 def workers(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Workers]:
     clients, prefix = start_workers(Path(tmp_path_factory.mktemp("data")), 2)
     try:
-        yield clients, clients[0].app.state.service  # type: ignore[attr-defined]
+        service: ServiceState = clients[0].app.state.service  # type: ignore[attr-defined]
+        put_tower(clients[0], {"X-API-Key": service.admin_key})
+        yield clients, service
     finally:
         for c in clients:
             c.__exit__(None, None, None)
@@ -89,38 +92,43 @@ class _Nothing:
     kappa=st.sampled_from([0.0, 0.3, 0.8]),
     window=st.sampled_from([1, 7, 60, 300]),
     beta=st.sampled_from([0.0, 0.5]),
+    domain=st.sampled_from(["default", "tower"]),
 )
 def test_events_hopping_between_workers_decide_as_the_core(
-    workers: Workers, seed: int, strategy: str, kappa: float, window: int, beta: float
-) -> None:
+    workers: Workers, seed: int, strategy: str, kappa: float, window: int, beta: float,
+    domain: str,
+) -> None:  # fmt: skip
+    """On the shipped maze and on a building of two floors (Redis keeps six actions' advice
+    for its retries)."""
     clients, service = workers
-    grid = service.catalog.get("default").domain
+    grid = service.catalog.get(domain).domain
     rng = np.random.default_rng(seed)
     start = grid.start if rng.random() < 0.5 else int(rng.integers(grid.n_states))
     params = StrategyParams(beta=beta, rate=0.4, seed=seed % 1000, n_steps=7, threshold=0.3)
     given = strategies.get(strategy).in_force(params)
     maker = clients[int(rng.integers(2))]
     sid, auth, created = open_session(
-        maker, kappa=kappa, window=window, start=grid.cell(start), strategy=strategy,
+        maker, domain, kappa=kappa, window=window, start=grid.cell(start), strategy=strategy,
         params=given,
     )  # fmt: skip
-    goal_priors = core_goal_priors(service)
+    goal_priors = core_goal_priors(service, domain)
     core = make_advisor(
-        strategy, core_tables(service), kappa, window, params, goal_priors,
+        strategy, core_tables(service, domain), kappa, window, params, goal_priors,
         GuideMap.of(grid, goal_priors),
     )  # fmt: skip
-    assert created["decision"] == led(expected_json(core.start(start), service), core, grid)
+    expect = partial(expected_json, service=service, name=domain)
+    assert created["decision"] == led(expect(core.start(start)), core, grid)
     token = auth["Authorization"].removeprefix("Bearer ")
     s, step = start, 1
     for _ in range(int(rng.integers(2, 7))):
         if rng.random() < 0.3:  # new expert data, through either worker: both follow it
-            add_expert(clients[int(rng.integers(2))], service, grid, rng)
-            core.use_tables(core_tables(service), core_goal_priors(service))
+            add_expert(clients[int(rng.integers(2))], service, grid, rng, domain)
+            core.use_tables(core_tables(service, domain), core_goal_priors(service, domain))
         events, expected, one = [], [], []  # one: as one event's answer has it
         for a in moves(grid, s, rng):
             s2 = int(grid.next_state[s, a])
-            events.append({"state": grid.cell(s), "action": ACTIONS[a]})
-            expected.append(expected_json(core.observe(s, a, s2), service))
+            events.append({"state": grid.cell(s), "action": grid.actions[a]})
+            expected.append(expect(core.observe(s, a, s2)))
             one.append(led(expected[-1], core, grid))
             s = s2
         if not events:

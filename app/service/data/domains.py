@@ -31,6 +31,7 @@ from app.advice.guide import MARKS, GuideMap
 from app.advice.models import AdviceTables
 from app.advice.priors import ActionPrior, GoalPriors
 from app.arrays import IntArray
+from app.domain.building import Domain, load_map
 from app.domain.grid import Frame, GridDomain, MapError, NamedCell, name_goals
 from app.service.data.store import POOLED, DomainRecord, Store, TableCounts, Trajectory
 from app.strategies import DomainData, Need
@@ -65,10 +66,10 @@ class PriorView:
         return agent_type if agent_type is not None and agent_type in self.tables else POOLED
 
 
-def restore_prior(alpha0: float, n_states: int, tables: Mapping[str, TableCounts]) -> ActionPrior:
-    """An :class:`ActionPrior` holding the stored counts."""
+def restore_prior(alpha0: float, domain: Domain, tables: Mapping[str, TableCounts]) -> ActionPrior:
+    """An :class:`ActionPrior` of ``domain``'s states and actions holding the stored counts."""
     stored = {key: (t.n_trajectories, t.counts) for key, t in tables.items()}
-    return ActionPrior.from_counts(alpha0, stored, n_states)
+    return ActionPrior.from_counts(alpha0, stored, domain.n_states, n_actions=domain.n_actions)
 
 
 def _view(prior: ActionPrior, old: PriorView | None, changed: set[str]) -> PriorView:
@@ -85,7 +86,7 @@ class DomainState:
     """One live domain: the grid, its prior, the current :class:`PriorView`."""
 
     name: str
-    domain: GridDomain
+    domain: Domain
     prior: ActionPrior
     created_at: datetime
     updated_at: datetime
@@ -129,15 +130,22 @@ def needed() -> frozenset[Need]:
     return needs | {Need.GOAL_PRIORS} if Need.GUIDE_MAP in needs else needs
 
 
-def preparation_bytes(n_goals: int, n_states: int, needs: Iterable[Need]) -> int:
-    """Bytes what ``needs`` keep of a domain of ``n_goals`` destinations and ``n_states`` free
-    cells: the goal priors' counts and each goal's log theta (G x S x 4 float64 each), the
-    counts of unknown goal (S x 4) and the goal of each state (S); a guide map's distances and
-    detours (G x S int64 each), its landmarks' distances (MARKS x S int64), its open moves (S
-    int64, S x 4 booleans) and the destination of each state (S); its counts are the goal
-    priors' own."""
-    gs, s = n_goals * n_states, n_states
-    sizes = {Need.GOAL_PRIORS: 64 * gs + 40 * s, Need.GUIDE_MAP: 16 * gs + (20 + 8 * MARKS) * s}
+def preparation_bytes(
+    n_goals: int, n_states: int, needs: Iterable[Need], n_actions: int = 4
+) -> int:
+    """Bytes what ``needs`` keep of a domain of ``n_goals`` destinations, ``n_states`` free
+    cells and ``n_actions`` actions (A): the goal priors' counts and each goal's log theta
+    (G x S x A float64 each), the counts of unknown goal (S x A) and the goal of each state
+    (S); a guide map's distances and detours (G x S int64 each), its landmarks' distances
+    (MARKS x S int64), its open moves (S int64, S x A booleans) and the destination of each
+    state (S), on a map of several floors each state's floor and nearest stops (3 S int64);
+    its counts are the goal priors' own."""
+    gs, s, a = n_goals * n_states, n_states, n_actions
+    floors = 24 * s if a != 4 else 0
+    sizes = {
+        Need.GOAL_PRIORS: 16 * a * gs + (8 * a + 8) * s,
+        Need.GUIDE_MAP: 16 * gs + (16 + a + 8 * MARKS) * s + floors,
+    }
     return sum(sizes[n] for n in set(needs))
 
 
@@ -172,8 +180,8 @@ class DomainCatalog:
         """Read every domain and its counts from the store, and prepare each
         (:meth:`prepare_all`; at start, before any request)."""
         for rec in self.store.domains():
-            domain = GridDomain.from_text(rec.map_text, name=rec.name)
-            prior = restore_prior(rec.alpha0, domain.n_states, self.store.counts(rec.name))
+            domain = load_map(rec.map_text, name=rec.name)
+            prior = restore_prior(rec.alpha0, domain, self.store.counts(rec.name))
             self._domains[rec.name] = DomainState(
                 rec.name, domain, prior, rec.created_at, rec.updated_at, version=rec.version
             )
@@ -212,13 +220,13 @@ class DomainCatalog:
             cleaned = [str(r).rstrip() for r in rows]
             while cleaned and not cleaned[-1]:
                 cleaned.pop()
-            if tuple(cleaned) == old.domain.rows_text:
+            if isinstance(old.domain, GridDomain) and tuple(cleaned) == old.domain.rows_text:
                 goal_names = name_goals(old.domain.rows_text, names)
                 return old.domain.with_frame(frame).with_names(goal_names)
         return GridDomain.from_strings(rows, name=name, frame=frame, names=names)
 
     def put(
-        self, name: str, domain: GridDomain, alpha0: float, preparing: bool = False
+        self, name: str, domain: Domain, alpha0: float, preparing: bool = False
     ) -> tuple[DomainState, bool, bool]:
         """Create or replace ``name`` (store first); returns (state, created, kept_data): the
         same map keeps its trajectories and counts, a new map starts with none. ``preparing``:
@@ -234,10 +242,12 @@ class DomainCatalog:
         return state, created, kept
 
     @staticmethod
-    def _state(rec: DomainRecord, domain: GridDomain, keep: DomainState | None) -> DomainState:
+    def _state(rec: DomainRecord, domain: Domain, keep: DomainState | None) -> DomainState:
         """The state of a put domain; ``keep``: the old state whose counts it keeps."""
         stored = keep.prior.stored_counts() if keep is not None else {}
-        prior = ActionPrior.from_counts(rec.alpha0, stored, domain.n_states)
+        prior = ActionPrior.from_counts(
+            rec.alpha0, stored, domain.n_states, n_actions=domain.n_actions
+        )
         goals = keep.goal_priors if keep is not None else None
         guide = None
         if goals is not None:
@@ -263,7 +273,8 @@ class DomainCatalog:
         trajectories of unknown goal (or of a cell that is not a goal) count for every goal."""
         with state.lock:
             if state.goal_priors is None:
-                priors = GoalPriors(state.domain.n_states, state.domain.goals, state.view.alpha0)
+                grid = state.domain
+                priors = GoalPriors(grid.n_states, grid.goals, state.view.alpha0, grid.n_actions)
                 state.goal_priors = add_goals(priors, self.store.trajectories(state.name))
             return state.goal_priors
 
@@ -301,11 +312,11 @@ class DomainCatalog:
     def _builders(self) -> dict[Need, Callable[[DomainState], object]]:
         return {Need.GOAL_PRIORS: self.goal_priors, Need.GUIDE_MAP: self.guide_map}
 
-    def over_memory(self, grid: GridDomain, needs: Iterable[Need]) -> str | None:
+    def over_memory(self, grid: Domain, needs: Iterable[Need]) -> str | None:
         """Why what ``needs`` keep of ``grid`` is more than this catalog allows a domain
         (None: it is not)."""
         needs = set(needs)
-        size = preparation_bytes(len(grid.goals), grid.n_states, needs)
+        size = preparation_bytes(len(grid.goals), grid.n_states, needs, grid.n_actions)
         if not needs or self.max_memory is None or size <= self.max_memory:
             return None
         what = ", ".join(sorted(n.value for n in needs))
@@ -375,7 +386,8 @@ class DomainCatalog:
         """Under ``state.lock``, ``state`` being the current domain of its name: store ``items``
         and add them to ``state`` (True), or, when the store's data version shows changes by
         another process that ``state`` lacks, only store them (False: read it again)."""
-        version = self.store.add_trajectories(state.name, items, state.domain.n_states)
+        grid = state.domain
+        version = self.store.add_trajectories(state.name, items, grid.n_states, grid.n_actions)
         if version != state.version + 1:
             return False
         state.version = version
@@ -419,8 +431,8 @@ class DomainCatalog:
         if old is not None and old.created_at == rec.created_at and old.map_text == rec.map_text:
             grid = old.domain  # the same map (and frame): not read again
         else:
-            grid = GridDomain.from_text(rec.map_text, name=name)
-        prior = restore_prior(rec.alpha0, grid.n_states, counts)
+            grid = load_map(rec.map_text, name=name)
+        prior = restore_prior(rec.alpha0, grid, counts)
         goals, guide = None, None
         if old is not None and old.goal_priors is not None and same_map(old, rec, grid):
             goals = add_goals(old.goal_priors.copy(alpha0=rec.alpha0), added)
@@ -451,7 +463,7 @@ class DomainCatalog:
         return changed
 
 
-def same_map(state: DomainState, rec: DomainRecord, grid: GridDomain) -> bool:
+def same_map(state: DomainState, rec: DomainRecord, grid: Domain) -> bool:
     """Whether ``rec`` (read as ``grid``) is the map ``state`` holds, not a new domain of the
     same name (made after a delete) or another map: the states are the same cells."""
     return state.created_at == rec.created_at and state.domain.rows_text == grid.rows_text

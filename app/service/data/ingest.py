@@ -13,10 +13,11 @@ import numpy as np
 from pydantic import TypeAdapter, ValidationError
 
 from app.arrays import IntArray
-from app.domain.grid import GridDomain
+from app.domain.building import Domain
 from app.service.data.store import Trajectory
 from app.service.problems import BadInput, describe_errors
 from app.service.schemas import ACTION_CODE, TrajectoriesCreate
+from app.service.wire.events import cell_words
 
 BODY = TypeAdapter(TrajectoriesCreate)
 
@@ -28,9 +29,7 @@ def parse_trajectories(raw: bytes) -> TrajectoriesCreate:
         raise BadInput(describe_errors(exc.errors(include_input=False))) from None
 
 
-def to_trajectories(
-    domain: GridDomain, body: TrajectoriesCreate, max_steps: int
-) -> list[Trajectory]:
+def to_trajectories(domain: Domain, body: TrajectoriesCreate, max_steps: int) -> list[Trajectory]:
     """Checked trajectories; :class:`BadInput` names the first bad step."""
     trajs = body.trajectories
     lengths = np.array([len(t.steps) for t in trajs], dtype=np.int64)
@@ -38,12 +37,19 @@ def to_trajectories(
     if total > max_steps:
         raise BadInput(f"too many steps: {total} in one request, at most {max_steps}", 413)
     ends = np.cumsum(lengths)
-    cells = np.array([s["state"] for t in trajs for s in t.steps], dtype=np.int64).reshape(-1, 2)
-    actions = np.array([ACTION_CODE[s["action"]] for t in trajs for s in t.steps], dtype=np.int64)
+    steps = [s for t in trajs for s in t.steps]
+    actions = np.array([ACTION_CODE[s["action"]] for s in steps], dtype=np.int64)
 
     def name(k: int) -> str:
         i = int(np.searchsorted(ends, k, side="right"))
         return f"trajectories[{i}].steps[{k - (ends[i] - lengths[i])}]"
+
+    for k, step in enumerate(steps):
+        if len(step["state"]) != domain.width:
+            raise BadInput(f"{name(k)}: cell {list(step['state'])}: {cell_words(domain)}")
+        if actions[k] >= domain.n_actions:
+            raise BadInput(f"{name(k)}: action {step['action']!r}: this map has one floor")
+    cells = np.array([s["state"] for s in steps], dtype=np.int64).reshape(-1, domain.width)
 
     states = _states(domain, cells, name)
     led_to = domain.next_state[states, actions]
@@ -63,19 +69,22 @@ def to_trajectories(
     return out
 
 
-def _goal(domain: GridDomain, goal: list[int] | None, i: int) -> int | None:
+def _goal(domain: Domain, goal: list[int] | None, i: int) -> int | None:
     if goal is None:
         return None
+    if len(goal) != domain.width:
+        raise BadInput(f"trajectories[{i}].goal: {list(goal)}: {cell_words(domain)}")
     return int(_states(domain, np.array([goal]), lambda _: f"trajectories[{i}].goal")[0])
 
 
-def _states(domain: GridDomain, cells: IntArray, name: Callable[[int], str]) -> IntArray:
-    rows, cols = domain.shape
-    off = np.flatnonzero((cells[:, 0] >= rows) | (cells[:, 1] >= cols))
+def _states(domain: Domain, cells: IntArray, name: Callable[[int], str]) -> IntArray:
+    shape = domain.shape
+    off = np.flatnonzero((cells >= np.array(shape)).any(axis=1))
     if off.size:
         k = int(off[0])
-        raise BadInput(f"{name(k)}: cell {cells[k].tolist()} is off the {rows}x{cols} map")
-    states: IntArray = domain.state_of[cells[:, 0], cells[:, 1]]
+        size = "x".join(map(str, shape))
+        raise BadInput(f"{name(k)}: cell {cells[k].tolist()} is off the {size} map")
+    states: IntArray = domain.state_of[tuple(cells.T)]
     walls = np.flatnonzero(states < 0)
     if walls.size:
         k = int(walls[0])

@@ -9,8 +9,10 @@ Tables (the same on every database; only the engine's connect options differ):
   above any version of an earlier domain of the same name;
 * ``trajectories``: domain, agent type, steps as a compact blob of little-endian int32
   (state, action) pairs, optional goal state, the data version that added it;
-* ``prior_counts``: per (domain, table) the eqs. (1)-(2) increments as an int32 (states x 4) blob
-  and the number of trajectories; table ``"*"`` is pooled over all agent types.
+* ``prior_counts``: per (domain, table) the eqs. (1)-(2) increments as an int32 (states x
+  actions) blob and the number of trajectories; table ``"*"`` is pooled over all agent types.
+  4 actions, or 6 on a map of several floors: :func:`actions_of` reads it from the map's
+  text, so a database of a version before floors is read as it was written (no migration).
 
 A trajectory and the counts it adds are written in one transaction, so the counts always equal
 a recount of the stored trajectories (:meth:`Store.recount`), whatever happens to the process.
@@ -58,6 +60,9 @@ from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 
 from app.advice.priors import ActionPrior, trajectory_counts
 from app.arrays import IntArray
+from app.domain.building import N_ACTIONS as BUILDING_ACTIONS
+from app.domain.floors import is_floors_text
+from app.domain.grid import N_ACTIONS as GRID_ACTIONS
 
 POOLED = ActionPrior.POOLED
 RETRIES = 5
@@ -188,11 +193,27 @@ def _record(row: Any) -> DomainRecord:
 
 
 def _rows(map_text: str) -> list[str]:
-    """A stored map's rows, without the header lines of its frame (they hold ':')."""
-    return [line for line in map_text.splitlines() if ":" not in line]
+    """A stored map's rows, without the header lines of its frame and destinations (they hold
+    ':'); on a map of several floors each floor's rows after a line that marks it, and its
+    connections: what makes its states and moves."""
+    if not is_floors_text(map_text):
+        return [line for line in map_text.splitlines() if ":" not in line]
+    return [
+        "floor:" if line.startswith("floor:") else line
+        for line in map_text.splitlines()
+        if ":" not in line or line.startswith(("floor:", "connection:"))
+    ]
 
 
-def table_increments(items: Sequence[Trajectory], n_states: int) -> dict[str, TableCounts]:
+def actions_of(map_text: str) -> int:
+    """The actions of a stored map, the width of its counts: 6 on a map of several floors
+    (N, E, S, W, U, D), else 4 (every map a version before floors stored)."""
+    return BUILDING_ACTIONS if is_floors_text(map_text) else GRID_ACTIONS
+
+
+def table_increments(
+    items: Sequence[Trajectory], n_states: int, n_actions: int = GRID_ACTIONS
+) -> dict[str, TableCounts]:
     """What ``items`` add to each table: every trajectory to ``"*"``, typed ones to their type
     (eq. (1) with delta = 0, as :class:`ActionPrior` counts them)."""
     groups: dict[str, list[IntArray]] = {POOLED: [t.pairs for t in items]}
@@ -200,7 +221,9 @@ def table_increments(items: Sequence[Trajectory], n_states: int) -> dict[str, Ta
         if t.agent_type is not None:
             groups.setdefault(t.agent_type, []).append(t.pairs)
     return {
-        key: TableCounts(len(trajs), trajectory_counts(trajs, n_states).astype(np.int64))
+        key: TableCounts(
+            len(trajs), trajectory_counts(trajs, n_states, n_actions=n_actions).astype(np.int64)
+        )
         for key, trajs in groups.items()
     }
 
@@ -362,13 +385,16 @@ class Store:
         return conn.execute(select(DomainRow.id).where(DomainRow.name == name)).scalar()
 
     # ---- trajectories and counts --------------------------------------------------------------
-    def add_trajectories(self, name: str, items: Sequence[Trajectory], n_states: int) -> int:
-        """Store ``items`` and add their counts, in one transaction; returns the domain's data
-        version that holds them. KeyError: no such domain.
+    def add_trajectories(
+        self, name: str, items: Sequence[Trajectory], n_states: int, n_actions: int = GRID_ACTIONS
+    ) -> int:
+        """Store ``items`` and add their counts (``n_actions`` wide: the map's actions), in one
+        transaction; returns the domain's data version that holds them. KeyError: no such
+        domain.
 
         Two writers may both create a table's counts row; the loser's transaction is rolled
         back whole and retried, and then finds the row and adds to it."""
-        increments = table_increments(items, n_states)
+        increments = table_increments(items, n_states, n_actions)
         for attempt in range(RETRIES):
             try:
                 return self._add_trajectories(name, items, n_states, increments)
@@ -421,7 +447,7 @@ class Store:
                       "counts": _pack(inc.counts)}  # fmt: skip
             conn.execute(insert(CountsRow).values(**values))
             return
-        total = _unpack(row.counts, 4) + inc.counts
+        total = _unpack(row.counts, inc.counts.shape[1]) + inc.counts
         n = row.n_trajectories + inc.n_trajectories
         _check_fits(key, n, total)
         conn.execute(update(CountsRow).where(where).values(n_trajectories=n, counts=_pack(total)))
@@ -430,12 +456,14 @@ class Store:
         """The stored counts of every table of a domain (empty if it has none)."""
         with self.engine.connect() as conn:
             dom = self._domain_id(conn, name)
+            text = conn.execute(select(DomainRow.map_text).where(DomainRow.id == dom)).scalar()
             rows = conn.execute(
                 select(CountsRow.agent_type, CountsRow.n_trajectories, CountsRow.counts).where(
                     CountsRow.domain_id == dom
                 )
             ).all()
-        return {r.agent_type: TableCounts(r.n_trajectories, _unpack(r.counts, 4)) for r in rows}
+        width = actions_of(text or "")
+        return {r.agent_type: TableCounts(r.n_trajectories, _unpack(r.counts, width)) for r in rows}
 
     def trajectories(self, name: str, since: int | None = None) -> list[Trajectory]:
         """The stored trajectories of ``name`` in the order they were stored (``since``: only
@@ -455,10 +483,12 @@ class Store:
             ).all()  # fmt: skip
         return [Trajectory(r.agent_type, _unpack(r.steps), r.goal, r.version) for r in rows]
 
-    def recount(self, name: str, n_states: int) -> dict[str, TableCounts]:
+    def recount(
+        self, name: str, n_states: int, n_actions: int = GRID_ACTIONS
+    ) -> dict[str, TableCounts]:
         """The counts recomputed from the stored trajectories (to check :meth:`counts`)."""
         items = self.trajectories(name)
-        return table_increments(items, n_states) if items else {}
+        return table_increments(items, n_states, n_actions) if items else {}
 
 
 def _with_deadlines(engine: Engine, deadline: float) -> None:

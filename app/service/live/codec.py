@@ -35,7 +35,7 @@ from app import strategies
 from app.advice.advisor import Advisor, Decision, DecisionBatch
 from app.advice.guide import GuideAdvisor, upgraded_compliance, upgraded_evidence
 from app.advice.models import AdviceTables
-from app.domain.grid import GridDomain
+from app.domain.building import Domain
 from app.service.data.domains import DomainState
 from app.service.live.history import AdviceLog, Recent
 from app.service.live.registry import RECENT_ADVICE, Budget, LiveSession
@@ -62,10 +62,10 @@ class CodecError(ValueError):
 _SLOTS: dict[type, list[str]] = {}
 
 
-_DIGESTS: weakref.WeakKeyDictionary[GridDomain, bytes] = weakref.WeakKeyDictionary()
+_DIGESTS: weakref.WeakKeyDictionary[Domain, bytes] = weakref.WeakKeyDictionary()
 
 
-def map_digest(grid: GridDomain) -> bytes:
+def map_digest(grid: Domain) -> bytes:
     """What a session keeps of its map: the SHA-256 of its rows (a session loaded on another
     map of the same name is refused), made once a map."""
     digest = _DIGESTS.get(grid)
@@ -186,7 +186,9 @@ def _unadvice_log(v: dict[str, bytes] | None, tables: AdviceTables) -> AdviceLog
 
 #: a record's head: its first step, kappa, the advice count and benefit before it, its length
 _HEAD = struct.Struct("<qdqdI")
-_I4, _F8, _ADVICE = struct.Struct("<i"), struct.Struct("<d"), struct.Struct("<4d")
+_I4, _F8 = struct.Struct("<i"), struct.Struct("<d")
+#: a piece of advice of 4 actions, or 6 on a map of several floors
+_ADVICE = {4: struct.Struct("<4d"), 6: struct.Struct("<6d")}
 
 
 def replay_record(b: DecisionBatch) -> bytes:
@@ -208,7 +210,8 @@ def replay_record(b: DecisionBatch) -> bytes:
 def decision_record(d: Decision, kappa: float, count_before: int, benefit_before: float) -> bytes:
     """:func:`replay_record` of one decision, without making a batch of it (the one-event
     path: numpy arrays of one cost more than the rest)."""
-    advice = _ADVICE.pack(*d.advice) if d.advise and d.advice is not None else b""
+    given = d.advice if d.advise else None
+    advice = b"" if given is None else _ADVICE[len(given)].pack(*given)
     return b"".join((
         _HEAD.pack(d.step, kappa, count_before, benefit_before, 1),
         _I4.pack(d.state), b"\x01" if d.advise else b"\x00", _F8.pack(d.kl),
@@ -216,8 +219,9 @@ def decision_record(d: Decision, kappa: float, count_before: int, benefit_before
     ))  # fmt: skip
 
 
-def _read_record(raw: bytes, at: int) -> tuple[DecisionBatch, int]:
-    """The record that starts at ``at`` of ``raw``, and where the next one starts."""
+def _read_record(raw: bytes, at: int, width: int) -> tuple[DecisionBatch, int]:
+    """The record that starts at ``at`` of ``raw`` (advice of ``width`` actions: the
+    session's domain's), and where the next one starts."""
     if len(raw) - at < _HEAD.size:
         raise CodecError("a decision record cut short")
     first, kappa, count_before, benefit_before, n = _HEAD.unpack_from(raw, at)
@@ -233,7 +237,7 @@ def _read_record(raw: bytes, at: int) -> tuple[DecisionBatch, int]:
         state = column("<i4", n).astype(np.int64)
         advise = column("u1", n).astype(np.bool_)
         kl, p = column("<f8", n), column("<f8", n)
-        advice = column("<f8", 4 * int(np.count_nonzero(advise))).reshape(-1, 4)
+        advice = column("<f8", width * int(np.count_nonzero(advise))).reshape(-1, width)
     except ValueError as exc:  # frombuffer past the end
         raise CodecError("a decision record cut short") from exc
     count = count_before + np.cumsum(advise, dtype=np.int64)
@@ -245,19 +249,20 @@ def _read_record(raw: bytes, at: int) -> tuple[DecisionBatch, int]:
     return batch, at
 
 
-def read_replay_record(raw: bytes) -> DecisionBatch:
-    """The batch :func:`replay_record` (or :func:`decision_record`) wrote."""
-    batch, end = _read_record(raw, 0)
+def read_replay_record(raw: bytes, width: int = 4) -> DecisionBatch:
+    """The batch :func:`replay_record` (or :func:`decision_record`) wrote, of advice of
+    ``width`` actions."""
+    batch, end = _read_record(raw, 0, width)
     if end != len(raw):
         raise CodecError("bytes after a decision record")
     return batch
 
 
-def read_replay_records(raw: bytes) -> list[DecisionBatch]:
+def read_replay_records(raw: bytes, width: int = 4) -> list[DecisionBatch]:
     """The batches of records written one after another, in their order."""
     out, at = [], 0
     while at < len(raw):
-        batch, at = _read_record(raw, at)
+        batch, at = _read_record(raw, at, width)
         out.append(batch)
     return out
 
@@ -304,8 +309,9 @@ def packed_record(record: bytes) -> bytes:
     return _FRAME.pack(len(data)) + data
 
 
-def read_packed_records(raw: bytes) -> list[DecisionBatch]:
-    """The batches of records :func:`packed_record` wrote one after another, in their order."""
+def read_packed_records(raw: bytes, width: int = 4) -> list[DecisionBatch]:
+    """The batches of records :func:`packed_record` wrote one after another, in their order
+    (advice of ``width`` actions)."""
     out, at = [], 0
     while at < len(raw):
         if len(raw) - at < _FRAME.size:
@@ -314,7 +320,7 @@ def read_packed_records(raw: bytes) -> list[DecisionBatch]:
         at += _FRAME.size
         if len(raw) - at < n:
             raise CodecError("a decision record cut short")
-        out.extend(read_replay_records(unpacked(raw[at : at + n])))
+        out.extend(read_replay_records(unpacked(raw[at : at + n]), width))
         at += n
     return out
 
@@ -371,7 +377,7 @@ def load(raw: bytes | dict[str, Any], domain: DomainState, replay_steps: int) ->
         _unadvice_log(v["advice_log"], advisor.tables), client=v["client"],
         reserved=v["reserved"], born=mono - (wall - v["born"]),
         path_times=_unring(v["path_times"]), token_digest=v["token_digest"],
-        replay=Replay.of(replay_steps, v["replay"]),
+        replay=Replay.of(replay_steps, v["replay"], domain.domain.n_actions),
         # written since advice budgets came: a session written before has none
         budget=None if v.get("budget") is None else Budget(*v["budget"]),
         tokens=v.get("tokens", 0.0), tokens_at=v.get("tokens_at", 0.0),

@@ -90,13 +90,14 @@ class AdviceLog:
     of where explorers were: :meth:`forget_before`). About 1.7 kB for 50 entries where a deque
     of tuples takes about 7 kB: 100,000 sessions hold one each (docs/PERFORMANCE.md, memory)."""
 
-    __slots__ = ("_buf", "_count", "_done", "_own", "_rows_out", "_tables", "_written")
+    __slots__ = ("_buf", "_count", "_done", "_own", "_rows_out", "_tables", "_width", "_written")
 
     def __init__(self, size: int):
         # rows step, state, index into _tables, when; an array.array, as in Recent
         self._buf = array("q", bytes(8 * ROWS * size))
         self._count = 0
         self._tables: list[AdviceTables] = []
+        self._width = 4  # the actions of the tables' domain (6 on a map of several floors)
         # the advice itself, for advisors whose advice is not theta_s (made at the first one)
         self._own: npt.NDArray[np.float64] | None = None
         self._written: dict[str, bytes] | None = None  # what written() gave, while unchanged
@@ -127,9 +128,9 @@ class AdviceLog:
             buf[2, ring] = which
             buf[3, ring] = when
         if advice is not None and self._own is None:
-            self._own = np.full((size, 4), np.nan)
+            self._own = np.full((size, self._width), np.nan)
         if self._own is not None:  # NaN rows: theta_s of the tables
-            rows = np.full((m, 4), np.nan) if advice is None else advice[k - m :]
+            rows = np.full((m, self._width), np.nan) if advice is None else advice[k - m :]
             for ring, part in spans:
                 self._own[ring] = rows[part]
         self._count += k
@@ -145,7 +146,7 @@ class AdviceLog:
         buf[at], buf[size + at], buf[2 * size + at] = step, state, which
         buf[3 * size + at] = when
         if advice is not None and self._own is None:
-            self._own = np.full((size, 4), np.nan)
+            self._own = np.full((size, self._width), np.nan)
         if self._own is not None:  # NaN row: theta_s of the tables
             self._own[at] = np.nan if advice is None else advice
         self._count += 1
@@ -156,6 +157,7 @@ class AdviceLog:
         if not self._tables or self._tables[-1] is not tables:
             self._compact()
             self._tables.append(tables)
+            self._width = tables.n_actions
         return len(self._tables) - 1
 
     def _rows(self) -> npt.NDArray[np.int64]:
@@ -213,7 +215,7 @@ class AdviceLog:
             return self._written
         size = len(self._buf) // ROWS
         if self._rows_out is None:  # made (again): every entry kept is new to it
-            self._rows_out = np.full((size, 4), np.nan)
+            self._rows_out = np.full((size, self._width), np.nan)
             self._done = self._count - min(self._count, size)
         new = range(max(self._done, self._count - size), self._count)
         if len(new) <= 4:  # one or two since the last call, as a rule: no index arrays
@@ -232,7 +234,7 @@ class AdviceLog:
             if which[0] == which[-1]:  # one table, as a rule (indices only grow along the ring)
                 out = self._tables[int(which[0])].theta[states]
             else:
-                out = np.empty((len(slots), 4))
+                out = np.empty((len(slots), self._width))
                 for t in np.unique(which).tolist():
                     pick = which == t
                     out[pick] = self._tables[t].theta[states[pick]]
@@ -257,7 +259,7 @@ class AdviceLog:
         advice; ``tables`` stands for the table index, never read)."""
         log = cls(size)
         steps = np.frombuffer(v["steps"], dtype=np.int64)
-        advice = np.frombuffer(v["advice"], dtype=np.float64).reshape(-1, 4)
+        advice = np.frombuffer(v["advice"], dtype=np.float64).reshape(-1, tables.n_actions)
         if len(steps):
             log.extend(
                 steps, np.frombuffer(v["states"], dtype=np.int64), tables, advice,
@@ -274,6 +276,6 @@ class AdviceLog:
             return [(a, s, self._tables[t]) for a, s, t in zip(steps, states, which, strict=True)]
         own = self._own[order].tolist()
         return [
-            (a, s, self._tables[t] if o[0] != o[0] else (o[0], o[1], o[2], o[3]))  # NaN: theta
+            (a, s, self._tables[t] if o[0] != o[0] else tuple(o))  # NaN: theta
             for a, s, t, o in zip(steps, states, which, own, strict=True)
         ]

@@ -289,7 +289,7 @@ class SessionSnapshot:
     strategy: str
     params: dict[str, int | float]  # the strategy's parameters in force
     steps: int
-    position: tuple[int, int]
+    position: tuple[int, ...]
     p_normal: float
     advice_count: int
     total_cost: float
@@ -297,17 +297,17 @@ class SessionSnapshot:
     advice_per_100: float
     created_at: datetime
     idle_seconds: float
-    path: list[tuple[int, int]]
+    path: list[tuple[int, ...]]
     p_history: list[float]
-    advice: list[tuple[int, tuple[int, int], Advice]]  # (step, cell, theta_s), oldest first
+    advice: list[tuple[int, tuple[int, ...], Advice]]  # (step, cell, theta_s), oldest first
     # advisors with a goal posterior: (goal cell, P(goal | H), ruled out) per goal of the map
-    goals: list[tuple[tuple[int, int], float, bool]] | None = None
+    goals: list[tuple[tuple[int, ...], float, bool]] | None = None
     budget: Budget | None = None  # its advice budget
     advice_left: tuple[int | None, int | None] = (None, None)  # in all, this minute
     muted: bool = False
     beliefs: Beliefs | None = None  # what its advisor believes, in plain words
     # the destination its advice leads to: (goal index, cell, name or None)
-    leads_to: tuple[int, tuple[int, int], str | None] | None = None
+    leads_to: tuple[int, tuple[int, ...], str | None] | None = None
 
 
 class SessionRegistry:
@@ -346,7 +346,8 @@ class SessionRegistry:
         """Bytes a session with ``advisor`` reserves: the most its advisor's arrays can take,
         its history rings (int32 cells, float32 P(M1 | H)), the decisions it keeps for retries
         and :data:`SESSION_OVERHEAD`."""
-        rings = 4 * sum(self.history_sizes) + Replay.footprint(self.replay_steps)
+        width = advisor.tables.n_actions
+        rings = 4 * sum(self.history_sizes) + Replay.footprint(self.replay_steps, width)
         return advisor.footprint() + rings + SESSION_OVERHEAD
 
     def client_usage(self, client: str) -> tuple[int, int]:
@@ -389,7 +390,8 @@ class SessionRegistry:
             session = LiveSession(
                 sid, token, domain, agent_type, key, advisor, start, decision.p_normal,
                 datetime.now(UTC), now, self.history_sizes, client=client, reserved=need,
-                born=now, token_digest=token_digest(token), replay=Replay(self.replay_steps),
+                born=now, token_digest=token_digest(token),
+                replay=Replay(self.replay_steps, domain.domain.n_actions),
                 budget=budget, tokens=tokens, tokens_at=wall,
             )  # fmt: skip
             session.spent(0)  # the start decision's advice, if any, left this minute's bucket
@@ -770,8 +772,8 @@ def _snap(r: _Raw) -> SessionSnapshot:
     s = r.s
     cells = s.domain.domain.cells
 
-    def cell(state: int) -> tuple[int, int]:
-        return int(cells[state, 0]), int(cells[state, 1])
+    def cell(state: int) -> tuple[int, ...]:
+        return tuple(cells[state].tolist())
 
     path = cells[r.path if r.path is not None else [r.position]].tolist()
     grid = s.domain.domain
@@ -781,7 +783,7 @@ def _snap(r: _Raw) -> SessionSnapshot:
     return SessionSnapshot(
         s.id, s.domain.name, s.agent_type, s.table_key, r.kappa, r.window, r.strategy,
         r.params, r.steps, cell(r.position), r.p_normal, r.advice_count, r.total_cost,
-        r.benefit, r.advice_per_100, s.created_at, r.idle, [(a, b) for a, b in path],
+        r.benefit, r.advice_per_100, s.created_at, r.idle, [tuple(c) for c in path],
         r.p_history.tolist() if r.p_history is not None else [r.p_normal],
         [(step, cell(st), _advice(tables, st)) for step, st, tables in r.advice],
         None if r.beliefs is None else [(cell(g), p, out) for g, p, out in r.beliefs],
@@ -799,5 +801,4 @@ def beliefs_of(advisor: Advisor, p_normal: float) -> Beliefs:
 def _advice(source: AdviceTables | Advice, state: int) -> Advice:
     if not isinstance(source, AdviceTables):
         return source
-    n, e, s, w = source.theta[state].tolist()
-    return (n, e, s, w)
+    return tuple(source.theta[state].tolist())

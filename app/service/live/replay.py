@@ -5,7 +5,8 @@ An event may carry ``"step": n``, the session step it is meant to be (the first 
 session is step 1). A step the session has already applied is answered from here with the
 decision it got, and nothing is applied; a step that is neither applied nor the next one is
 refused (409). :class:`Replay` keeps the last ``limit`` decisions in one ring of 53-byte rows
-(state, advised, KL, P(M1 | H), the advice), grown as the session goes up to ``limit``; the
+(state, advised, KL, P(M1 | H), the advice; 69 bytes on a map of several floors, six actions'
+advice), grown as the session goes up to ``limit``; the
 running advice count and benefit of each row follow exactly from the figures before the
 oldest row (the advisor adds them up one decision at a time, as ``np.add.accumulate`` does).
 """
@@ -21,14 +22,19 @@ import numpy.typing as npt
 from app.advice.advisor import Decision, DecisionBatch
 from app.arrays import Moves
 
-ROW = np.dtype(
-    [("state", "<i4"), ("advise", "u1"), ("kl", "<f8"), ("p", "<f8"), ("advice", "<f8", (4,))]
-)
-#: a row as packed bytes (``ROW`` has no padding), and the (advise, kl) of one
-_ROW = struct.Struct("<iBdd4d")
+#: a row of each width of advice (the domain's actions: 4, or 6 on a map of several floors)
+ROWS = {
+    w: np.dtype(
+        [("state", "<i4"), ("advise", "u1"), ("kl", "<f8"), ("p", "<f8"), ("advice", "<f8", (w,))]
+    )
+    for w in (4, 6)
+}
+ROW = ROWS[4]
+#: a row as packed bytes (``ROWS`` have no padding), and the (advise, kl) of one
+_PACKED = {w: struct.Struct(f"<iBdd{w}d") for w in ROWS}
 _OLD = struct.Struct("<4xBd")
-_NO_ADVICE = (np.nan,) * 4
-assert _ROW.size == ROW.itemsize
+_NO_ADVICE = {w: (np.nan,) * w for w in ROWS}
+assert all(_PACKED[w].size == ROWS[w].itemsize for w in ROWS)
 DEFAULT_STEPS = 500
 
 
@@ -37,21 +43,22 @@ class StepConflict(ValueError):
 
 
 class Replay:
-    """The last ``limit`` decisions of one session (0: none kept)."""
+    """The last ``limit`` decisions of one session (0: none kept) of ``width`` actions."""
 
-    __slots__ = ("_benefit_base", "_count", "_count_base", "_rows", "limit")
+    __slots__ = ("_benefit_base", "_count", "_count_base", "_rows", "limit", "width")
 
-    def __init__(self, limit: int):
+    def __init__(self, limit: int, width: int = 4):
         self.limit = limit
+        self.width = width
         self._rows: npt.NDArray[np.void] | None = None  # made at the first decision, then grown
         self._count = 0  # rows written since the ring was made (or grown, or restarted)
         self._count_base = 0  # advice count and benefit before the oldest row kept
         self._benefit_base = 0.0
 
     @staticmethod
-    def footprint(limit: int) -> int:
+    def footprint(limit: int, width: int = 4) -> int:
         """Bytes a ring of ``limit`` rows takes at most."""
-        return ROW.itemsize * limit
+        return ROWS[width].itemsize * limit
 
     @property
     def kept(self) -> int:
@@ -60,7 +67,7 @@ class Replay:
     def _ordered(self) -> npt.NDArray[np.void]:
         rows, m = self._rows, self.kept
         if rows is None or not m:
-            return np.zeros(0, dtype=ROW)
+            return np.zeros(0, dtype=ROWS[self.width])
         return rows[np.arange(self._count - m, self._count) % len(rows)]
 
     def _room(self, k: int) -> npt.NDArray[np.void]:
@@ -70,7 +77,7 @@ class Replay:
         need = min(self.limit, kept + k)
         if rows is None or len(rows) < need:
             size = min(self.limit, max(need, 2 * (0 if rows is None else len(rows)), 8))
-            grown = np.zeros(size, dtype=ROW)
+            grown = np.zeros(size, dtype=ROWS[self.width])
             grown[:kept] = self._ordered()
             self._rows = rows = grown
             self._count = kept
@@ -96,16 +103,16 @@ class Replay:
         if rows is None or (count >= len(rows) and len(rows) < limit):
             rows = self._room(1)  # made, or grown (the first ``limit`` decisions only)
             count = self._count
-        at = count % len(rows)
+        at, packed = count % len(rows), _PACKED[self.width]
         if count >= len(rows):  # full: the oldest row, overwritten, goes into the base
-            advised, kl = _OLD.unpack_from(rows, at * _ROW.size)  # type: ignore[arg-type]
+            advised, kl = _OLD.unpack_from(rows, at * packed.size)  # type: ignore[arg-type]
             if advised:
                 self._count_base += 1
                 self._benefit_base += kl
         advise = bool(d.advise)
-        advice = d.advice if advise and d.advice is not None else _NO_ADVICE
+        advice = d.advice if advise and d.advice is not None else _NO_ADVICE[self.width]
         row = (d.state, advise, d.kl, d.p_normal, *advice)
-        _ROW.pack_into(rows, at * _ROW.size, *row)  # type: ignore[arg-type]  # a buffer
+        packed.pack_into(rows, at * packed.size, *row)  # type: ignore[arg-type]  # a buffer
         self._count = count + 1
 
     def add(self, b: DecisionBatch) -> None:
@@ -121,7 +128,7 @@ class Replay:
             )
             b, n = part(b, cut, n), self.limit
         rows = self._room(n)
-        new = np.zeros(n, dtype=ROW)
+        new = np.zeros(n, dtype=ROWS[self.width])
         new["state"], new["advise"], new["kl"], new["p"] = b.state, b.advise, b.kl, b.p_normal
         new["advice"] = np.nan
         new["advice"][b.advise] = b.advice
@@ -163,13 +170,14 @@ class Replay:
         }  # fmt: skip
 
     @classmethod
-    def of(cls, limit: int, state: dict[str, object] | None) -> Replay:
-        """A ring of ``limit`` rows holding what :meth:`state` wrote (its newest rows, if
-        ``limit`` is smaller now)."""
-        r = cls(limit)
+    def of(cls, limit: int, state: dict[str, object] | None, width: int = 4) -> Replay:
+        """A ring of ``limit`` rows of ``width`` actions holding what :meth:`state` wrote (its
+        newest rows, if ``limit`` is smaller now)."""
+        r = cls(limit, width)
         if not state or not limit:
             return r
-        rows = np.frombuffer(state["rows"], dtype=ROW)  # type: ignore[call-overload]
+        row = ROWS[width]
+        rows = np.frombuffer(state["rows"], dtype=row)  # type: ignore[call-overload]
         r._count_base = int(state["count_base"])  # type: ignore[call-overload]
         r._benefit_base = float(state["benefit_base"])  # type: ignore[arg-type]
         if len(rows) > limit:  # the oldest go into the base
@@ -180,7 +188,7 @@ class Replay:
                 r._benefit_base += kl
             rows = rows[len(rows) - limit :]
         if len(rows):
-            r._rows = np.zeros(min(limit, max(len(rows), 8)), dtype=ROW)
+            r._rows = np.zeros(min(limit, max(len(rows), 8)), dtype=row)
             r._rows[: len(rows)] = rows
             r._count = len(rows)
         return r

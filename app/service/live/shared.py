@@ -704,7 +704,8 @@ class SharedSessions:
         if first_step <= steps:  # a retry: the decisions Redis keeps
             key = f"{self.prefix}:r:{session.id}"
             older, newer = await self.redis.mget(key + ":old", key)
-            batches = codec.read_packed_records((older or b"") + (newer or b""))
+            width = session.domain.domain.n_actions
+            batches = codec.read_packed_records((older or b"") + (newer or b""), width)
         done, rest = retried(
             session.id, steps, first_step, moves, lambda first, n: _covering(batches, first, n),
             sum(len(b) for b in batches),

@@ -437,7 +437,7 @@ def _check(
             s2 = next_state[s, a]
         if a < 0 or has_next:
             lands = -1
-            for k in range(4):
+            for k in range(next_state.shape[1]):
                 if next_state[s, k] == s2:
                     lands = k
                     break

@@ -15,6 +15,7 @@ Every number's text is orjson's shortest round-trip form, on every path.
 from __future__ import annotations
 
 import weakref
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -24,26 +25,31 @@ from advisor_client import protocol
 from app.advice.advisor import Decision, DecisionBatch
 from app.advice.models import AdviceTables
 from app.arrays import FloatArray, IntArray
-from app.domain.grid import GridDomain
+from app.domain.building import ACTIONS, Building, Domain
 from app.service.wire.compiled import tokens, write_decisions
 
 NUMPY = orjson.OPT_SERIALIZE_NUMPY
 
 
-def decision_dict(d: Decision, domain: GridDomain) -> dict[str, Any]:
+def advice_dict(advice: Sequence[float]) -> dict[str, float]:
+    """Advice by action: N, E, S, W, and U, D on a map of several floors."""
+    return dict(zip(ACTIONS[: len(advice)], advice, strict=True))
+
+
+def decision_dict(d: Decision, domain: Domain) -> dict[str, Any]:
     """One decision in the API's shape (``DecisionPublic``)."""
     return {
         "step": d.step,
         "state": domain.cell(d.state),
         "advise": d.advise,
-        "advice": None if d.advice is None else dict(zip("NESW", d.advice, strict=True)),
+        "advice": None if d.advice is None else advice_dict(d.advice),
         "kl": d.kl,
         "p_normal": d.p_normal,
         "cost": {"advice_count": d.advice_count, "total": d.total_cost, "benefit": d.benefit},
     }
 
 
-def decision_json(d: Decision, domain: GridDomain, leads_to: Any = None) -> bytes:
+def decision_json(d: Decision, domain: Domain, leads_to: Any = None) -> bytes:
     """One decision as JSON; ``leads_to``: the destination its advice leads to (a
     ``DestinationPublic`` as a dict), written only when given."""
     out = decision_dict(d, domain)
@@ -52,8 +58,11 @@ def decision_json(d: Decision, domain: GridDomain, leads_to: Any = None) -> byte
     return orjson.dumps(out)
 
 
-def batch_json(out: DecisionBatch, domain: GridDomain) -> bytes:
-    """A batch of decisions as a JSON list."""
+def batch_json(out: DecisionBatch, domain: Domain) -> bytes:
+    """A batch of decisions as a JSON list (on a map of several floors written by orjson
+    from a dict a decision: the compiled layout writes four actions and two coordinates)."""
+    if isinstance(domain, Building):
+        return orjson.dumps(batch_dicts(out, domain))
     numbers = orjson.dumps((out.kl, out.p_normal, out.total_cost, out.benefit), option=NUMPY)
     if out.advised_from is not None:  # theta_s: the tables' text, made once
         text, lo, hi = theta_text(out.advised_from)
@@ -107,8 +116,32 @@ def theta_text(tables: AdviceTables) -> tuple[bytes, IntArray, IntArray]:
     return made
 
 
-def batch_binary(out: DecisionBatch, domain: GridDomain) -> bytes:
-    """A batch of decisions as one binary frame."""
+def batch_dicts(out: DecisionBatch, domain: Domain) -> list[dict[str, Any]]:
+    """A batch's decisions in the API's shape (``DecisionPublic``), as :func:`decision_dict`
+    writes each."""
+    cells = domain.cells[out.state].tolist()
+    advice = iter(out.advice.tolist())
+    columns = zip(
+        cells, out.advise.tolist(), out.kl.tolist(), out.p_normal.tolist(),
+        out.advice_count.tolist(), out.total_cost.tolist(), out.benefit.tolist(), strict=True,
+    )  # fmt: skip
+    return [
+        {
+            "step": out.first_step + i,
+            "state": cell,
+            "advise": advise,
+            "advice": advice_dict(next(advice)) if advise else None,
+            "kl": kl,
+            "p_normal": p,
+            "cost": {"advice_count": count, "total": total, "benefit": benefit},
+        }
+        for i, (cell, advise, kl, p, count, total, benefit) in enumerate(columns)
+    ]
+
+
+def batch_binary(out: DecisionBatch, domain: Domain) -> bytes:
+    """A batch of decisions as one binary frame (a map of several floors: the frame's wide
+    form, :data:`advisor_client.protocol.FLOORS`)."""
     return protocol.pack(
         out.first_step, out.kappa, out.count_before, out.benefit_before, out.kl, out.p_normal,
         out.advice, domain.cells[out.state].astype(np.int32), out.advise,

@@ -1,6 +1,7 @@
 """Events in: JSON text to checked (s, a, s'), with one set of checks and one set of words.
 
-An event ``{"state": [r, c], "action": "E", "next_state": [r, c]}`` becomes (s, a, s'):
+An event ``{"state": [r, c], "action": "E", "next_state": [r, c]}`` becomes (s, a, s'); on a
+map of several floors cells are ``[floor, row, col]`` and the actions also ``U`` and ``D``:
 
 * without ``next_state`` the domain's transitions give it: ``s' = T(s, a)``;
 * without ``action`` it is the move from ``s`` to ``s'``; an unchanged cell is ambiguous (a
@@ -33,6 +34,7 @@ import numpy as np
 from pydantic import TypeAdapter, ValidationError
 
 from app.arrays import IntArray, Moves
+from app.domain.building import Building, Domain
 from app.domain.grid import GridDomain, packed
 from app.service.problems import BadInput, describe_errors
 from app.service.schemas import ACTION_CODE, EventIn
@@ -50,15 +52,15 @@ AMBIGUOUS = (
 )
 
 
-def reason_text(domain: GridDomain, reason: int, cell: list[int], nxt: list[int]) -> str:
+def reason_text(domain: Domain, reason: int, cell: list[int], nxt: list[int]) -> str:
     """The words for a reason code of :func:`check_moves` about the event at ``cell``."""
-    rows, cols = domain.shape
+    size = "x".join(str(n) for n in domain.shape)
     if reason == compiled.STATE_OFF:
-        return f"state {cell} is off the {rows}x{cols} map"
+        return f"state {cell} is off the {size} map"
     if reason == compiled.STATE_WALL:
         return f"state {cell} is a wall"
     if reason == compiled.NEXT_OFF:
-        return f"next_state {nxt} is off the {rows}x{cols} map"
+        return f"next_state {nxt} is off the {size} map"
     if reason == compiled.NEXT_WALL:
         return f"next_state {nxt} is a wall"
     if reason == compiled.NO_MOVE:
@@ -81,16 +83,30 @@ def _validate(adapter: TypeAdapter[Any], raw: bytes | str) -> Any:
         raise BadInput(describe_errors(errors)) from None
 
 
-def _arrays(events: list[EventIn]) -> Scanned:
-    """Parsed events as the compiled reader gives them: cells (n, 2), action codes (n,; -1
-    none), next cells (n, 2; -1 none), steps (n,; -1 none)."""
-    n = len(events)
+def cell_words(domain: Domain) -> str:
+    """How a cell of ``domain`` is written, for an error about one of another shape."""
+    if isinstance(domain, Building):
+        return f"this map has {domain.n_floors} floors: a cell is [floor, row, col]"
+    return "this map has one floor: a cell is [row, col]"
+
+
+def _arrays(events: list[EventIn], domain: Domain) -> Scanned:
+    """Parsed events as the compiled reader gives them: cells (n, k), action codes (n,; -1
+    none), next cells (n, k; -1 none), steps (n,; -1 none); ``k`` the domain's coordinates
+    (BadInput names the first event whose cell has another number)."""
+    n, k = len(events), domain.width
+    for i, e in enumerate(events):
+        for key in ("state", "next_state"):
+            cell: Any = e.get(key)
+            if cell is not None and len(cell) != k:
+                raise BadInput(f"event {i}: {key} {list(cell)}: {cell_words(domain)}")
     flat = chain.from_iterable
-    cells = np.fromiter(flat(e["state"] for e in events), np.int64, 2 * n).reshape(n, 2)
+    none = (-1,) * k
+    cells = np.fromiter(flat(e["state"] for e in events), np.int64, k * n).reshape(n, k)
     actions = np.fromiter((ACTION_CODE[e.get("action")] for e in events), np.int64, n)
-    nexts = np.fromiter(flat(e.get("next_state") or (-1, -1) for e in events), np.int64, 2 * n)
+    nexts = np.fromiter(flat(e.get("next_state") or none for e in events), np.int64, k * n)
     steps = np.fromiter((e.get("step", -1) for e in events), np.int64, n)
-    return cells, actions, nexts.reshape(n, 2), steps
+    return cells, actions, nexts.reshape(n, k), steps
 
 
 def first_step(steps: IntArray) -> int | None:
@@ -111,17 +127,39 @@ def first_step(steps: IntArray) -> int | None:
     return first
 
 
-def _checked(domain: GridDomain, cells: IntArray, actions: IntArray, nexts: IntArray) -> Moves:
-    moves, bad, reason = check_moves(domain.state_of, domain.next_state, cells, actions, nexts)
+def _checked(domain: Domain, cells: IntArray, actions: IntArray, nexts: IntArray) -> Moves:
+    if cells.shape[1] != domain.width:  # the compiled reader's [row, col] on a building
+        raise BadInput(f"event 0: state {cells[0].tolist()}: {cell_words(domain)}")
+    wide = np.flatnonzero(actions >= domain.n_actions)
+    if len(wide):
+        i = int(wide[0])
+        raise BadInput(
+            f"event {i}: action {'NESWUD'[actions[i]]!r} changes floor: this map has one "
+            "floor (N, E, S, W)"
+        )
+    state_of, flat, flat_next = domain.state_of, cells, nexts
+    if isinstance(domain, Building):  # floors stacked as rows: [floor * rows + row, col]
+        floors, rows, cols = domain.shape
+        state_of = state_of.reshape(floors * rows, cols)
+        flat, flat_next = _stacked(cells, rows, floors), _stacked(nexts, rows, floors)
+    moves, bad, reason = check_moves(state_of, domain.next_state, flat, actions, flat_next)
     if bad >= 0:
         why = reason_text(domain, reason, cells[bad].tolist(), nexts[bad].tolist())
         raise BadInput(f"event {bad}: {why}")
     return moves
 
 
-def read_moves(
-    domain: GridDomain, raw: bytes | str, max_events: int
-) -> tuple[Moves, bool, int | None]:
+def _stacked(cells: IntArray, rows: int, floors: int) -> IntArray:
+    """Cells ``[floor, row, col]`` as cells of the floors stacked into one grid, ``[floor *
+    rows + row, col]``: a floor or row off the building a row off the grid (the row -1 for a
+    negative one, as the reader's -1 of no cell stays -1; past the last row else)."""
+    f, r = cells[:, 0], cells[:, 1]
+    inside = (f >= 0) & (f < floors) & (r >= 0) & (r < rows)
+    row = np.where(inside, f * rows + r, np.where((f < 0) | (r < 0), -1, floors * rows))
+    return np.column_stack((row, cells[:, 2]))
+
+
+def read_moves(domain: Domain, raw: bytes | str, max_events: int) -> tuple[Moves, bool, int | None]:
     """JSON text (one event or a list) -> (checked (s, a, s') arrays, single, the first
     event's step): single when it was one event object, not a list; the step None when no
     event carries one (:func:`first_step`). BadInput (422, or 413 for too many events) names
@@ -130,10 +168,10 @@ def read_moves(
     if head in (b"[", "["):
         scanned = scan_events(raw)
         if scanned is None:
-            scanned = _arrays(_validate(EVENT_LIST, raw))
+            scanned = _arrays(_validate(EVENT_LIST, raw), domain)
         single = False
     elif head in (b"{", "{"):
-        scanned, single = _arrays([_validate(EVENT, raw)]), True
+        scanned, single = _arrays([_validate(EVENT, raw)], domain), True
     else:
         raise BadInput(NOT_JSON)
     if len(scanned[0]) > max_events:
@@ -144,7 +182,7 @@ def read_moves(
     return _checked(domain, cells, actions, nexts), single, first_step(steps)
 
 
-def read_move(domain: GridDomain, raw: bytes | str) -> tuple[int, int, int, int] | None:
+def read_move(domain: Domain, raw: bytes | str) -> tuple[int, int, int, int] | None:
     """One event object (JSON text) -> its checked (s, a, s') as plain ints and its step (-1:
     none), or None when ``raw`` does not start as an object (then :func:`read_moves` reads
     it). The same checks and errors as :func:`read_moves` gives for it; the common form costs
@@ -153,8 +191,8 @@ def read_move(domain: GridDomain, raw: bytes | str) -> tuple[int, int, int, int]
     if head not in (b"{", "{"):
         return None
     plain = _PLAIN_BYTES.fullmatch(raw) if isinstance(raw, bytes) else _PLAIN_TEXT.fullmatch(raw)
-    if plain is None:
-        cells, actions, nexts, steps = _arrays([_validate(EVENT, raw)])
+    if plain is None or not isinstance(domain, GridDomain):
+        cells, actions, nexts, steps = _arrays([_validate(EVENT, raw)], domain)
         (s,), (a,), (s2,) = _checked(domain, cells, actions, nexts)
         return int(s), int(a), int(s2), int(steps[0])
     r, c, letter, step = plain.groups()

@@ -13,7 +13,7 @@ if TYPE_CHECKING:
     from app.service.data.domains import DomainState
 
 #: a move from the start: reading it makes the one-event reader's lists of a grid
-_START_MOVE = '{{"state": [{}, {}], "action": "N"}}'
+_START_MOVE = '{{"state": [{}], "action": "N"}}'
 
 
 def warm(domain: DomainState) -> None:
@@ -23,4 +23,4 @@ def warm(domain: DomainState) -> None:
     for tables in domain.view.tables.values():
         theta_text(tables)
     grid = domain.domain
-    read_move(grid, _START_MOVE.format(*grid.cell(grid.start)))
+    read_move(grid, _START_MOVE.format(", ".join(map(str, grid.cell(grid.start)))))

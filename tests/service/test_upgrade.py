@@ -1,0 +1,79 @@
+"""An upgrade keeps what the version before floors wrote: its database (domains, trajectories,
+counts four actions wide, the sessions a graceful stop kept) and its sessions as Redis keeps
+them (packed session, packed decision records), read with no migration step.
+
+``fixtures/previous`` was written by that version (commit aae9804) with
+``fixtures/make_previous.py``, which says how; its ``expected.json`` holds what that version
+answered next on the same data, and this version must answer the same, byte for byte once
+parsed (timestamps of the session aside)."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+from typing import Any
+
+import pytest
+from fastapi.testclient import TestClient
+
+from app.service.live import codec
+from app.service.main import create_app
+from app.service.state import ServiceState
+from app.service.wire.encode import batch_dicts, decision_dict
+from tests.service.conftest import make_settings
+
+PREVIOUS = Path(__file__).parent / "fixtures" / "previous"
+EXPECTED: dict[str, Any] = json.loads((PREVIOUS / "expected.json").read_text())
+#: what a session's summary holds that does not depend on when it is read
+STEADY = ("advice_count", "benefit", "goals", "kappa", "p_normal", "params", "position",
+          "prior_table", "steps", "strategy", "total_cost", "window", "beliefs")  # fmt: skip
+
+
+@pytest.fixture
+def upgraded(tmp_path: Path) -> Any:
+    data = tmp_path / "data"
+    shutil.copytree(PREVIOUS / "data", data)
+    settings = make_settings(data, bootstrap_per_goal=1, replay_steps=8)
+    with TestClient(create_app(settings)) as client:
+        yield client
+
+
+def test_the_previous_version_s_database_and_kept_sessions_go_on_as_they_would_have(
+    upgraded: TestClient,
+) -> None:
+    client = upgraded
+    for name in ("default", "tiny"):
+        assert client.get(f"/domains/{name}").json() == EXPECTED[name]
+    prior = client.get("/domains/tiny/prior", params={"agent_type": "guest"})
+    assert prior.json() == EXPECTED["tiny_prior"]
+    for s in EXPECTED["sessions"]:
+        auth = {"Authorization": f"Bearer {s['token']}"}
+        r = client.post(f"/sessions/{s['id']}/events", json=s["more"], headers=auth)
+        assert r.status_code == 200, r.text
+        assert r.json() == s["answers"]
+        again = client.post(f"/sessions/{s['id']}/events", json=s["retry"], headers=auth)
+        assert again.json() == s["retried"]
+        summary = client.get(f"/sessions/{s['id']}", headers=auth).json()
+        assert {k: summary[k] for k in STEADY} == {k: s["summary"][k] for k in STEADY}
+
+
+def test_sessions_the_previous_version_kept_in_redis_read_as_they_were(
+    upgraded: TestClient,
+) -> None:
+    """The Redis form (read by ``codec``, as every worker reads it): the session goes on with
+    the answers that version gave, and its decision records read back as it answered them."""
+    service: ServiceState = upgraded.app.state.service  # type: ignore[attr-defined]
+    for i, s in enumerate(EXPECTED["sessions"]):
+        domain = service.catalog.get(s["domain"])
+        raw = (PREVIOUS / "redis" / f"{i}.session").read_bytes()
+        session = codec.load(codec.unpacked(raw), domain, 8)
+        records = codec.read_packed_records((PREVIOUS / "redis" / f"{i}.records").read_bytes())
+        kept = [d for batch in records for d in batch_dicts(batch, domain.domain)]
+        assert kept == s["first_answers"][-len(kept) :] and len(kept) == 8
+        grid = domain.domain
+        for event, answer in zip(s["more"], s["answers"], strict=True):
+            here = grid.state(*event["state"])
+            a = "NESW".index(event["action"])
+            d = session.advisor.observe(here, a, int(grid.next_state[here, a]))
+            assert json.loads(json.dumps(decision_dict(d, grid))) == answer
