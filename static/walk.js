@@ -3,7 +3,10 @@
 // Beside the maze, always in view (the map scrolls and zooms in its own box): what the advisor
 // believes of the walker as its strategy says it (GET /sessions/{id} with the session's token,
 // read again after each decision), where its advice leads, the advice's worth against its price
-// κ, P(M1|H) after each move, the map's destinations by name, and a legend.
+// κ, P(M1|H) after each move, the map's destinations by name, and a legend. On a building of
+// several floors (GET /domains/{name} has "floors") the map is the walker's floor, followed as
+// it rides; cells are [floor, row, col], PageUp/PageDown (R/F) ride where a stair or lift is,
+// and advice says "take the lift up" as it says "go east".
 "use strict";
 
 (() => {
@@ -12,7 +15,12 @@
   const KEYS = {
     ArrowUp: "N", ArrowRight: "E", ArrowDown: "S", ArrowLeft: "W",
     w: "N", d: "E", s: "S", a: "W", W: "N", D: "E", S: "S", A: "W",
+    PageUp: "U", PageDown: "D", r: "U", f: "D", R: "U", F: "D",
   };
+  const RIDES = ["U", "D"];
+  const RIDE_ARROWS = { U: "⇧", D: "⇩" };
+  const WAYS = { N: "go north", E: "go east", S: "go south", W: "go west" };
+  const STOP_FILL = "#7a4fc2"; // a stop of stairs or a lift
   const MIN_ADVICE_P = 0.03; // arrows below this probability are not drawn
   const ADVISED_FILL = "rgba(214, 69, 69, 0.35)"; // a dot where advice was given
   const $ = (id) => document.getElementById(id);
@@ -24,6 +32,9 @@
     decision: null, advice: null, advisedCells: [], background: null, domain: null,
     history: [], // {step, p, advised} of every decision of this walk, oldest first
     beliefs: null, leadsTo: null, asking: false, askAgain: false,
+    // a building: its floors (GET /domains' "floors"), the floor drawn, and each stop's rides
+    // ("f,r,c" -> {U: [f, r, c] or null, D: ..., kind, name})
+    floors: null, floor: 0, stops: new Map(),
   };
   const ZOOM = [2, 3, 4, 6, 8, 10, 12, 16, 20, 24, 32]; // cell sizes, CSS pixels
   // What each strategy's advice is, in plain words (GET /strategies: its entry says it).
@@ -37,7 +48,8 @@
       off.height = canvas.height;
       const octx = off.getContext("2d");
       octx.setTransform(ctx.getTransform());
-      canvas.dataset.labelPx = drawMaze(octx, walk.map, walk.cell, walk.domain.goal_names);
+      canvas.dataset.labelPx = drawMaze(octx, walk.map, walk.cell, floorGoalNames());
+      if (walk.floors) drawStops(octx);
       walk.background = off;
     }
     return walk.background;
@@ -54,11 +66,112 @@
     return r >= 0 && r < map.length && c >= 0 && c < map[0].length && map[r][c] !== "#";
   }
 
-  // The same transitions as the service: a move into a wall or off the map stays put.
+  /** A cell's row and column (a building's cells are [floor, row, col]). */
+  function rc(cell) {
+    return walk.floors ? cell.slice(1) : cell;
+  }
+
+  /** Whether a cell is on the floor drawn. */
+  function onFloor(cell) {
+    return !walk.floors || cell[0] === walk.floor;
+  }
+
+  function sameCell(a, b) {
+    return a.length === b.length && a.every((v, i) => v === b[i]);
+  }
+
+  // The same transitions as the service: a move into a wall or off the map stays put; U and D
+  // ride to the next stop above or below where the cell is a stop, and stay put elsewhere.
   function stepLocal(pos, a) {
+    if (RIDES.includes(a)) {
+      const stop = walk.stops.get(pos.join(","));
+      return stop && stop[a] ? stop[a] : pos.slice();
+    }
     const [dr, dc] = MOVES[a];
-    const r = pos[0] + dr, c = pos[1] + dc;
-    return isFree(r, c) ? [r, c] : [pos[0], pos[1]];
+    const [r0, c0] = rc(pos);
+    const r = r0 + dr, c = c0 + dc;
+    if (!isFree(r, c)) return pos.slice();
+    return walk.floors ? [pos[0], r, c] : [r, c];
+  }
+
+  /** Each stop of the building's connections: where U and D lead from it. */
+  function stopsOf(connections) {
+    const stops = new Map();
+    for (const conn of connections || []) {
+      const sorted = [...conn.stops].sort((x, y) => x[0] - y[0]);
+      sorted.forEach((cell, i) => stops.set(cell.join(","), {
+        U: sorted[i + 1] || null, D: sorted[i - 1] || null, kind: conn.kind, name: conn.name,
+      }));
+    }
+    return stops;
+  }
+
+  /** The destinations' labels on the floor drawn, in its row-major order (as drawMaze counts
+   *  them): their names, else G and their index among the building's. */
+  function floorGoalNames() {
+    const domain = walk.domain;
+    if (!walk.floors) return domain.goal_names;
+    const names = [];
+    domain.goals.forEach((cell, i) => {
+      if (cell[0] === walk.floor) names.push((domain.goal_names && domain.goal_names[i]) || `G${i}`);
+    });
+    return names;
+  }
+
+  /** The index of the building's (or map's) destination at a cell, or -1. */
+  function goalAt(cell) {
+    if (!walk.floors) return goalIndex(walk.map, cell);
+    return walk.domain.goals.findIndex((g) => sameCell(g, cell));
+  }
+
+  /** The stops of the floor drawn: a violet mark with ⇧, ⇩ or ⇅ (where it leads). */
+  function drawStops(g) {
+    const cell = walk.cell;
+    g.font = `bold ${Math.max(9, Math.floor(cell * 0.6))}px system-ui, sans-serif`;
+    g.textAlign = "center";
+    g.textBaseline = "middle";
+    for (const [key, stop] of walk.stops) {
+      const at = key.split(",").map(Number);
+      if (at[0] !== walk.floor) continue;
+      const [x, y] = centre(at.slice(1), cell);
+      g.fillStyle = STOP_FILL;
+      g.fillRect(x - cell / 2 + 1, y - cell / 2 + 1, cell - 2, cell - 2);
+      g.fillStyle = "#fff";
+      g.fillText(stop.U && stop.D ? "⇅" : stop.U ? "⇧" : "⇩", x, y);
+    }
+  }
+
+  /** The floor the map shows: the walker's (drawn again when it changes). */
+  function showFloor(f) {
+    if (!walk.floors) return;
+    const floor = walk.floors[f];
+    if (walk.floor !== f || walk.map !== floor.map) {
+      walk.floor = f;
+      walk.map = floor.map;
+      walk.background = null;
+    }
+    $("floor").textContent = `${floor.name} (ordinal ${floor.ordinal})`;
+    document.body.dataset.floor = f;
+    const stop = walk.pos ? walk.stops.get(walk.pos.join(",")) : null;
+    const note = $("ride-note");
+    note.hidden = !stop;
+    if (stop) {
+      const ways = [stop.U && "up (PageUp or R)", stop.D && "down (PageDown or F)"].filter(Boolean);
+      note.textContent = `Here: ${stop.name} (${stop.kind}), ${ways.join(" or ")}.`;
+    }
+  }
+
+  /** The most advised way in words: "go east", "take the lift up" (none when no way is
+   *  advised clearly more than the others). */
+  function adviceWords(advice, state) {
+    const ways = Object.keys(advice).sort((x, y) => advice[y] - advice[x]);
+    const best = ways[0];
+    if (advice[best] - advice[ways[1]] < 0.01) return "No way stands out here";
+    if (!RIDES.includes(best)) return `${capitalised(WAYS[best])} (${Math.round(100 * advice[best])}%)`;
+    const stop = walk.stops.get(state.join(","));
+    const what = stop ? `the ${stop.kind === "lift" ? "lift" : stop.kind}` : "the stairs or lift";
+    const way = best === "U" ? "up" : "down";
+    return `Take ${what} ${way} (${Math.round(100 * advice[best])}%)`;
   }
 
   function draw() {
@@ -69,8 +182,9 @@
     ctx.drawImage(background(), 0, 0);
     ctx.restore();
     ctx.fillStyle = ADVISED_FILL;
-    for (const rc of walk.advisedCells) {
-      const [x, y] = centre(rc, cell);
+    for (const at of walk.advisedCells) {
+      if (!onFloor(at)) continue;
+      const [x, y] = centre(rc(at), cell);
       ctx.beginPath();
       ctx.arc(x, y, cell * 0.16, 0, 2 * Math.PI);
       ctx.fill();
@@ -80,14 +194,20 @@
       ctx.lineWidth = Math.max(2, cell * 0.18);
       ctx.lineJoin = "round";
       ctx.beginPath();
-      walk.path.forEach((rc, i) => {
-        const [x, y] = centre(rc, cell);
-        if (i === 0) ctx.moveTo(x, y); else ctx.lineTo(x, y);
-      });
+      let drawing = false; // the path's stretches on the floor drawn
+      for (const at of walk.path) {
+        if (!onFloor(at)) {
+          drawing = false;
+          continue;
+        }
+        const [x, y] = centre(rc(at), cell);
+        if (drawing) ctx.lineTo(x, y); else ctx.moveTo(x, y);
+        drawing = true;
+      }
       ctx.stroke();
     }
     if (walk.pos) {
-      const [x, y] = centre(walk.pos, cell);
+      const [x, y] = centre(rc(walk.pos), cell);
       ctx.fillStyle = COLOURS.walker;
       ctx.beginPath();
       ctx.arc(x, y, Math.max(4, cell * 0.32), 0, 2 * Math.PI); // seen on a small cell too
@@ -100,7 +220,7 @@
   function keepInView() {
     if (!walk.pos) return;
     const board = $("board");
-    const [x, y] = centre(walk.pos, walk.cell);
+    const [x, y] = centre(rc(walk.pos), walk.cell);
     const left = x + canvas.offsetLeft, top = y + canvas.offsetTop; // the box is positioned
     const margin = Math.min(4 * walk.cell + 24, board.clientWidth / 3, board.clientHeight / 3);
     if (left - margin < board.scrollLeft) board.scrollLeft = left - margin;
@@ -139,6 +259,8 @@
   function drawAdvice(x, y, advice) {
     const cell = walk.cell;
     ctx.font = `bold ${Math.max(10, Math.floor(cell * 0.55))}px system-ui, sans-serif`;
+    ctx.textAlign = "center"; // each label centred on its tag
+    ctx.textBaseline = "middle";
     for (const a of ACTIONS) {
       const p = advice[a];
       if (p < MIN_ADVICE_P) continue;
@@ -153,6 +275,20 @@
       ctx.fillStyle = COLOURS.advice;
       ctx.fillText(label, tx, ty);
     }
+    const stop = walk.floors ? walk.stops.get(walk.pos.join(",")) : null;
+    RIDES.forEach((a, i) => { // up and down where there is a ride: a tag clear of the arrows
+      const p = advice[a];
+      if (!stop || !stop[a] || p < MIN_ADVICE_P) return;
+      const label = `${RIDE_ARROWS[a]} ${Math.round(100 * p)}%`;
+      const w = ctx.measureText(label).width + 6;
+      const [width, height] = [walk.map[0].length * cell, walk.map.length * cell];
+      const tx = Math.min(width - w / 2, Math.max(w / 2, x - cell * 2));
+      const ty = Math.min(height - cell * 0.35, Math.max(cell * 0.35, y + (i ? 1 : -1) * cell * 1.3));
+      ctx.fillStyle = STOP_FILL;
+      ctx.fillRect(tx - w / 2, ty - cell * 0.35, w, cell * 0.7);
+      ctx.fillStyle = "#fff";
+      ctx.fillText(label, tx, ty);
+    });
   }
 
   /** P(M1|H) after each decision of this walk, 0 to 1 upwards, a dotted line at 0.5, the
@@ -220,7 +356,7 @@
   function showDecision(d) {
     walk.decision = d;
     $("steps").textContent = d.step;
-    $("position").textContent = `[${d.state[0]}, ${d.state[1]}]`;
+    $("position").textContent = `[${d.state.join(", ")}]`;
     const kappa = walk.session ? walk.session.kappa : NaN;
     $("kl").textContent = `${fmt(d.kl)} nats`;
     $("kl").title = "KL[θ‖P(A|s,H)]";
@@ -231,7 +367,7 @@
     drawChart();
     $("advice-count").textContent = d.cost.advice_count;
     $("cost").textContent = fmt(d.cost.total, 2);
-    const g = goalIndex(walk.map, d.state);
+    const g = goalAt(d.state);
     $("goal-note").textContent = g >= 0 ? `You are at ${goalLabel(g, walk.domain.goal_names)}.` : "";
     if (d.advise && d.leads_to) showLeadsTo(d.leads_to);
     document.body.dataset.goal = g >= 0 ? `G${g}` : "";
@@ -242,13 +378,15 @@
       walk.advice = d.advice;
       walk.advisedCells.push(d.state);
       $("advice-step").textContent = d.step;
+      $("advice-words").textContent = adviceWords(d.advice, d.state);
+      document.body.dataset.adviceWords = $("advice-words").textContent;
       const list = $("advice-list");
-      list.replaceChildren(...ACTIONS.map((a) => {
+      list.replaceChildren(...Object.keys(d.advice).map((a) => {
         const li = document.createElement("li");
         li.dataset.action = a;
         li.innerHTML = `<span class="arrow"></span><span class="p"></span>` +
           `<span class="bar"><span></span></span>`;
-        li.querySelector(".arrow").textContent = `${ARROWS[a]} ${a}`;
+        li.querySelector(".arrow").textContent = `${ARROWS[a] || RIDE_ARROWS[a]} ${a}`;
         li.querySelector(".p").textContent = `${(100 * d.advice[a]).toFixed(1)}%`;
         li.querySelector(".bar > span").style.width = `${(100 * d.advice[a]).toFixed(1)}%`;
         return li;
@@ -350,6 +488,7 @@
       setStatus(`The service refused a move: ${data.detail}`, true);
       walk.pending = 0;
       if (walk.decision) walk.pos = walk.decision.state; // back to where the service has us
+      if (walk.floors) showFloor(walk.pos[0]);
       draw();
       return;
     }
@@ -357,11 +496,12 @@
       walk.pending = Math.max(0, walk.pending - 1);
       document.body.dataset.pending = walk.pending;
       showDecision(d);
-      if (walk.pending === 0 && (d.state[0] !== walk.pos[0] || d.state[1] !== walk.pos[1])) {
+      if (walk.pending === 0 && !sameCell(d.state, walk.pos)) {
         walk.pos = d.state; // the service is the truth
         walk.path.push(d.state);
       }
     }
+    if (walk.floors) showFloor(walk.pos[0]);
     draw();
     keepInView();
     askBeliefs();
@@ -373,6 +513,7 @@
     const from = walk.pos;
     walk.pos = stepLocal(from, a);
     walk.path.push(walk.pos);
+    if (walk.floors) showFloor(walk.pos[0]);
     walk.pending += 1;
     document.body.dataset.pending = walk.pending;
     socket.send(JSON.stringify({ state: from, action: a }));
@@ -416,11 +557,15 @@
       const created = await fetchJSON(`/domains/${encodeURIComponent(name)}/sessions`, {
         method: "POST", body: JSON.stringify(body),
       });
+      const floors = domain.floors || null;
       Object.assign(walk, {
         map: domain.map, pos: created.decision.state, path: [created.decision.state],
         session: created, pending: 0, advice: null, advisedCells: [], background: null,
-        history: [], domain, beliefs: null, leadsTo: null,
+        history: [], domain, beliefs: null, leadsTo: null, floors, floor: -1,
+        stops: stopsOf(domain.connections),
       });
+      for (const el of document.querySelectorAll(".floors-only, #floor-keys")) el.hidden = !floors;
+      if (floors) showFloor(walk.pos[0]);
       $("beliefs").replaceChildren();
       listDestinations(domain);
       showLeadsTo(null);
@@ -496,6 +641,15 @@
         g.fill();
       },
       advice: (g) => drawArrow(g, 3, size / 2, "E", size - 5, COLOURS.advice, 2.5),
+      stop: (g) => {
+        g.fillStyle = STOP_FILL;
+        g.fillRect(2, 2, size - 4, size - 4);
+        g.fillStyle = "#fff";
+        g.font = `bold ${size * 0.6}px system-ui, sans-serif`;
+        g.textAlign = "center";
+        g.textBaseline = "middle";
+        g.fillText("⇅", size / 2, size / 2);
+      },
     };
     for (const li of document.querySelectorAll("#maze-legend li")) {
       const swatch = document.createElement("canvas");
@@ -516,6 +670,7 @@
   document.addEventListener("keydown", (e) => {
     const a = KEYS[e.key];
     if (!a || e.target.closest("input, select, textarea")) return;
+    if (RIDES.includes(a) && !walk.floors) return; // one floor: nothing to ride
     e.preventDefault();
     move(a);
   });

@@ -112,7 +112,7 @@ def session_public(s: SessionSnapshot) -> SessionPublic:
         session_id=s.id, domain=s.domain, agent_type=s.agent_type, prior_table=s.table_key,
         kappa=s.kappa, window=s.window, strategy=s.strategy, params=s.params, goals=_goals(s),
         steps=s.steps,
-        position=s.position, p_normal=s.p_normal,
+        position=s.position, floor=s.floor, p_normal=s.p_normal,
         advice_count=s.advice_count, total_cost=s.total_cost, benefit=s.benefit,
         advice_per_100=s.advice_per_100, idle_seconds=s.idle_seconds, created_at=s.created_at,
         muted=s.muted, budget=_budget(s), beliefs=beliefs_dict(s),
@@ -129,7 +129,7 @@ def _session_figures(s: SessionSnapshot) -> dict[str, Any]:
         "total_cost": s.total_cost, "advice_per_100": s.advice_per_100, "path": s.path,
         "p_normal_history": s.p_history, "muted": s.muted, "budget": _budget(s),
         "beliefs": beliefs_dict(s),
-    }  # fmt: skip
+    } | ({"floor": s.floor} if s.floor is not None else {})  # fmt: skip
 
 
 def overview_session(s: SessionSnapshot) -> dict[str, Any]:

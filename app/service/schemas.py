@@ -592,6 +592,11 @@ class SessionBase(BaseModel):
     goals: list[GoalBelief] | None = Field(description="goal_aware sessions only, else null.")
     steps: int
     position: Cell
+    floor: str | None = Field(
+        None,
+        exclude_if=_absent,
+        description="On a map of several floors, the name of the floor the explorer is on.",
+    )
     p_normal: float
     advice_count: int
     total_cost: float

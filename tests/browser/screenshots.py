@@ -38,6 +38,8 @@ PAGES: dict[str, str] = {
     "walk-big-map": "/walk on a generated 141 x 162 building with named destinations: the map "
     "scrolls and zooms in its own box, the panel stays in view, labels stay readable, the "
     "destination the advice leads to named",
+    "walk-floors-lift": "/walk in a building of two floors: the walker's floor, at the lift "
+    "the advice in words (take the lift up) and its share on a violet tag, PageUp to ride",
     "viewer": "The 3D viewer: the prior's arrows, the kappa shading, live sessions' paths, "
     "markers and advice, what the picked session's advisor believes in plain words, and its "
     "P(M1|H) over time",

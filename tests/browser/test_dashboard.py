@@ -11,6 +11,7 @@ import pytest
 from playwright.sync_api import Page, Route, expect
 
 from tests.browser.conftest import ADMIN, Service, screenshot
+from tests.browser.test_walk import LIFTS
 
 pytestmark = pytest.mark.browser
 
@@ -47,6 +48,7 @@ def test_dashboard_lists_a_session_and_refreshes_its_figures(service: Service, p
     service.move(sid, auth, [28, 3], "WW")
     expect(row.locator('td[data-column="steps"]')).to_have_text("5")
     expect(row.locator('td[data-column="position"]')).to_have_text("[28, 1]")
+    expect(row.locator('td[data-column="floor"]')).to_have_text("–")  # one floor
     link = page.locator("#viewer-link")
     expect(link).to_be_visible()
     expect(link).to_have_attribute("href", re.compile(rf":{service.viewer.port}/$"))
@@ -91,7 +93,8 @@ def test_dashboard_figures_have_a_legend_and_units(service: Service, page: Page)
     expect(row.locator(".bar")).to_have_count(1)
     expect(row.locator("svg.spark line.half")).to_have_count(1)
     units = {
-        "kappa": "κ, nats", "steps": "moves", "position": "[row, col]",
+        "kappa": "κ, nats", "steps": "moves", "position": "[row, col] ([floor, row, col])",
+        "floor": "buildings of floors",
         "p": "plain words (the paper's symbol)", "leads": "destination",
         "cost": "κ × advice, nats", "per100": "decisions",
     }  # fmt: skip
@@ -256,3 +259,26 @@ def test_dashboard_says_what_each_strategy_believes_plain_words_first(
     assert to["name"] in ("Lobby", "Café (east)")
     expect(page.locator('#sessions th[data-column="p"]')).to_contain_text("Advisor believes")
     screenshot(page, "dashboard-beliefs")
+
+
+def test_dashboard_shows_the_floor_of_a_session_in_a_building(service: Service, page: Page) -> None:
+    """A session on a map of several floors: its position [floor, row, col] and its floor by
+    name, followed as it rides the lift up."""
+    r = service.http.put("/domains/lifts", json={"text": LIFTS}, headers={"X-API-Key": ADMIN})
+    assert r.status_code in (200, 201), r.text
+    created = service.http.post("/domains/lifts/sessions", json={}).json()
+    sid, auth = created["session_id"], {"Authorization": f"Bearer {created['token']}"}
+    events = [{"state": [0, 3, c], "action": "E"} for c in range(1, 7)]
+    events.append({"state": [0, 3, 7], "action": "U"})
+    r = service.http.post(f"/sessions/{sid}/events", json=events[:6], headers=auth)
+    assert r.status_code == 200, r.text
+    page.goto(service.base + "/")
+    page.fill("#key", service.operator_key)
+    page.click("#key-form button[type=submit]")
+    row = page.locator(f'tr[data-session-id="{sid}"]')
+    expect(row.locator('td[data-column="position"]')).to_have_text("[0, 3, 7]")
+    expect(row.locator('td[data-column="floor"]')).to_have_text("Ground floor")
+    r = service.http.post(f"/sessions/{sid}/events", json=events[6], headers=auth)
+    assert r.status_code == 200 and r.json()["state"] == [1, 3, 7], r.text
+    expect(row.locator('td[data-column="floor"]')).to_have_text("First floor")
+    expect(row.locator('td[data-column="position"]')).to_have_text("[1, 3, 7]")

@@ -71,12 +71,14 @@ def test_walk_keys_move_the_explorer_and_advice_appears_when_lost(
     chart = page.locator("#p-chart")
     expect(chart).to_have_attribute("data-points", "4")
     assert float(chart.get_attribute("data-last") or "nan") == pytest.approx(p, abs=6e-4)
-    # the legend names what the maze shows, each with a swatch drawn as the maze draws it
-    legend = page.locator("#maze-legend li")
+    # the legend names what the maze shows, each with a swatch drawn as the maze draws it (the
+    # stairs and lifts on a building only)
+    legend = page.locator("#maze-legend li:visible")
     expect(legend).to_have_count(7)
-    expect(page.locator("#maze-legend li canvas.swatch")).to_have_count(7)
+    expect(page.locator("#maze-legend li:visible canvas.swatch")).to_have_count(7)
     for item in ("wall", "start", "goal", "walker", "path", "advised", "advice"):
         expect(page.locator(f'#maze-legend li[data-item="{item}"]')).to_be_visible()
+    expect(page.locator('#maze-legend li[data-item="stop"]')).to_be_hidden()
 
     # a lost-looking walk: bumping into the walls and going back and forth
     for key in ["ArrowDown", "ArrowDown", "ArrowLeft", "ArrowRight", "ArrowLeft", "ArrowRight"]:
@@ -300,3 +302,70 @@ def test_walk_keeps_its_panel_in_view_and_names_readable_on_a_141_by_162_map(
     assert board_scrolls(page) == [False, False]
     assert float(canvas.get_attribute("data-label-px") or "0") >= 11
     assert in_view(page, "#panel")
+
+
+#: Two floors joined by a lift; the one destination is upstairs, so the experts ride it
+LIFTS = """destination: 1 5 3 Radiology
+connection: lift 4 0:3,7 1:3,7 Lift 1
+floor: 0 Ground floor elevation: 0.0
+###########
+#.........#
+#.........#
+#S........#
+#.....#...#
+#.........#
+#.........#
+###########
+floor: 1 First floor elevation: 4.0
+###########
+#.........#
+#.........#
+#.........#
+#.....#...#
+#..G......#
+#.........#
+###########
+"""
+
+
+def test_walk_follows_the_walker_upstairs_and_says_take_the_lift_up(
+    service: Service, page: Page
+) -> None:
+    """A building of two floors: the map is the walker's floor; at the lift the advice says
+    "take the lift up" (every expert rode it) and PageUp rides it; the map follows to the
+    first floor, where the destination is named."""
+    body = {"text": LIFTS, "experts": {"per_goal": 3, "seed": 1}}
+    r = service.http.put("/domains/lifts", json=body, headers={"X-API-Key": ADMIN})
+    assert r.status_code in (200, 201), r.text
+    page.goto(service.base + "/walk?domain=lifts&strategy=paper")
+    expect(page.locator("#status")).to_contain_text("Connected")
+    page.fill("#kappa", "0")  # every step advised: the advice at each cell shows
+    page.click("#restart")
+    expect(page.locator("#status")).to_contain_text("Connected")
+    expect(page.locator("#floor-keys")).to_be_visible()
+    expect(page.locator("#floor")).to_have_text("Ground floor (ordinal 0)")
+    expect(page.locator("#position")).to_have_text("[0, 3, 1]")
+
+    def press(key: str, times: int = 1) -> None:
+        for _ in range(times):
+            page.keyboard.press(key)
+            page.wait_for_function("document.body.dataset.pending === '0'")
+
+    press("ArrowRight", 6)
+    expect(page.locator("#position")).to_have_text("[0, 3, 7]")
+    expect(page.locator("#ride-note")).to_have_text("Here: Lift 1 (lift), up (PageUp or R).")
+    expect(page.locator("#advice-words")).to_contain_text("Take the lift up")
+    expect(page.locator("#advice-list li[data-action='U']")).to_have_count(1)
+    expect(page.locator('#maze-legend li[data-item="stop"]')).to_be_visible()
+    screenshot(page, "walk-floors-lift", full_page=True)
+    press("PageUp")
+    expect(page.locator("#position")).to_have_text("[1, 3, 7]")
+    assert page.evaluate("document.body.dataset.floor") == "1"
+    expect(page.locator("#floor")).to_have_text("First floor (ordinal 1)")
+    expect(page.locator("#ride-note")).to_have_text("Here: Lift 1 (lift), down (PageDown or F).")
+    press("ArrowDown", 2)
+    press("ArrowLeft", 4)
+    expect(page.locator("#position")).to_have_text("[1, 5, 3]")
+    expect(page.locator("#goal-note")).to_have_text("You are at Radiology.")
+    expect(page.locator("#destinations li")).to_have_text(["Radiology · G0 [1, 5, 3]"])
+    screenshot(page, "walk-floors", full_page=True)

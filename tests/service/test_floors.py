@@ -76,8 +76,12 @@ def test_events_of_another_shape_are_refused_saying_what_a_cell_is(
     said = detail(client.post(f"/sessions/{sid}/events", json={"state": [f, r, c],
                               "next_state": [1, r, c]}, headers=auth))  # fmt: skip
     assert "is not one move from state" in said
-    # nothing refused was applied: the session made the one move it was sent
-    assert client.get(f"/sessions/{sid}", headers=auth).json()["steps"] == 1
+    # nothing refused was applied: the session made the one move it was sent, upstairs
+    seen = client.get(f"/sessions/{sid}", headers=auth).json()
+    assert seen["steps"] == 1 and seen["floor"] == b.floors[1].name
+    assert "floor" not in client.get(f"/sessions/{tiny}", headers=tiny_auth).json()
+    listed = client.get("/overview", headers=admin).json()["sessions"]
+    assert {s["session_id"]: s.get("floor") for s in listed} == {sid: b.floors[1].name, tiny: None}
     # a start of the wrong shape is refused the same way
     r3 = client.post("/domains/tower/sessions", json={"start": [r, c]})
     assert detail(r3) == f"start: [{r}, {c}]: {wide}"

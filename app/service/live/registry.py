@@ -40,6 +40,7 @@ from app.advice.advisor import (
 from app.advice.models import AdviceTables
 from app.advice.params import StrategyParams
 from app.arrays import Moves
+from app.domain.building import Building
 from app.service.data.domains import DomainState
 from app.service.live.history import Advice, AdviceLog, Recent
 from app.service.live.replay import DEFAULT_STEPS, Replay, retried
@@ -308,6 +309,8 @@ class SessionSnapshot:
     beliefs: Beliefs | None = None  # what its advisor believes, in plain words
     # the destination its advice leads to: (goal index, cell, name or None)
     leads_to: tuple[int, tuple[int, ...], str | None] | None = None
+    # on a map of several floors, the name of the floor the explorer is on (None: one floor)
+    floor: str | None = None
 
 
 class SessionRegistry:
@@ -788,6 +791,7 @@ def _snap(r: _Raw) -> SessionSnapshot:
         [(step, cell(st), _advice(tables, st)) for step, st, tables in r.advice],
         None if r.beliefs is None else [(cell(g), p, out) for g, p, out in r.beliefs],
         s.budget, r.advice_left, s.muted, r.plain, leads,
+        grid.floors[int(cells[r.position, 0])].name if isinstance(grid, Building) else None,
     )  # fmt: skip
 
 
