@@ -193,7 +193,7 @@ def create_session(
     body |= {"strategy": strategy, "params": dict(params) if params is not None else None}
     body["budget"] = dict(budget) if budget is not None else None
     if start is not None:
-        body["start"] = [int(start[0]), int(start[1])]
+        body["start"] = [int(x) for x in start]
     clean = {k: v for k, v in body.items() if v is not None}
     return Call("POST", f"/domains/{_name(name)}/sessions", clean)
 

@@ -5,8 +5,10 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any, Literal, NotRequired, TypedDict
 
-Cell = tuple[int, int] | list[int]
-ActionName = Literal["N", "E", "S", "W"]
+#: a cell: ``[row, col]``, or ``[floor, row, col]`` on a map of several floors
+Cell = tuple[int, int] | tuple[int, int, int] | list[int]
+#: an action: ``U`` and ``D`` (up, down where a stair or lift is) on a map of several floors
+ActionName = Literal["N", "E", "S", "W", "U", "D"]
 
 
 class Advice(TypedDict):
@@ -14,6 +16,8 @@ class Advice(TypedDict):
     E: float
     S: float
     W: float
+    U: NotRequired[float]  # on a map of several floors only
+    D: NotRequired[float]
 
 
 class Cost(TypedDict):

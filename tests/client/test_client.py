@@ -369,3 +369,29 @@ def test_a_stream_the_service_closed_to_refuse_it_is_not_opened_again(server: Se
             with pytest.raises(AdvisorError) as err:
                 stream.send(W)
             assert err.value.status == 404 and stream.reconnects == 0
+
+
+def test_the_client_serves_a_building_of_floors(server: Server, tmp_path: Path) -> None:
+    """A map file of two floors put as the project writes it; cells [floor, row, col], U and D
+    in the advice, and the binary stream's wide frames equal the JSON stream's decisions."""
+    from tests.service.test_strategies import TOWER
+
+    path = tmp_path / "tower.txt"
+    path.write_text(TOWER.to_text())
+    stop = int(TOWER.rides[0, 0])
+    walk = [{"state": list(TOWER.cell(stop)), "action": "U"}, {"state": list(TOWER.cell(
+        int(TOWER.rides[0, 1]))), "action": "D"}] * 20  # fmt: skip
+    with AdvisorClient(server.url, admin_key=server.admin_key) as client:
+        made = client.put_domain_file("tower-file", path, experts={"per_goal": 1})
+        assert made["actions"] == ["N", "E", "S", "W", "U", "D"] and len(made["floors"]) == 2
+        start = list(TOWER.cell(stop))
+        a = client.create_session("tower-file", kappa=0.0, start=start)
+        b = client.create_session("tower-file", kappa=0.0, start=start)
+        with client.stream(a) as text, client.stream(b, binary=True) as binary:
+            want = text.send(walk)
+            got = binary.send(walk)
+            assert isinstance(got, DecisionFrame) and got.cell.shape == (40, 3)
+            assert got.to_dicts() == want
+        assert want[0]["state"] == list(TOWER.cell(int(TOWER.rides[0, 1])))  # rode up
+        assert set(want[0]["advice"] or {}) == set("NESWUD")
+        client.delete_domain("tower-file")
