@@ -96,11 +96,32 @@ class Health(TypedDict):
     uptime_seconds: float
 
 
+class Floor(TypedDict):
+    """A floor of a map of several floors."""
+
+    index: int  # a cell's first coordinate (0 the lowest)
+    ordinal: int
+    name: str
+    elevation: float | None
+    map: list[str]
+
+
+class Connection(TypedDict):
+    """Stairs, a lift, an escalator or a ramp: its stops [floor, row, col], lowest first."""
+
+    kind: str
+    name: str
+    cost: int
+    stops: list[list[int]]
+
+
 class DomainInfo(TypedDict):
     name: str
     rows: int
     cols: int
-    map: list[str]
+    map: list[str]  # on a map of several floors the lowest floor's rows
+    floors: NotRequired[list[Floor]]  # a map of several floors only
+    connections: NotRequired[list[Connection]]
     resolution: float | None
     origin: list[float] | None
     start: list[int]
