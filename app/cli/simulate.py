@@ -5,7 +5,9 @@ session, and reports every move over the session's websocket with :mod:`advisor_
 ``--advice`` (the default) an advised explorer samples its next action from the advice
 (the paper's protocol); with ``--no-advice`` the service still watches and decides, but the
 explorer ignores it.
-The map comes from the server (``GET /domains/{name}``); nothing here touches service internals.
+The map comes from the server (``GET /domains/{name}``; a map of several floors is rebuilt
+from its floors and connections, as the viewer rebuilds it); nothing here touches service
+internals.
 """
 
 from __future__ import annotations
@@ -27,14 +29,16 @@ from app.advice.advisor import DEFAULT_KAPPA, DEFAULT_STRATEGY, DEFAULT_WINDOW
 from app.agents.explorers import FIXED_EXPLORERS, make_explorer
 from app.cli.local import URL_HELP, service_url, settings_or_exit
 from app.cli.options import choice
-from app.domain.grid import ACTIONS, GridDomain
+from app.domain.building import Domain
+from app.domain.grid import GridDomain
+from app.viewer.remote import building_of
 
 
 @dataclass(frozen=True)
 class Outcome:
     explorer: int
     episode: int
-    goal: tuple[int, int]
+    goal: tuple[int, ...]
     success: bool
     steps: int
     advice_count: int
@@ -56,16 +60,24 @@ class Plan:
     strategy: str = DEFAULT_STRATEGY
 
 
-def _advice(decision: Decision) -> npt.NDArray[np.float64] | None:
-    given = decision["advice"]
+def _advice(decision: Decision, grid: Domain) -> npt.NDArray[np.float64] | None:
+    """The advice as a vector over the map's actions (N, E, S, W, and U, D on floors)."""
+    given: dict[str, float] | None = decision["advice"]  # type: ignore[assignment]
     if given is None:
         return None
-    return np.array([given["N"], given["E"], given["S"], given["W"]])
+    return np.array([given[a] for a in grid.actions])
+
+
+def domain_of(info: dict[str, object], name: str) -> Domain:
+    """The map of a ``GET /domains/{name}`` answer: a grid, or a building of floors."""
+    if info.get("floors") is not None:
+        return building_of(info, name)
+    return GridDomain.from_strings(info["map"], name=name)  # type: ignore[arg-type]
 
 
 async def episode(
     client: AsyncAdvisorClient,
-    grid: GridDomain,
+    grid: Domain,
     plan: Plan,
     k: int,
     e: int,
@@ -87,11 +99,11 @@ async def episode(
     steps = 0
     async with await client.stream(session) as stream:
         while steps < plan.steps and s != goal:
-            advice = _advice(decision) if plan.advice and decision["advise"] else None
+            advice = _advice(decision, grid) if plan.advice and decision["advise"] else None
             a = explorer.act(s, rng, advice)
             s2 = int(grid.next_state[s, a])
             explorer.observe(s, a, s2)
-            event = {"state": grid.cell(s), "action": ACTIONS[a], "next_state": grid.cell(s2)}
+            event = {"state": grid.cell(s), "action": grid.actions[a], "next_state": grid.cell(s2)}
             decision = await stream.send(event)
             s, steps = s2, steps + 1
             if plan.delay:
@@ -117,7 +129,7 @@ async def run(server: str, plan: Plan, seed: int, progress: bool = True) -> list
     each episode's line is printed in episode order, as soon as those before it are done."""
     async with AsyncAdvisorClient(server) as client:
         info = await client.domain(plan.domain)
-        grid = GridDomain.from_strings(info["map"], name=plan.domain)
+        grid = domain_of(dict(info), plan.domain)
         rngs = np.random.default_rng(seed).spawn(plan.explorers)
         done: dict[int, Outcome] = {}
         printed = 0

@@ -42,6 +42,25 @@ def test_simulate_optimal_explorers_reach_their_goals(server: Server) -> None:
     assert "2/2 reached their goal (mean reward 1000)" in run.stdout
 
 
+def test_simulate_walks_a_building_of_floors(server: Server, tmp_path: Path) -> None:
+    """Optimal explorers on a building of two floors: every goal reached, those upstairs by
+    the stairs or a lift (cells [floor, row, col], U and D sent to the service)."""
+    from tests.service.test_strategies import TOWER
+
+    path = tmp_path / "tower.txt"
+    path.write_text(TOWER.to_text())
+    with AdvisorClient(server.url, admin_key=server.admin_key) as client:
+        client.put_domain_file("tower-sim", path, experts={"per_goal": 1})
+    run = simulate("--server", server.url, "--domain", "tower-sim", "--explorer", "optimal",
+                   "--strategy", "guide", "--episodes", "6", "--steps", "400")  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    assert "6/6 reached their goal (mean reward 1000)" in run.stdout
+    upstairs = [line for line in run.stdout.splitlines() if ": goal [1, " in line]
+    assert upstairs, run.stdout  # a goal on the first floor was among them
+    with AdvisorClient(server.url, admin_key=server.admin_key) as client:
+        client.delete_domain("tower-sim")
+
+
 def test_simulate_takes_an_advising_strategy(server: Server) -> None:
     run = simulate("--server", server.url, "--strategy", "goal_aware", "--episodes", "1",
                    "--steps", "40")  # fmt: skip
