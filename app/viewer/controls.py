@@ -1,4 +1,5 @@
-"""The viewer's control panel: pickers, the kappa slider, layer toggles, the picked session.
+"""The viewer's control panel: pickers, the kappa slider, layer toggles, the picked session,
+and on a building the floor filter (every floor, or one).
 
 The pump reads the handles' values on each tick and applies them: GUI threads never touch the
 scene. A change of any control only wakes the pump (:meth:`Controls.on_change`), so a choice is
@@ -20,6 +21,7 @@ import viser.uplot
 
 from app.advice.advisor import DEFAULT_KAPPA
 from app.viewer.scene import (
+    CONNECTION_STYLE,
     GOAL_COLOUR,
     LAYERS,
     PRIOR_COLOUR,
@@ -32,6 +34,8 @@ from app.viewer.sessions import ADVICE_MIN_P, FLOOR_COLOUR, PALETTE
 from app.viewer.state import SessionView
 
 NONE = "(none)"
+#: the floor filter's first choice: every floor of a building, stacked
+ALL_FLOORS = "All floors"
 #: What "lost" means for the kappa shading (plain words first, the paper's symbol second).
 LOST_CERTAIN = "certainly lost (P(M1|H) = 0)"
 LOST_PICKED = "as the picked session (its P(M1|H))"
@@ -59,10 +63,17 @@ class Controls:
     def __init__(self, gui: viser.GuiApi):
         self._shown: tuple[object, ...] | None = None
         self.domain = gui.add_dropdown("Domain", (NONE,))
+        self.floor = gui.add_dropdown(
+            "Floors", (ALL_FLOORS,), visible=False,
+            hint="A building's floors stacked at their heights, or one floor alone, from above",
+        )  # fmt: skip
         self.session = gui.add_dropdown(
             "Session", (NONE,), hint="Sessions on this domain, most recently active first"
         )
-        self.fit = gui.add_button("Fit the maze to the window", hint="Look at it from above")
+        self.fit = gui.add_button(
+            "Fit the maze to the window",
+            hint="Look at it from above (every floor of a building: from the south, above)",
+        )
         self._fit_asked = False
         self.fit.on_click(lambda _event: self._ask_fit())
         with gui.add_folder("Where advice would be given"):
@@ -98,6 +109,7 @@ class Controls:
         control changes, from a browser or from code."""
         inputs: tuple[viser.GuiInputHandle[Any], ...] = (
             self.domain,
+            self.floor,
             self.session,
             self.kappa,
             self.lost,
@@ -120,6 +132,13 @@ class Controls:
     def picked_domain(self) -> str | None:
         value = picked(self.domain)
         return None if value == NONE else value
+
+    @property
+    def picked_floor(self) -> int | None:
+        """The floor shown alone (its index among the building's, lowest first), None for
+        every floor (and on a one-floor map)."""
+        value = picked(self.floor)
+        return None if value == ALL_FLOORS else self.floor.options.index(value) - 1
 
     @property
     def picked_session(self) -> str | None:
@@ -168,6 +187,14 @@ class Controls:
     def set_domains(self, names: Sequence[str]) -> None:
         set_options(self.domain, tuple(names) or (NONE,))
 
+    def set_floors(self, names: Sequence[str]) -> None:
+        """The floors of the domain shown (lowest first; none: a one-floor map, and the filter
+        is hidden); the legend says what a building adds."""
+        set_options(self.floor, (ALL_FLOORS, *names))
+        if self.floor.visible != bool(names):
+            self.floor.visible = bool(names)
+            self.legend.content = legend_markdown(floors=bool(names))
+
     def set_sessions(self, ids: Sequence[str]) -> None:
         set_options(self.session, (NONE, *ids))
 
@@ -210,11 +237,21 @@ def swatch(rgb: npt.ArrayLike, shape: str = "■") -> str:
     return f'<span style="color: #{r:02x}{g:02x}{b:02x}">{shape}</span>'
 
 
-def legend_markdown() -> str:
-    """What each thing in the scene is, in the scene's own colours."""
+def legend_markdown(floors: bool = False) -> str:
+    """What each thing in the scene is, in the scene's own colours (``floors``: with what a
+    building of several floors adds)."""
     sessions = "".join(swatch(c, "●") for c in PALETTE[:5])
     # the shading is drawn translucent on the floor: its swatch is the colour that results
     shade = SHADE_OPACITY * np.array(SHADE_COLOUR) + (1 - SHADE_OPACITY) * np.array(FLOOR_COLOUR)
+    ways = ", ".join(
+        f"{swatch(colour)} {kind}" for kind, (colour, _, _) in CONNECTION_STYLE.items()
+    )
+    building = [
+        f"**Floors**: stacked at their heights, each named at its corner; {ways}: the "
+        "connections between floors (stairs and escalators zigzag, lifts and ramps go "
+        "straight), their stops tiled on each floor. Up and down (U, D) are arrows standing "
+        "upright. *Floors* shows one floor alone, from above",
+    ]
     return "\n\n".join(
         [
             f"{swatch(WALL_COLOUR)} walls, {swatch(START_COLOUR)} start, "
@@ -234,6 +271,7 @@ def legend_markdown() -> str:
             f"{swatch(PALETTE[0], '↑')} **Advice given**: arrows in the explorer's colour "
             "from each cell where it was advised, one per move, as long as the advice's "
             f"probability of that move (under {ADVICE_MIN_P:.0%} not drawn)",
+            *(building if floors else []),
         ]
     )
 

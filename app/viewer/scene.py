@@ -7,6 +7,15 @@ Scene tree (names like paths; each top-level layer is a frame whose visibility t
     /shading/cells    a tile per free cell, opaque where a lost explorer would be advised
     /paths, /markers, /advice   live sessions (:mod:`app.viewer.sessions`)
 
+A building (a map of several floors) is drawn floor by floor at its floors' heights
+(:mod:`app.viewer.storeys`): each layer holds a frame per floor (``/maze/f0``, ``/prior/f0``,
+...) with that floor's nodes in it (``/maze/f0/walls``, ``/prior/f0/arrows``; the floor's name
+``/maze/f0/name``, its connections' stops ``/maze/f0/stops``, the destinations labelled by
+name), and ``/maze/connections`` joins the floors: lifts and ramps straight, stairs and
+escalators zigzagging, in their kinds' colours. Showing one floor (:meth:`MazeScene.show_floor`)
+hides the other floors' frames and the connections; U and D, up and down, are flat arrows
+standing upright in the prior and arrows straight up and down in the advice.
+
 A :class:`MazeScene` draws one domain; it is fed plain data (:mod:`app.viewer.state`) and keeps
 no reference to any service. The map, prior and shading have a fixed number of instances and
 update their arrays in place.
@@ -20,13 +29,14 @@ from collections.abc import Sequence
 import numpy as np
 import numpy.typing as npt
 import viser
-from viser import BatchedMeshHandle, ImageHandle, SceneNodeHandle
+from viser import BatchedMeshHandle, FrameHandle, ImageHandle, SceneNodeHandle
 
-from app.arrays import FloatArray
-from app.domain.grid import GridDomain
+from app.arrays import BoolArray, FloatArray
+from app.domain.building import Building, Domain
 from app.viewer import geometry as geo
-from app.viewer.sessions import FLOOR_COLOUR, SessionLayers
+from app.viewer.sessions import FLOOR_COLOUR, SessionLayers, floors_of, node
 from app.viewer.state import SessionView
+from app.viewer.storeys import building_corners, floor_levels, stack_camera
 
 LAYERS = ("prior", "shading", "paths", "markers", "advice")
 WALL_HEIGHT = 0.6
@@ -36,6 +46,14 @@ GOAL_COLOUR = (230, 168, 23)
 PRIOR_COLOUR = (38, 92, 200)
 SHADE_COLOUR = (235, 87, 87)
 SHADE_OPACITY = 0.45
+#: each kind of connection's colour, line thickness (cells) and flights a floor (0: straight)
+CONNECTION_STYLE: dict[str, tuple[tuple[int, int, int], float, int]] = {
+    "lift": ((142, 68, 173), 0.22, 0),
+    "stairs": ((22, 160, 133), 0.12, 2),
+    "escalator": ((211, 84, 140), 0.12, 2),
+    "ramp": ((120, 130, 150), 0.16, 0),
+}
+CONNECTION_Z = 0.05
 
 
 #: viser's default vertical field of view (75 degrees), until a browser says its own.
@@ -43,15 +61,24 @@ DEFAULT_FOV = math.radians(75.0)
 
 
 def top_down_camera(
-    domain: GridDomain, fov: float = DEFAULT_FOV, aspect: float = 1.0
+    domain: Domain, fov: float = DEFAULT_FOV, aspect: float = 1.0, floor: int = 0
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """(position, look_at, up) for a camera above the middle of the map, north up, at the
-    height where the map fills a view of vertical field of view ``fov`` (radians) and
-    ``aspect`` (width / height), walls included (:func:`geometry.fit_height`)."""
-    rows, cols = domain.shape
-    centre = np.array([cols / 2, rows / 2, 0.0])
+    """(position, look_at, up) for a camera above the middle of the map (on a building, of
+    floor ``floor``), north up, at the height where the map fills a view of vertical field of
+    view ``fov`` (radians) and ``aspect`` (width / height), walls included
+    (:func:`geometry.fit_height`)."""
+    rows, cols = domain.shape[-2:]
+    centre = np.array([cols / 2, rows / 2, float(floor_levels(domain)[floor])])
     height = geo.fit_height(rows, cols, fov, aspect, top=WALL_HEIGHT)
     return centre + np.array([0.0, 0.0, height]), centre, np.array([0.0, 1.0, 0.0])
+
+
+def building_camera(
+    building: Building, fov: float = DEFAULT_FOV, aspect: float = 1.0
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """(position, look_at, up) for a camera that sees every floor of ``building`` from the
+    south and above (:func:`app.viewer.storeys.stack_camera`), walls included."""
+    return stack_camera(building_corners(building, WALL_HEIGHT), fov, aspect)
 
 
 Target = viser.ViserServer | viser.ClientHandle
@@ -63,40 +90,88 @@ DETAIL_CELLS = 10_000
 
 class MazeScene:
     """One domain drawn into a viser scene (a server's, shown to every browser, or one
-    client's), with its prior and the live sessions on it."""
+    client's), with its prior and the live sessions on it. On a building, ``floor_walls``,
+    ``floor_arrows`` and ``floor_shading`` hold each floor's nodes, lowest first; ``walls``,
+    ``prior_arrows`` and ``shading`` are a one-floor map's (None on a building)."""
 
-    def __init__(self, server: Target, domain: GridDomain, theta: npt.ArrayLike):
+    def __init__(self, server: Target, domain: Domain, theta: npt.ArrayLike):
         self.server = server
         self.domain = domain
+        self.floors = floors_of(domain)  # [None] on a one-floor map
+        self.states = geo.floor_states(domain)  # each floor's states
         self.detailed = domain.n_states <= DETAIL_CELLS
-        self.walls: BatchedMeshHandle | None = None  # none on a big map: an image instead
-        self.prior_arrows: BatchedMeshHandle | None = None  # none on a big map
-        self.shading: BatchedMeshHandle | ImageHandle | None = None
-        self.frames = {name: server.scene.add_frame(f"/{name}", show_axes=False) for name in LAYERS}
-        self.maze_frame = server.scene.add_frame("/maze", show_axes=False)
-        self._draw_static()
+        self.floor_walls: list[BatchedMeshHandle] = []  # none on a big map: images instead
+        self.floor_arrows: list[BatchedMeshHandle] = []  # none on a big map
+        none: list[BatchedMeshHandle | ImageHandle | None] = [None] * len(self.floors)
+        self.floor_shading = none
+        self.shown_floor: int | None = None
+        scene = server.scene
+        self.frames = {name: scene.add_frame(f"/{name}", show_axes=False) for name in LAYERS}
+        self.maze_frame = scene.add_frame("/maze", show_axes=False)
+        # on a building, a frame per floor in each layer: showing one floor hides the others'
+        self.floor_frames: list[list[FrameHandle]] = [
+            [scene.add_frame(f"/{layer}/f{f}", show_axes=False) for layer in ("maze", *LAYERS)]
+            for f in self.floors
+            if f is not None
+        ]
+        self.connections: FrameHandle | None = None
+        for floor in self.floors:
+            self._draw_floor(floor)
+        self._draw_connections()
         self._draw_prior(theta)
         self._draw_shading()
         self.live = SessionLayers(server, domain)
 
+    @property
+    def walls(self) -> BatchedMeshHandle | None:
+        return self._one(self.floor_walls)
+
+    @property
+    def prior_arrows(self) -> BatchedMeshHandle | None:
+        return self._one(self.floor_arrows)
+
+    @property
+    def shading(self) -> BatchedMeshHandle | ImageHandle | None:
+        return self.floor_shading[0] if self.floors == [None] else None
+
+    def _one(self, handles: list[BatchedMeshHandle]) -> BatchedMeshHandle | None:
+        return handles[0] if handles and self.floors == [None] else None
+
     # ---- the map ------------------------------------------------------------------------
-    def _draw_static(self) -> None:
+    def _walls_of(self, floor: int | None) -> BoolArray:
+        walls: BoolArray = self.domain.walls if floor is None else self.domain.walls[floor]
+        return walls
+
+    def _on(self, floor: int | None, cells: npt.ArrayLike) -> BoolArray:
+        """Which of ``cells`` lie on ``floor`` (all of them on a one-floor map)."""
+        floors = geo.floor_of(self.domain, cells)
+        on: BoolArray = np.ones(len(floors), bool) if floor is None else floors == floor
+        return on
+
+    def _draw_floor(self, floor: int | None) -> None:
         d, scene = self.domain, self.server.scene
-        rows, cols = d.shape
+        rows, cols = d.shape[-2:]
+        level = float(floor_levels(d)[floor or 0])
+        if floor is not None:
+            info = d.floors[floor]  # type: ignore[union-attr]  # a building's
+            scene.add_label(node("maze", floor, "name"), f"{info.name} ({info.ordinal})",
+                            position=(0.0, 0.0, level + WALL_HEIGHT),
+                            anchor="bottom-left")  # fmt: skip
         if not self.detailed:
-            self._draw_map_image()
+            self._draw_map_image(floor, level)
             return
         scene.add_box(
-            "/maze/floor",
+            node("maze", floor, "floor"),
             color=FLOOR_COLOUR,
             dimensions=(cols, rows, 0.02),
-            position=(cols / 2, rows / 2, -0.011),
+            position=(cols / 2, rows / 2, level - 0.011),
             cast_shadow=False,
         )
         walls = geo.wall_cells(d)
+        walls = walls[self._on(floor, walls)]
         vertices, faces = geo.box_mesh()
-        self.walls = scene.add_batched_meshes_simple(
-            "/maze/walls",
+        self.floor_walls.append(scene.add_batched_meshes_simple(
+            node("maze", floor, "walls"),
             vertices=vertices,
             faces=faces,
             batched_wxyzs=np.tile([1.0, 0.0, 0.0, 0.0], (len(walls), 1)),
@@ -105,120 +180,202 @@ class MazeScene:
             batched_colors=WALL_COLOUR,
             flat_shading=True,
             lod="off",
-        )
-        start = geo.cell_centres(d, [d.cell(d.start)], 0.006)[0]
-        scene.add_box("/maze/start", color=START_COLOUR, dimensions=(0.9, 0.9, 0.01),
-                      position=tuple(start))  # fmt: skip
-        goals = geo.cell_centres(d, [d.cell(g) for g in d.goals], 0.006)
-        scene.add_batched_meshes_simple(
-            "/maze/goals",
+        ))  # fmt: skip
+        start = d.cell(d.start)
+        if self._on(floor, [start])[0]:
+            scene.add_box(node("maze", floor, "start"), color=START_COLOUR,
+                          dimensions=(0.9, 0.9, 0.01),
+                          position=tuple(geo.cell_centres(d, [start], 0.006)[0]))  # fmt: skip
+        goal_cells = [d.cell(g) for g in d.goals]
+        here = np.flatnonzero(self._on(floor, goal_cells))
+        self._tiles(node("maze", floor, "goals"), [goal_cells[i] for i in here], GOAL_COLOUR)
+        goals = geo.cell_centres(d, [goal_cells[i] for i in here], 0.006)
+        for i, pos in zip(here, goals + np.array([0.0, 0.0, 0.2]), strict=True):
+            scene.add_label(node("maze", floor, f"goal_labels/G{i}"), d.goal_label(int(i)),
+                            position=tuple(pos))  # fmt: skip
+        if isinstance(d, Building):
+            stops = [(stop, c.kind) for c in d.connections for stop in c.stops if stop[0] == floor]
+            colours = [CONNECTION_STYLE[kind][0] for _, kind in stops]
+            self._tiles(node("maze", floor, "stops"), [s for s, _ in stops], colours)
+
+    def _tiles(self, name: str, cells: Sequence[tuple[int, ...]], colours: npt.ArrayLike) -> None:
+        """Flat tiles on ``cells`` (none: no node), in one colour or one each."""
+        if not cells:
+            return
+        vertices, faces = geo.box_mesh()
+        self.server.scene.add_batched_meshes_simple(
+            name,
             vertices=vertices,
             faces=faces,
-            batched_wxyzs=np.tile([1.0, 0.0, 0.0, 0.0], (len(goals), 1)),
-            batched_positions=goals,
-            batched_scales=np.tile([0.9, 0.9, 0.01], (len(goals), 1)),
-            batched_colors=GOAL_COLOUR,
+            batched_wxyzs=np.tile([1.0, 0.0, 0.0, 0.0], (len(cells), 1)),
+            batched_positions=geo.cell_centres(self.domain, cells, 0.006),
+            batched_scales=np.tile([0.9, 0.9, 0.01], (len(cells), 1)),
+            batched_colors=np.asarray(colours, dtype=np.uint8).reshape(-1, 3)
+            if np.ndim(colours) == 2 else tuple(np.asarray(colours).tolist()),
             lod="off",
-        )
-        for i, pos in enumerate(goals + np.array([0.0, 0.0, 0.2])):
-            scene.add_label(f"/maze/goal_labels/G{i}", d.goal_label(i), position=tuple(pos))
+        )  # fmt: skip
 
-    def _draw_map_image(self) -> None:
-        """A big map as one image on the floor: walls dark, start and goals in their colours
-        (one pixel a cell, sent as a PNG)."""
+    def _draw_connections(self) -> None:
+        """A building's connections between their stops, by kind (one node a kind)."""
+        d = self.domain
+        if not isinstance(d, Building) or not d.connections:
+            return
+        scene = self.server.scene
+        self.connections = scene.add_frame("/maze/connections", show_axes=False)
+        for kind, (colour, thickness, flights) in CONNECTION_STYLE.items():
+            parts = [
+                geo.connection_segments(d, i, flights, CONNECTION_Z)
+                for i, c in enumerate(d.connections)
+                if c.kind == kind
+            ]
+            if parts:
+                segments = np.concatenate(parts)
+                colours = np.broadcast_to(np.array(colour, np.uint8), (*segments.shape[:2], 3))
+                scene.add_line_segments(f"/maze/connections/{kind}", segments, colours,
+                                        thickness=thickness)  # fmt: skip
+
+    def _draw_map_image(self, floor: int | None, level: float) -> None:
+        """A big map's floor as one image: walls dark, start and goals in their colours (one
+        pixel a cell, sent as a PNG)."""
         d, scene = self.domain, self.server.scene
-        rows, cols = d.shape
+        rows, cols = d.shape[-2:]
         image = np.empty((rows, cols, 3), dtype=np.uint8)
         image[:] = FLOOR_COLOUR
-        image[d.walls] = WALL_COLOUR
+        image[self._walls_of(floor)] = WALL_COLOUR
+        if isinstance(d, Building):
+            for c in d.connections:
+                for f, r, col in c.stops:
+                    if f == floor:
+                        image[r, col] = CONNECTION_STYLE[c.kind][0]
         for g in d.goals:
-            image[d.cell(g)] = GOAL_COLOUR
-        image[d.cell(d.start)] = START_COLOUR
+            if self._on(floor, [d.cell(g)])[0]:
+                image[d.cell(g)[-2:]] = GOAL_COLOUR
+        if self._on(floor, [d.cell(d.start)])[0]:
+            image[d.cell(d.start)[-2:]] = START_COLOUR
         scene.add_image(
-            "/maze/image", image, render_width=cols, render_height=rows, format="png",
-            position=(cols / 2, rows / 2, 0.002), cast_shadow=False, receive_shadow=False,
+            node("maze", floor, "image"), image, render_width=cols, render_height=rows,
+            format="png", position=(cols / 2, rows / 2, level + 0.002), cast_shadow=False,
+            receive_shadow=False,
         )  # fmt: skip
 
     # ---- the prior and the kappa shading -------------------------------------------------
     def _draw_prior(self, theta: npt.ArrayLike) -> None:
         if not self.detailed:  # not drawn: four arrows a cell would be too many
             return
+        a = self.domain.n_actions
         positions, wxyzs, scales, opacities = geo.prior_arrows(self.domain, theta)
         vertices, faces = geo.flat_arrow_mesh()
-        self.prior_arrows = self.server.scene.add_batched_meshes_simple(
-            "/prior/arrows",
-            vertices=vertices,
-            faces=faces,
-            batched_wxyzs=wxyzs,
-            batched_positions=positions,
-            batched_scales=scales,
-            batched_colors=PRIOR_COLOUR,
-            batched_opacities=opacities,
-            opacity=1.0,
-            side="double",
-            cast_shadow=False,
-            receive_shadow=False,
-            lod="off",
-        )
+        for floor, states in zip(self.floors, self.states, strict=True):
+            at = slice(a * states.start, a * states.stop)
+            self.floor_arrows.append(self.server.scene.add_batched_meshes_simple(
+                node("prior", floor, "arrows"),
+                vertices=vertices,
+                faces=faces,
+                batched_wxyzs=wxyzs[at],
+                batched_positions=positions[at],
+                batched_scales=scales[at],
+                batched_colors=PRIOR_COLOUR,
+                batched_opacities=opacities[at],
+                opacity=1.0,
+                side="double",
+                cast_shadow=False,
+                receive_shadow=False,
+                lod="off",
+            ))  # fmt: skip
 
     def set_prior(self, theta: npt.ArrayLike) -> None:
         """The prior changed: resize and re-shade the arrows in place."""
-        if self.prior_arrows is None:
+        if not self.floor_arrows:
             return
+        a = self.domain.n_actions
         _, _, scales, opacities = geo.prior_arrows(self.domain, theta)
-        self.prior_arrows.batched_scales = scales.astype(np.float32)
-        self.prior_arrows.batched_opacities = opacities.astype(np.float32)
+        for arrows, states in zip(self.floor_arrows, self.states, strict=True):
+            at = slice(a * states.start, a * states.stop)
+            arrows.batched_scales = scales[at].astype(np.float32)
+            arrows.batched_opacities = opacities[at].astype(np.float32)
 
     def _draw_shading(self) -> None:
         d = self.domain
-        n = d.n_states
-        self.shaded = np.zeros(n, dtype=bool)
-        if not self.detailed:  # an image, made at the first shade
+        self.shaded = np.zeros(d.n_states, dtype=bool)
+        self._shade_drawn = False
+        if not self.detailed:  # images, made at the first shade
             return
         vertices, faces = geo.box_mesh()
-        self.shading = self.server.scene.add_batched_meshes_simple(
-            "/shading/cells",
-            vertices=vertices,
-            faces=faces,
-            batched_wxyzs=np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)),
-            batched_positions=geo.cell_centres(d, d.cells, 0.004),
-            batched_scales=np.tile([0.98, 0.98, 0.004], (n, 1)),
-            batched_colors=SHADE_COLOUR,
-            batched_opacities=np.zeros(n),
-            opacity=1.0,
-            cast_shadow=False,
-            receive_shadow=False,
-            lod="off",
-        )
+        for k, (floor, states) in enumerate(zip(self.floors, self.states, strict=True)):
+            n = states.stop - states.start
+            self.floor_shading[k] = self.server.scene.add_batched_meshes_simple(
+                node("shading", floor, "cells"),
+                vertices=vertices,
+                faces=faces,
+                batched_wxyzs=np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)),
+                batched_positions=geo.cell_centres(d, d.cells[states], 0.004),
+                batched_scales=np.tile([0.98, 0.98, 0.004], (n, 1)),
+                batched_colors=SHADE_COLOUR,
+                batched_opacities=np.zeros(n),
+                opacity=1.0,
+                cast_shadow=False,
+                receive_shadow=False,
+                lod="off",
+            )
 
     def shade(self, theta: npt.ArrayLike, kappa: float, p_normal: float = 0.0) -> int:
         """Shade the cells where an explorer with P(M1 | H) = ``p_normal`` would be advised at
         ``kappa`` (see :func:`geometry.advised_cells`); returns how many cells that is."""
         mask = geo.advised_cells(theta, kappa, p_normal)
-        if not np.array_equal(mask, self.shaded) or (self.shading is None and not self.detailed):
+        if not np.array_equal(mask, self.shaded) or not (self.detailed or self._shade_drawn):
             self.shaded = mask
-            if isinstance(self.shading, BatchedMeshHandle):
-                opacity = np.where(mask, SHADE_OPACITY, 0.0).astype(np.float32)
-                self.shading.batched_opacities = opacity
-            else:
-                self._shade_image(mask)
+            self._shade_drawn = True
+            for k, (floor, states) in enumerate(zip(self.floors, self.states, strict=True)):
+                shading = self.floor_shading[k]
+                if isinstance(shading, BatchedMeshHandle):
+                    opacity = np.where(mask[states], SHADE_OPACITY, 0.0).astype(np.float32)
+                    shading.batched_opacities = opacity
+                else:
+                    self._shade_image(k, floor, states, mask)
         return int(mask.sum())
 
-    def _shade_image(self, mask: npt.NDArray[np.bool_]) -> None:
+    def _shade_image(self, k: int, floor: int | None, states: slice, mask: BoolArray) -> None:
         d = self.domain
-        rows, cols = d.shape
+        rows, cols = d.shape[-2:]
         image = np.zeros((rows, cols, 4), dtype=np.uint8)
-        cells = d.cells[mask]
-        image[cells[:, 0], cells[:, 1]] = (*SHADE_COLOUR, int(255 * SHADE_OPACITY))
-        self.shading = self.server.scene.add_image(
-            "/shading/image", image, render_width=cols, render_height=rows, format="png",
-            position=(cols / 2, rows / 2, 0.004), cast_shadow=False, receive_shadow=False,
+        cells = d.cells[states][mask[states]]
+        image[cells[:, -2], cells[:, -1]] = (*SHADE_COLOUR, int(255 * SHADE_OPACITY))
+        level = float(floor_levels(d)[floor or 0])
+        self.floor_shading[k] = self.server.scene.add_image(
+            node("shading", floor, "image"), image, render_width=cols, render_height=rows,
+            format="png", position=(cols / 2, rows / 2, level + 0.004), cast_shadow=False,
+            receive_shadow=False,
         )  # fmt: skip
 
     def set_layer(self, layer: str, visible: bool) -> None:
         if layer not in self.frames:
             raise ValueError(f"unknown layer {layer!r}: one of {', '.join(LAYERS)}")
         self.frames[layer].visible = visible
+
+    # ---- floors and the camera -----------------------------------------------------------
+    def show_floor(self, floor: int | None) -> None:
+        """Show every floor (None) or floor ``floor`` (its index) alone: the others' maps,
+        prior, shading and explorers hidden, and the connections between floors."""
+        if floor is not None and not 0 <= floor < len(self.floor_frames):
+            raise ValueError(f"no floor {floor}: this map has {len(self.floor_frames)} floors")
+        if floor == self.shown_floor:
+            return
+        self.shown_floor = floor
+        for f, frames in enumerate(self.floor_frames):
+            for frame in frames:
+                frame.visible = floor is None or f == floor
+        if self.connections is not None:
+            self.connections.visible = floor is None
+
+    def camera(
+        self, fov: float = DEFAULT_FOV, aspect: float = 1.0
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """(position, look_at, up) of the camera that fits what is shown: a one-floor map or
+        the floor shown from above, every floor of a building from the south and above."""
+        d = self.domain
+        if isinstance(d, Building) and self.shown_floor is None:
+            return building_camera(d, fov, aspect)
+        return top_down_camera(d, fov, aspect, self.shown_floor or 0)
 
     # ---- live sessions -------------------------------------------------------------------
     def update_sessions(self, sessions: Sequence[SessionView], picked: str | None = None) -> bool:

@@ -7,7 +7,11 @@ Scene nodes (one each for all sessions, so a tick sends a few messages, not one 
     /advice/arrows    the advice each session was given, drawn at the cell where it was given
 
 Their sizes change with every move, so each is re-created under the same name (viser replaces
-the node) and removed when there is nothing to draw.
+the node) and removed when there is nothing to draw. On a building each floor has its own
+(``/paths/f1/lines``, ``/markers/f1/points``, ``/advice/f1/arrows``, ``/markers/f1/picked``:
+:func:`node`), so that showing one floor hides the others' explorers: a path's segment belongs
+to the floor it leaves (a ride rises from it), advice to the floor where it was given (U and D
+as arrows straight up and down).
 """
 
 from __future__ import annotations
@@ -18,8 +22,8 @@ import numpy as np
 import viser
 from viser import SceneNodeHandle
 
-from app.arrays import FloatArray
-from app.domain.grid import GridDomain
+from app.arrays import BoolArray, FloatArray, IntArray
+from app.domain.building import Domain
 from app.viewer import geometry as geo
 from app.viewer.state import SessionView
 
@@ -37,6 +41,17 @@ ADVICE_MIN_P = 0.05
 ADVICE_REACH = 0.85
 
 
+def node(layer: str, floor: int | None, leaf: str) -> str:
+    """The scene name of ``leaf`` in ``layer`` on ``floor`` (None: a one-floor map, whose
+    nodes sit in the layer itself): ``/paths/lines``, ``/paths/f1/lines``."""
+    return f"/{layer}/{leaf}" if floor is None else f"/{layer}/f{floor}/{leaf}"
+
+
+def floors_of(domain: Domain) -> list[int | None]:
+    """The floors to draw each layer on: [None] on a one-floor map, else each index."""
+    return [None] if domain.width == 2 else list(range(domain.shape[0]))
+
+
 def palette_colour(index: int) -> tuple[int, int, int]:
     r, g, b = PALETTE[index % len(PALETTE)]
     return (int(r), int(g), int(b))
@@ -45,9 +60,10 @@ def palette_colour(index: int) -> tuple[int, int, int]:
 class SessionLayers:
     """The live sessions of one domain, drawn into a viser scene (a server's or a client's)."""
 
-    def __init__(self, server: viser.ViserServer | viser.ClientHandle, domain: GridDomain):
+    def __init__(self, server: viser.ViserServer | viser.ClientHandle, domain: Domain):
         self.server = server
         self.domain = domain
+        self.floors = floors_of(domain)
         self.session_ids: tuple[str, ...] = ()
         self.picked: str | None = None
         self._session_key: tuple[object, ...] = ()
@@ -85,42 +101,51 @@ class SessionLayers:
                 used = np.bincount(list(self._colour_index.values()), minlength=len(PALETTE))
                 self._colour_index[sid] = int(np.argmin(used))
 
+    def _on(self, floor: int | None, floors: IntArray) -> BoolArray:
+        """Which of the things on ``floors`` are drawn on ``floor`` (None: all)."""
+        on: BoolArray = np.ones(len(floors), dtype=bool) if floor is None else floors == floor
+        return on
+
     def _draw_paths(self, sessions: Sequence[SessionView]) -> None:
         segments, owner, age = geo.path_segments(self.domain, [s.path for s in sessions], PATH_Z)
         # older segments fade towards the floor, so the direction of travel shows
         fade = (0.25 + 0.75 * age)[:, None]
         colours = fade * self._colours(sessions)[owner] + (1 - fade) * np.array(FLOOR_COLOUR)
         pairs = np.repeat(colours[:, None, :], 2, axis=1).astype(np.uint8)
-        self._replace_or_remove(
-            "/paths/lines",
-            [segments],
-            lambda pts: self.server.scene.add_line_segments(
-                "/paths/lines", pts, pairs, thickness=0.14
-            ),
-        )
+        leaves = geo.floor_at(self.domain, segments[:, 0, 2])
+        for floor in self.floors:
+            name, on = node("paths", floor, "lines"), self._on(floor, leaves)
+
+            def lines(pts: FloatArray, name: str = name, on: BoolArray = on) -> SceneNodeHandle:
+                return self.server.scene.add_line_segments(name, pts, pairs[on], thickness=0.14)
+
+            self._replace_or_remove(name, [segments[on]], lines)
 
     def _draw_markers(self, sessions: Sequence[SessionView], picked: str | None) -> None:
         scene = self.server.scene
-        pts = [geo.cell_centres(self.domain, [s.position], MARKER_Z) for s in sessions]
+        where = [s.position for s in sessions]
+        pts = geo.cell_centres(self.domain, where, MARKER_Z)
+        floors = geo.floor_of(self.domain, where)
         colours = np.array([self.colour(s.session_id) for s in sessions], dtype=np.uint8)
-        self._replace_or_remove(
-            "/markers/points",
-            pts,
-            lambda p: scene.add_point_cloud(
-                "/markers/points", p, colours, point_size=0.62, point_shape="circle"
-            ),
-        )
         chosen = [s for s in sessions if s.session_id == picked]
-        if chosen:
-            pos = geo.cell_centres(self.domain, [chosen[0].position], MARKER_Z + 0.3)[0]
-            self._nodes["/markers/picked"] = scene.add_label(
-                "/markers/picked", f"▶ {picked}", position=tuple(pos)
-            )
-        else:
-            self._remove("/markers/picked")
+        for floor in self.floors:
+            name, on = node("markers", floor, "points"), self._on(floor, floors)
+
+            def points(p: FloatArray, name: str = name, on: BoolArray = on) -> SceneNodeHandle:
+                return scene.add_point_cloud(
+                    name, p, colours[on].reshape(-1, 3), point_size=0.62, point_shape="circle"
+                )
+
+            self._replace_or_remove(name, [pts[on]], points)
+            label = node("markers", floor, "picked")
+            if chosen and self._on(floor, geo.floor_of(self.domain, [chosen[0].position]))[0]:
+                pos = geo.cell_centres(self.domain, [chosen[0].position], MARKER_Z + 0.3)[0]
+                self._nodes[label] = scene.add_label(label, f"▶ {picked}", position=tuple(pos))
+            else:
+                self._remove(label)
 
     def _draw_advice(self, sessions: Sequence[SessionView]) -> None:
-        cells: list[tuple[int, int]] = []
+        cells: list[tuple[int, ...]] = []
         probs: list[tuple[float, ...]] = []
         owner: list[int] = []
         for k, s in enumerate(sessions):
@@ -132,18 +157,17 @@ class SessionLayers:
             self.domain, cells, probs, ADVICE_REACH, ADVICE_MIN_P, ADVICE_Z
         )
         colours = self._colours(sessions)[np.asarray(owner, dtype=np.int64)[row]]
-        self._replace_or_remove(
-            "/advice/arrows",
-            [points],
-            lambda pts: self.server.scene.add_arrows(
-                "/advice/arrows",
-                pts,
-                colours.astype(np.uint8),
-                shaft_radius=0.05,
-                head_radius=0.13,
-                head_length=0.16,
-            ),
-        )
+        floors = geo.floor_of(self.domain, cells)[row]
+        for floor in self.floors:
+            name, on = node("advice", floor, "arrows"), self._on(floor, floors)
+
+            def arrows(pts: FloatArray, name: str = name, on: BoolArray = on) -> SceneNodeHandle:
+                return self.server.scene.add_arrows(
+                    name, pts, colours[on].astype(np.uint8),
+                    shaft_radius=0.05, head_radius=0.13, head_length=0.16,
+                )  # fmt: skip
+
+            self._replace_or_remove(name, [points[on]], arrows)
 
     def _replace_or_remove(
         self, name: str, parts: list[FloatArray], add: Callable[[FloatArray], SceneNodeHandle]

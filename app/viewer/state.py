@@ -15,9 +15,10 @@ from typing import NamedTuple
 
 from app.advice.advisor import DEFAULT_STRATEGY
 from app.arrays import FloatArray
-from app.domain.grid import GridDomain
+from app.domain.building import Domain
 
-Cell = tuple[int, int]
+#: a cell as the service gives it: (row, col), or (floor, row, col) on a building
+Cell = tuple[int, ...]
 Probabilities = tuple[float, ...]
 
 
@@ -46,9 +47,10 @@ class Destination(NamedTuple):
 
 @dataclass(frozen=True, eq=False)
 class DomainView:
-    """A domain and its current prior ``theta`` (states x 4); ``prior_version`` changes with it."""
+    """A domain (a one-floor map or a building) and its current prior ``theta`` (states x
+    actions: 4, or 6 on a building); ``prior_version`` changes with it."""
 
-    domain: GridDomain
+    domain: Domain
     theta: FloatArray
     prior_version: int = 0
 
@@ -58,7 +60,8 @@ class DomainView:
 
 
 class AdviceGiven(NamedTuple):
-    """Advice the advisor gave at ``cell``: theta of that cell, in the order N, E, S, W.
+    """Advice the advisor gave at ``cell``: theta of that cell, in the order N, E, S, W (and
+    U, D on a building).
 
     A named tuple: feeds build many of these per tick, and tuples are cheap to make."""
 

@@ -25,9 +25,10 @@ from collections.abc import Callable
 
 import viser
 
+from app.domain.building import Building
 from app.viewer.controls import LOST_PICKED, Controls
 from app.viewer.guard import MAX_CLIENTS, bounded_server, client_without_uploads
-from app.viewer.scene import DEFAULT_FOV, LAYERS, MazeScene, top_down_camera
+from app.viewer.scene import DEFAULT_FOV, LAYERS, MazeScene
 from app.viewer.state import DomainView, Feed, Snapshot
 
 log = logging.getLogger(__name__)
@@ -49,7 +50,8 @@ class ClientView:
         self.controls = Controls(client.gui)
         self.scene: MazeScene | None = None
         self._drawn: tuple[str, int] | None = None  # (domain name, prior version)
-        self._aimed: tuple[int, int] | None = None  # the canvas size the camera was fitted to
+        # the canvas size and the floor shown (None: all) the camera was fitted to
+        self._aimed: tuple[tuple[int, int], int | None] | None = None
 
     def apply(self, snap: Snapshot) -> None:
         """Bring this browser's scene and panel up to date with ``snap``."""
@@ -64,8 +66,11 @@ class ClientView:
         self._draw_domain(view)
         scene = self.scene
         assert scene is not None
-        if controls.take_fit() or self._aimed != canvas_of(self.client):
-            self.aim()  # asked for, or the window changed size: the maze fills it again
+        domain = view.domain
+        controls.set_floors([f.name for f in domain.floors] if isinstance(domain, Building) else [])
+        scene.show_floor(controls.picked_floor)
+        if controls.take_fit() or self._aimed != (canvas_of(self.client), scene.shown_floor):
+            self.aim()  # asked for, the window changed size or another floor: fill it again
         sessions = snap.sessions_of(view.name)  # most recently active first, as the feed has them
         controls.set_sessions([s.session_id for s in sessions])
         picked = next((s for s in sessions if s.session_id == controls.picked_session), None)
@@ -93,11 +98,12 @@ class ClientView:
         self.aim()
 
     def aim(self) -> None:
-        """Look at this browser's map from above, north up, the map filling its canvas."""
+        """Look at this browser's map from above, north up, the map filling its canvas (a
+        building's floors, all of them, from the south and above: :meth:`MazeScene.camera`)."""
         if self.scene is not None:
             fov, aspect = view_of(self.client)
-            position, look_at, up = top_down_camera(self.scene.domain, fov, aspect)
-            self._aimed = canvas_of(self.client)
+            position, look_at, up = self.scene.camera(fov, aspect)
+            self._aimed = (canvas_of(self.client), self.scene.shown_floor)
             camera = self.client.camera
             camera.up_direction = tuple(up)
             camera.position = tuple(position)

@@ -44,6 +44,11 @@ PAGES: dict[str, str] = {
     "markers and advice, what the picked session's advisor believes in plain words, and its "
     "P(M1|H) over time",
     "viewer-legend": "The viewer's legend, at the foot of its panel",
+    "viewer-floors": "The 3D viewer on a generated hospital of two floors: the floors stacked "
+    "at their heights, the stairs (zigzag) and lifts (straight) between them, destinations "
+    "labelled by name on their floors, an explorer on each floor, the floor filter",
+    "viewer-floors-upstairs": "The same hospital's upper floor alone (the floor filter), "
+    "from above: its explorer's path and the advice it was given",
     "docs": "/docs, the API's Swagger UI, served offline",
     "redoc": "/redoc, the same API in ReDoc, served offline",
 }

@@ -11,10 +11,12 @@ import numpy as np
 import pytest
 from playwright.sync_api import Page, expect
 
-from app.viewer.controls import LAYER_LABELS, PLOT_TITLE
-from app.viewer.scene import top_down_camera
+from app.domain.building import Building
+from app.domain.floorplans import generate_floors
+from app.viewer.controls import ALL_FLOORS, LAYER_LABELS, PLOT_TITLE
+from app.viewer.storeys import floor_levels
 from app.viewer.viewer import ClientView
-from tests.browser.conftest import Service, screenshot, wait_until
+from tests.browser.conftest import ADMIN, Service, screenshot, wait_until
 from tests.viewer.conftest import choose
 
 pytestmark = pytest.mark.browser
@@ -119,10 +121,91 @@ def test_viewer_page_connects_and_shows_maze_prior_and_sessions(
 
 
 def fitted(view: ClientView) -> bool:
-    """Whether the browser's camera looks down on the maze from where it fills its canvas."""
+    """Whether the browser's camera looks at the maze from where it fills its canvas (down
+    on a one-floor map or the floor shown, from the south and above on every floor)."""
     camera = view.client.camera
     scene = view.scene
     if scene is None:
         return False
-    position, look_at, _ = top_down_camera(scene.domain, camera.fov, camera.aspect)
+    position, look_at, _ = scene.camera(camera.fov, camera.aspect)
     return bool(np.allclose(camera.position, position) and np.allclose(camera.look_at, look_at))
+
+
+TOWER = generate_floors(20, 20, 2, np.random.default_rng(3), n_goals=3, purpose="hospital")
+
+
+def test_viewer_page_shows_a_building_floor_by_floor(service: Service, page: Page) -> None:
+    """A building of two floors, read over HTTP: stacked at their heights with the stairs and
+    lifts between them, explorers on each floor; the panel's floor filter shows one alone."""
+    admin = {"X-API-Key": ADMIN}
+    body = {"text": TOWER.to_text(), "experts": {"per_goal": 2}}
+    put = service.http.put("/domains/tower", json=body, headers=admin)
+    assert put.status_code == 201, put.text
+    upstairs = list(TOWER.connections[0].stops[1])  # a lift's stop on the upper floor
+    walks = {"upstairs": (upstairs, "SSWWNN"), "ground": (list(TOWER.cell(TOWER.start)), "NNNEE")}
+    ids = {}
+    for name, (start, moves) in walks.items():
+        made = service.http.post("/domains/tower/sessions", json={"kappa": 0.0, "start": start})
+        assert made.status_code == 201, made.text
+        sid, token = made.json()["session_id"], made.json()["token"]
+        service.move(sid, {"Authorization": f"Bearer {token}"}, start, moves)
+        ids[name] = sid
+    viewer = service.viewer
+    server = viewer.server
+    assert server is not None
+    page.goto(f"http://127.0.0.1:{viewer.port}/")
+    expect(page.get_by_text("Connecting")).to_have_count(0, timeout=30_000)
+    wait_until(lambda: len(server.get_clients()) == 1, what="the viewer to see the browser")
+    wait_until(lambda: viewer.controls is not None, what="the browser's controls")
+    controls = viewer.controls
+    assert controls is not None
+    choose(controls.domain, "tower")
+    wait_until(
+        lambda: (
+            viewer.scene is not None
+            and isinstance(viewer.scene.domain, Building)
+            and set(ids.values()) <= set(viewer.scene.session_ids)
+        ),
+        what="the pump to draw the building and its sessions",
+    )
+    with viewer._lock:
+        view = next(iter(viewer.views.values()))
+        scene = view.scene
+        assert scene is not None
+        names = set(view.client.scene._handle_from_node_name)
+        for f in range(TOWER.n_floors):
+            assert {f"/maze/f{f}/walls", f"/maze/f{f}/name", f"/prior/f{f}/arrows"} <= names
+            assert f"/markers/f{f}/points" in names  # an explorer on each floor
+        assert {"/maze/connections/lift", "/maze/connections/stairs"} <= names
+        assert TOWER.goal_names is not None
+        for i, (f, _, _) in enumerate(TOWER.goal_cells):
+            label: Any = view.client.scene._handle_from_node_name[f"/maze/f{f}/goal_labels/G{i}"]
+            assert label.text == TOWER.goal_names[i]
+    # the floor filter is in the browser's panel; every floor first, from the south and above
+    floors = page.get_by_label("Floors", exact=True)
+    expect(floors).to_be_visible()
+    wait_until(lambda: fitted(view), what="the camera to see every floor")
+    notice = page.get_by_role("alert").filter(has_text="Software WebGL")
+    notice.get_by_role("button").click()
+    expect(notice).to_have_count(0)
+    client = next(iter(server.get_clients().values()))
+    image = client.get_render(240, 320, timeout=60.0)
+    assert np.asarray(image, dtype=np.float64).std() > 10.0
+    screenshot(page, "viewer-floors")
+    # one floor alone, picked in the browser's dropdown: the other floor hidden, seen from above
+    floors.click()
+    page.get_by_role("option", name="Floor 1", exact=True).click()
+    wait_until(lambda: scene.shown_floor == 1, what="the floor filter to reach the pump")
+    wait_until(lambda: fitted(view), what="the camera to look down on floor 1")
+    assert not any(frame.visible for frame in scene.floor_frames[0])
+    assert all(frame.visible for frame in scene.floor_frames[1])
+    assert scene.connections is not None and not scene.connections.visible
+    assert view.client.camera.look_at[2] == pytest.approx(floor_levels(TOWER)[1])
+    screenshot(page, "viewer-floors-upstairs")
+    floors.click()
+    page.get_by_role("option", name=ALL_FLOORS, exact=True).click()
+    wait_until(lambda: scene.shown_floor is None, what="every floor again")
+    assert all(frame.visible for frames in scene.floor_frames for frame in frames)
+    choose(controls.domain, "default")  # as the other tests expect to find it
+    wait_until(lambda: viewer.scene is not None and not isinstance(viewer.scene.domain, Building),
+               what="the one-floor map again")  # fmt: skip

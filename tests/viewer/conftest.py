@@ -21,6 +21,8 @@ from websockets.typing import Origin, Subprotocol
 
 from app.advice.advisor import Advisor
 from app.advice.models import AdviceTables
+from app.domain.building import Building, Domain
+from app.domain.floorplans import generate_floors
 from app.domain.generate import generate_domain
 from app.domain.grid import GridDomain
 from app.viewer.state import AdviceGiven, SessionView, Snapshot
@@ -57,6 +59,19 @@ def domain() -> GridDomain:
 def theta(domain: GridDomain) -> np.ndarray:
     rng = np.random.default_rng(0)
     return rng.dirichlet(np.full(4, 0.5), size=domain.n_states)
+
+
+@pytest.fixture(scope="module")
+def tower() -> Building:
+    """A generated hospital of two floors (4 m apart), lifts and stairs, named destinations."""
+    return generate_floors(20, 20, 2, np.random.default_rng(3), n_goals=3, purpose="hospital",
+                           name="tower")  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def tower_theta(tower: Building) -> np.ndarray:
+    rng = np.random.default_rng(0)
+    return rng.dirichlet(np.full(6, 0.5), size=tower.n_states)
 
 
 @pytest.fixture(scope="module")
@@ -135,20 +150,21 @@ def viewer(feed: FakeFeed) -> Iterator[Viewer]:
 
 
 def walk(
-    domain: GridDomain,
+    domain: Domain,
     theta: np.ndarray,
     session_id: str,
     steps: int,
     rng: np.random.Generator,
     kappa: float = 0.5,
 ) -> SessionView:
-    """A random walker advised by the core advisor, as the viewer would be told about it."""
+    """A random walker advised by the core advisor, as the viewer would be told about it
+    (on a building it rides too: six actions)."""
     advisor = Advisor(AdviceTables.paper(theta), kappa=kappa)
     s = domain.start
     decision = advisor.start(s)
     path, history, advice = [domain.cell(s)], [decision.p_normal], []
     for _ in range(steps):
-        a = int(rng.integers(4))
+        a = int(rng.integers(domain.n_actions))
         s2 = domain.step(s, a)
         decision = advisor.observe(s, a, s2)
         s = s2

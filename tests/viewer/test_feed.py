@@ -11,9 +11,12 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
+from app.domain.building import Building
+from app.domain.floorplans import generate_floors
+from app.domain.grid import Frame, GridDomain, MapError
 from app.service.config import Settings
 from app.service.main import create_app
-from app.viewer.remote import RemoteFeed
+from app.viewer.remote import RemoteFeed, building_of
 from tests.viewer.conftest import free_port
 
 ADMIN = "viewer-test-admin-key"
@@ -213,3 +216,65 @@ def test_feed_carries_destination_names_and_what_the_advisor_believes(
     assert view.leads_to.label == f"{view.leads_to.name} (G{view.leads_to.goal})"
     said = moved.json()["leads_to"]  # the decision's own
     assert view.leads_to == (said["goal"], tuple(said["cell"]), said["name"])
+
+
+TOWER = generate_floors(20, 20, 2, np.random.default_rng(3), n_goals=3, purpose="hospital")
+
+
+def test_feed_rebuilds_a_building_with_its_prior_and_sessions(client: TestClient) -> None:
+    """A map of several floors comes back as the Building that was put (floors, connections,
+    destinations' names), its prior (S, 6) in state order, its sessions' cells [floor, row,
+    col] and their advice over six actions; the one-floor domain is read as before."""
+    admin = {"X-API-Key": ADMIN}
+    body = {"text": TOWER.to_text(), "experts": {"per_goal": 2}}
+    assert client.put("/domains/tower-feed", json=body, headers=admin).status_code == 201
+    lift = TOWER.connections[0].stops[1]  # the lift's stop upstairs
+    made = client.post("/domains/tower-feed/sessions", json={"kappa": 0.0, "start": list(lift)})
+    assert made.status_code == 201, made.text
+    sid, auth = made.json()["session_id"], {"Authorization": f"Bearer {made.json()['token']}"}
+    moved = client.post(f"/sessions/{sid}/events", json={"state": list(lift), "action": "D"},
+                        headers=auth)  # fmt: skip
+    assert moved.status_code == 200 and moved.json()["state"] == list(TOWER.connections[0].stops[0])
+    feed = remote(client)
+    snap = feed()
+    view = snap.domains["tower-feed"]
+    building = view.domain
+    assert isinstance(building, Building) and building.name == "tower-feed"
+    assert building.to_text() == TOWER.to_text()
+    assert building.goal_names == TOWER.goal_names and building.n_actions == 6
+    prior = np.array(
+        [[[v if v is not None else [np.nan] * 6 for v in row] for row in floor]
+         for floor in client.get("/domains/tower-feed/prior").json()["theta"]]
+    )  # fmt: skip
+    assert view.theta.shape == (TOWER.n_states, 6)
+    cells = building.cells
+    np.testing.assert_allclose(view.theta, prior[cells[:, 0], cells[:, 1], cells[:, 2]], rtol=1e-12)
+    mine = next(s for s in snap.sessions if s.session_id == sid)
+    assert mine.path == [lift, TOWER.connections[0].stops[0]]
+    assert mine.position == TOWER.connections[0].stops[0]
+    assert [cell for _, cell, _ in mine.advice] == mine.path
+    assert all(len(p) == 6 and sum(p) == pytest.approx(1.0) for _, _, p in mine.advice)
+    assert isinstance(snap.domains["default"].domain, GridDomain)
+    assert feed().domains["tower-feed"] is view  # nothing changed: not fetched again
+
+
+def test_building_of_reads_the_frame_and_leaves_unnamed_goals_unnamed() -> None:
+    floors = [(-1, "Basement", None, ["S.#", "..G"]), (0, "Hall", 0.0, ["..#", "G.."])]
+    steps = {"kind": "stairs", "name": "Steps", "cost": 3, "stops": [[0, 0, 1], [1, 0, 1]]}
+    info = {
+        "floors": [
+            {"index": i, "ordinal": o, "name": n, "elevation": e, "map": m}
+            for i, (o, n, e, m) in enumerate(floors)
+        ],
+        "connections": [steps],
+        "goals": [[0, 1, 2], [1, 1, 0]],
+        "goal_names": [None, "Desk"],
+        "resolution": 0.5,
+        "origin": [1.0, 2.0, 0.0],
+    }  # fmt: skip
+    b = building_of(info, "small")
+    assert b.frame == Frame(0.5, (1.0, 2.0, 0.0))
+    assert b.goal_names == (None, "Desk") and [f.ordinal for f in b.floors] == [-1, 0]
+    assert b.connections[0].stops == ((0, 0, 1), (1, 0, 1))
+    with pytest.raises(MapError):
+        building_of({**info, "goals": [[0, 0, 2]], "goal_names": ["Wall"]}, "bad")

@@ -13,12 +13,14 @@ from hypothesis import given
 from hypothesis import strategies as st
 from viser import _messages
 
+from app.domain.building import Building
 from app.domain.generate import generate_domain
 from app.domain.grid import GridDomain
 from app.viewer import geometry as geo
-from app.viewer.controls import LOST_PICKED, NONE, PLOT_TITLE, SLIDER_KAPPA_HIGH
+from app.viewer.controls import ALL_FLOORS, LOST_PICKED, NONE, PLOT_TITLE, SLIDER_KAPPA_HIGH
 from app.viewer.scene import DEFAULT_FOV, WALL_HEIGHT
 from app.viewer.state import Destination, DomainView, Figure, Snapshot
+from app.viewer.storeys import floor_levels
 from app.viewer.viewer import Viewer, pump_wait
 from tests.viewer.conftest import Browser, FakeFeed, choose, free_port, wait_until, walk
 
@@ -375,3 +377,57 @@ def test_a_kappa_no_slider_gives_is_put_back_in_range(
     assert controls.kappa.value == kept
     assert scene.shaded.sum() == geo.advised_cells(theta, kept, 0.0).sum()
     assert f"kappa = {kept:.2f}" in controls.shading_text.content
+
+
+def test_viewer_floor_filter_shows_a_building_whole_or_one_floor(
+    viewer: Viewer,
+    feed: FakeFeed,
+    domain: GridDomain,
+    theta: np.ndarray,
+    tower: Building,
+    tower_theta: np.ndarray,
+) -> None:
+    """A one-floor map has no floor filter; a building's lists its floors, every floor seen
+    from the south and above, or one alone, from above (the others hidden)."""
+    feed.snapshot = snapshot(domain, theta, 1)
+    viewer.tick()
+    controls, view = viewer.controls, next(iter(viewer.views.values()))
+    assert controls is not None
+    assert not controls.floor.visible and controls.picked_floor is None
+    assert "Floors" not in controls.legend.content
+    feed.snapshot = Snapshot({tower.name: DomainView(tower, tower_theta)}, [
+        walk(tower, tower_theta, "t0", 20, np.random.default_rng(3)),
+    ])  # fmt: skip
+    choose(controls.domain, tower.name)
+    viewer.tick()
+    scene = viewer.scene
+    assert scene is not None and scene.domain is tower
+    assert controls.floor.visible and controls.floor.options == (
+        ALL_FLOORS,
+        "Ground floor",
+        "Floor 1",
+    )
+    assert "**Floors**" in controls.legend.content
+    assert scene.shown_floor is None
+    cam = view.client.camera
+    np.testing.assert_allclose(cam.up_direction, (0.0, 0.0, 1.0), atol=1e-6)
+    levels = floor_levels(tower)
+    assert cam.position[2] > levels[-1] and cam.position[1] < cam.look_at[1]
+    choose(controls.floor, "Floor 1")
+    viewer.tick()
+    assert scene.shown_floor == 1 == controls.picked_floor
+    assert not any(frame.visible for frame in scene.floor_frames[0])
+    assert all(frame.visible for frame in scene.floor_frames[1])
+    assert cam.look_at[2] == pytest.approx(levels[1])  # from above, on that floor
+    np.testing.assert_allclose(cam.up_direction, (0.0, 1.0, 0.0), atol=1e-6)
+    choose(controls.floor, "Basement")  # not one of them (a browser may send anything)
+    viewer.tick()
+    assert controls.floor.value == ALL_FLOORS and scene.shown_floor is None
+    choose(controls.floor, "Floor 1")
+    viewer.tick()
+    feed.snapshot = snapshot(domain, theta, 1)  # back to one floor: the filter goes
+    choose(controls.domain, domain.name)
+    viewer.tick()
+    assert viewer.scene is not None and viewer.scene.domain is domain
+    assert not controls.floor.visible and controls.picked_floor is None
+    assert view.client.camera.look_at[2] == 0.0
