@@ -20,16 +20,8 @@ import viser
 import viser.uplot
 
 from app.advice.advisor import DEFAULT_KAPPA
-from app.viewer.scene import (
-    CONNECTION_STYLE,
-    GOAL_COLOUR,
-    LAYERS,
-    PRIOR_COLOUR,
-    SHADE_COLOUR,
-    SHADE_OPACITY,
-    START_COLOUR,
-    WALL_COLOUR,
-)
+from app.viewer.plan import CONNECTION_STYLE, GOAL_COLOUR, START_COLOUR, WALL_COLOUR
+from app.viewer.scene import LAYERS, PRIOR_COLOUR, SHADE_COLOUR, SHADE_OPACITY
 from app.viewer.sessions import ADVICE_MIN_P, FLOOR_COLOUR, PALETTE
 from app.viewer.state import SessionView
 

@@ -7,14 +7,14 @@ Scene tree (names like paths; each top-level layer is a frame whose visibility t
     /shading/cells    a tile per free cell, opaque where a lost explorer would be advised
     /paths, /markers, /advice   live sessions (:mod:`app.viewer.sessions`)
 
-A building (a map of several floors) is drawn floor by floor at its floors' heights
-(:mod:`app.viewer.storeys`): each layer holds a frame per floor (``/maze/f0``, ``/prior/f0``,
-...) with that floor's nodes in it (``/maze/f0/walls``, ``/prior/f0/arrows``; the floor's name
-``/maze/f0/name``, its connections' stops ``/maze/f0/stops``, the destinations labelled by
-name), and ``/maze/connections`` joins the floors: lifts and ramps straight, stairs and
-escalators zigzagging, in their kinds' colours. Showing one floor (:meth:`MazeScene.show_floor`)
-hides the other floors' frames and the connections; U and D, up and down, are flat arrows
-standing upright in the prior and arrows straight up and down in the advice.
+The map's fixed nodes are drawn by :mod:`app.viewer.plan`. A building (a map of several floors)
+is drawn floor by floor at its floors' heights (:mod:`app.viewer.storeys`): each layer holds a
+frame per floor (``/maze/f0``, ``/prior/f0``, ...) with that floor's nodes in it
+(``/maze/f0/walls``, ``/prior/f0/arrows``; the floor's name, its connections' stops, the
+destinations labelled by name), and ``/maze/connections`` joins the floors. Showing one floor
+(:meth:`MazeScene.show_floor`) hides the other floors' frames and the connections; U and D, up
+and down, are flat arrows standing upright in the prior and arrows straight up and down in the
+advice.
 
 A :class:`MazeScene` draws one domain; it is fed plain data (:mod:`app.viewer.state`) and keeps
 no reference to any service. The map, prior and shading have a fixed number of instances and
@@ -34,26 +34,17 @@ from viser import BatchedMeshHandle, FrameHandle, ImageHandle, SceneNodeHandle
 from app.arrays import BoolArray, FloatArray
 from app.domain.building import Building, Domain
 from app.viewer import geometry as geo
-from app.viewer.sessions import FLOOR_COLOUR, SessionLayers, floors_of, node
+from app.viewer import plan
+from app.viewer.plan import DETAIL_CELLS as DETAIL_CELLS  # plan's, said here too
+from app.viewer.plan import WALL_HEIGHT as WALL_HEIGHT
+from app.viewer.sessions import SessionLayers, floors_of, node
 from app.viewer.state import SessionView
 from app.viewer.storeys import building_corners, floor_levels, stack_camera
 
 LAYERS = ("prior", "shading", "paths", "markers", "advice")
-WALL_HEIGHT = 0.6
-WALL_COLOUR = (52, 61, 82)
-START_COLOUR = (46, 160, 67)
-GOAL_COLOUR = (230, 168, 23)
 PRIOR_COLOUR = (38, 92, 200)
 SHADE_COLOUR = (235, 87, 87)
 SHADE_OPACITY = 0.45
-#: each kind of connection's colour, line thickness (cells) and flights a floor (0: straight)
-CONNECTION_STYLE: dict[str, tuple[tuple[int, int, int], float, int]] = {
-    "lift": ((142, 68, 173), 0.22, 0),
-    "stairs": ((22, 160, 133), 0.12, 2),
-    "escalator": ((211, 84, 140), 0.12, 2),
-    "ramp": ((120, 130, 150), 0.16, 0),
-}
-CONNECTION_Z = 0.05
 
 
 #: viser's default vertical field of view (75 degrees), until a browser says its own.
@@ -82,10 +73,6 @@ def building_camera(
 
 
 Target = viser.ViserServer | viser.ClientHandle
-#: Above this many free cells a map is drawn in a bounded form: walls and the kappa shading as
-#: images (a few bytes a cell), and the prior's arrows not at all (44 bytes an arrow, four a
-#: cell: a 500 x 500 map would send 55 MB). Below it, everything is drawn as instances.
-DETAIL_CELLS = 10_000
 
 
 class MazeScene:
@@ -114,10 +101,11 @@ class MazeScene:
             for f in self.floors
             if f is not None
         ]
-        self.connections: FrameHandle | None = None
         for floor in self.floors:
-            self._draw_floor(floor)
-        self._draw_connections()
+            walls = plan.draw_floor(scene, domain, floor, self.detailed)
+            if walls is not None:
+                self.floor_walls.append(walls)
+        self.connections = plan.draw_connections(scene, domain)
         self._draw_prior(theta)
         self._draw_shading()
         self.live = SessionLayers(server, domain)
@@ -136,127 +124,6 @@ class MazeScene:
 
     def _one(self, handles: list[BatchedMeshHandle]) -> BatchedMeshHandle | None:
         return handles[0] if handles and self.floors == [None] else None
-
-    # ---- the map ------------------------------------------------------------------------
-    def _walls_of(self, floor: int | None) -> BoolArray:
-        walls: BoolArray = self.domain.walls if floor is None else self.domain.walls[floor]
-        return walls
-
-    def _on(self, floor: int | None, cells: npt.ArrayLike) -> BoolArray:
-        """Which of ``cells`` lie on ``floor`` (all of them on a one-floor map)."""
-        floors = geo.floor_of(self.domain, cells)
-        on: BoolArray = np.ones(len(floors), bool) if floor is None else floors == floor
-        return on
-
-    def _draw_floor(self, floor: int | None) -> None:
-        d, scene = self.domain, self.server.scene
-        rows, cols = d.shape[-2:]
-        level = float(floor_levels(d)[floor or 0])
-        if floor is not None:
-            info = d.floors[floor]  # type: ignore[union-attr]  # a building's
-            scene.add_label(node("maze", floor, "name"), f"{info.name} ({info.ordinal})",
-                            position=(0.0, 0.0, level + WALL_HEIGHT),
-                            anchor="bottom-left")  # fmt: skip
-        if not self.detailed:
-            self._draw_map_image(floor, level)
-            return
-        scene.add_box(
-            node("maze", floor, "floor"),
-            color=FLOOR_COLOUR,
-            dimensions=(cols, rows, 0.02),
-            position=(cols / 2, rows / 2, level - 0.011),
-            cast_shadow=False,
-        )
-        walls = geo.wall_cells(d)
-        walls = walls[self._on(floor, walls)]
-        vertices, faces = geo.box_mesh()
-        self.floor_walls.append(scene.add_batched_meshes_simple(
-            node("maze", floor, "walls"),
-            vertices=vertices,
-            faces=faces,
-            batched_wxyzs=np.tile([1.0, 0.0, 0.0, 0.0], (len(walls), 1)),
-            batched_positions=geo.cell_centres(d, walls, WALL_HEIGHT / 2),
-            batched_scales=np.tile([1.0, 1.0, WALL_HEIGHT], (len(walls), 1)),
-            batched_colors=WALL_COLOUR,
-            flat_shading=True,
-            lod="off",
-        ))  # fmt: skip
-        start = d.cell(d.start)
-        if self._on(floor, [start])[0]:
-            scene.add_box(node("maze", floor, "start"), color=START_COLOUR,
-                          dimensions=(0.9, 0.9, 0.01),
-                          position=tuple(geo.cell_centres(d, [start], 0.006)[0]))  # fmt: skip
-        goal_cells = [d.cell(g) for g in d.goals]
-        here = np.flatnonzero(self._on(floor, goal_cells))
-        self._tiles(node("maze", floor, "goals"), [goal_cells[i] for i in here], GOAL_COLOUR)
-        goals = geo.cell_centres(d, [goal_cells[i] for i in here], 0.006)
-        for i, pos in zip(here, goals + np.array([0.0, 0.0, 0.2]), strict=True):
-            scene.add_label(node("maze", floor, f"goal_labels/G{i}"), d.goal_label(int(i)),
-                            position=tuple(pos))  # fmt: skip
-        if isinstance(d, Building):
-            stops = [(stop, c.kind) for c in d.connections for stop in c.stops if stop[0] == floor]
-            colours = [CONNECTION_STYLE[kind][0] for _, kind in stops]
-            self._tiles(node("maze", floor, "stops"), [s for s, _ in stops], colours)
-
-    def _tiles(self, name: str, cells: Sequence[tuple[int, ...]], colours: npt.ArrayLike) -> None:
-        """Flat tiles on ``cells`` (none: no node), in one colour or one each."""
-        if not cells:
-            return
-        vertices, faces = geo.box_mesh()
-        self.server.scene.add_batched_meshes_simple(
-            name,
-            vertices=vertices,
-            faces=faces,
-            batched_wxyzs=np.tile([1.0, 0.0, 0.0, 0.0], (len(cells), 1)),
-            batched_positions=geo.cell_centres(self.domain, cells, 0.006),
-            batched_scales=np.tile([0.9, 0.9, 0.01], (len(cells), 1)),
-            batched_colors=np.asarray(colours, dtype=np.uint8).reshape(-1, 3)
-            if np.ndim(colours) == 2 else tuple(np.asarray(colours).tolist()),
-            lod="off",
-        )  # fmt: skip
-
-    def _draw_connections(self) -> None:
-        """A building's connections between their stops, by kind (one node a kind)."""
-        d = self.domain
-        if not isinstance(d, Building) or not d.connections:
-            return
-        scene = self.server.scene
-        self.connections = scene.add_frame("/maze/connections", show_axes=False)
-        for kind, (colour, thickness, flights) in CONNECTION_STYLE.items():
-            parts = [
-                geo.connection_segments(d, i, flights, CONNECTION_Z)
-                for i, c in enumerate(d.connections)
-                if c.kind == kind
-            ]
-            if parts:
-                segments = np.concatenate(parts)
-                colours = np.broadcast_to(np.array(colour, np.uint8), (*segments.shape[:2], 3))
-                scene.add_line_segments(f"/maze/connections/{kind}", segments, colours,
-                                        thickness=thickness)  # fmt: skip
-
-    def _draw_map_image(self, floor: int | None, level: float) -> None:
-        """A big map's floor as one image: walls dark, start and goals in their colours (one
-        pixel a cell, sent as a PNG)."""
-        d, scene = self.domain, self.server.scene
-        rows, cols = d.shape[-2:]
-        image = np.empty((rows, cols, 3), dtype=np.uint8)
-        image[:] = FLOOR_COLOUR
-        image[self._walls_of(floor)] = WALL_COLOUR
-        if isinstance(d, Building):
-            for c in d.connections:
-                for f, r, col in c.stops:
-                    if f == floor:
-                        image[r, col] = CONNECTION_STYLE[c.kind][0]
-        for g in d.goals:
-            if self._on(floor, [d.cell(g)])[0]:
-                image[d.cell(g)[-2:]] = GOAL_COLOUR
-        if self._on(floor, [d.cell(d.start)])[0]:
-            image[d.cell(d.start)[-2:]] = START_COLOUR
-        scene.add_image(
-            node("maze", floor, "image"), image, render_width=cols, render_height=rows,
-            format="png", position=(cols / 2, rows / 2, level + 0.002), cast_shadow=False,
-            receive_shadow=False,
-        )  # fmt: skip
 
     # ---- the prior and the kappa shading -------------------------------------------------
     def _draw_prior(self, theta: npt.ArrayLike) -> None:
