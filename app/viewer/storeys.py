@@ -37,7 +37,7 @@ CELL_METRES = 1.0
 #: the closest two floors are drawn at least this share of the map's longer side apart
 STOREY_SHARE = 0.9
 #: the oblique camera's angle above the horizon (radians), looking north
-STACK_ELEVATION = math.radians(40.0)
+STACK_PITCH = math.radians(40.0)
 
 _levels: weakref.WeakKeyDictionary[Building, FloatArray] = weakref.WeakKeyDictionary()
 
@@ -82,10 +82,10 @@ def floor_levels(domain: Domain) -> FloatArray:
 
 
 def stack_camera(
-    corners: npt.ArrayLike, fov: float, aspect: float, elevation: float = STACK_ELEVATION,
+    corners: npt.ArrayLike, fov: float, aspect: float, pitch: float = STACK_PITCH,
     margin: float = 1.04,
 ) -> tuple[FloatArray, FloatArray, FloatArray]:  # fmt: skip
-    """(position, look_at, up) of a camera looking north and down by ``elevation`` at the
+    """(position, look_at, up) of a camera looking north and down by ``pitch`` at the
     middle of the box of ``corners`` (N, 3), as near as it can be with every corner in a view
     of vertical field of view ``fov`` (radians) and ``aspect`` (width / height), the box's
     extent times ``margin``.
@@ -99,7 +99,7 @@ def stack_camera(
         raise ValueError(f"fov must be in (0, pi) and aspect positive, got {fov}, {aspect}")
     box = np.asarray(corners, dtype=np.float64).reshape(-1, 3)
     look_at = (box.min(axis=0) + box.max(axis=0)) / 2
-    back = np.array([0.0, -math.cos(elevation), math.sin(elevation)])  # towards the camera
+    back = np.array([0.0, -math.cos(pitch), math.sin(pitch)])  # towards the camera
     right = np.array([1.0, 0.0, 0.0])
     up = np.cross(back, right)  # right x up = back: a right-handed view
     p = box - look_at

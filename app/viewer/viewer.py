@@ -61,6 +61,7 @@ class ClientView:
         controls.set_domains(sorted(snap.domains))
         view = snap.domains.get(controls.picked_domain or "")
         if view is None:
+            controls.set_floors([])
             self.clear()
             return
         self._draw_domain(view)

@@ -425,6 +425,13 @@ def test_viewer_floor_filter_shows_a_building_whole_or_one_floor(
     assert controls.floor.value == ALL_FLOORS and scene.shown_floor is None
     choose(controls.floor, "Floor 1")
     viewer.tick()
+    feed.snapshot = Snapshot()  # no domain left: no filter
+    viewer.tick()
+    assert viewer.scene is None and not controls.floor.visible
+    feed.snapshot = Snapshot({tower.name: DomainView(tower, tower_theta)})
+    choose(controls.floor, "Floor 1")
+    viewer.tick()
+    assert viewer.scene is not None and viewer.scene.shown_floor == 1
     feed.snapshot = snapshot(domain, theta, 1)  # back to one floor: the filter goes
     choose(controls.domain, domain.name)
     viewer.tick()
