@@ -35,8 +35,7 @@ def with_elevations(building: Building, heights: list[float | None]) -> Building
 
 def test_floors_stack_at_their_elevations_scaled_alike(tower: Building) -> None:
     """The tower's floors are 4 m apart on 20 x 20 cells of 1 m: drawn to scale they would be
-    4 units apart, so every height is stretched until the storey is STOREY_SHARE of the
-    longer side."""
+    4 units apart, so every height is stretched until the storey is STOREY_SHARE of the rows."""
     share = storeys.STOREY_SHARE
     levels = storeys.floor_levels(tower)
     assert [f.elevation for f in tower.floors] == [0.0, STOREY_HEIGHT]
@@ -55,7 +54,7 @@ def test_floors_without_elevation_are_placed_between_or_a_storey_beyond() -> Non
     assert storeys.elevations(given_).tolist() == [-1.0, 3.0, 6.0, 9.0]
     levels = storeys.floor_levels(given_)
     assert levels[0] == 0.0 and np.all(np.diff(levels) > 0)
-    # proportions kept: the smallest gap (3 m) is STOREY_SHARE of the longer side (20 cells)
+    # proportions kept: the smallest gap (3 m) is STOREY_SHARE of the rows (20)
     least = storeys.STOREY_SHARE * 20
     np.testing.assert_allclose(np.diff(levels), np.array([4.0, 3.0, 3.0]) * least / 3.0)
 
