@@ -31,7 +31,15 @@ MAY_IMPORT: dict[str, set[str]] = {
     # the strategies' table: each entry's readable advisor, served form and compiled form
     "app.strategies": {"app.domain", "app.advice", "app.kernels"},
     "app.agents": {"app.domain", "app.advice", "app.kernels", "app.strategies"},
-    "app.experiments": {"app.domain", "app.advice", "app.kernels", "app.strategies", "app.agents"},
+    # the experiments, and the maps of other formats they import (the IMDF venue)
+    "app.experiments": {
+        "app.domain",
+        "app.advice",
+        "app.kernels",
+        "app.strategies",
+        "app.agents",
+        "app.mapio",
+    },  # fmt: skip
     "app.service": {
         "app.domain",
         "app.advice",

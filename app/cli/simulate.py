@@ -5,9 +5,9 @@ session, and reports every move over the session's websocket with :mod:`advisor_
 ``--advice`` (the default) an advised explorer samples its next action from the advice
 (the paper's protocol); with ``--no-advice`` the service still watches and decides, but the
 explorer ignores it.
-The map comes from the server (``GET /domains/{name}``; a map of several floors is rebuilt
-from its floors and connections, as the viewer rebuilds it); nothing here touches service
-internals.
+The map comes from the server (``GET /domains/{name}``, read by
+:func:`app.domain.building.domain_of`: a map of several floors rebuilt from its floors and
+connections, as the viewer rebuilds it); nothing here touches service internals.
 """
 
 from __future__ import annotations
@@ -29,9 +29,7 @@ from app.advice.advisor import DEFAULT_KAPPA, DEFAULT_STRATEGY, DEFAULT_WINDOW
 from app.agents.explorers import FIXED_EXPLORERS, make_explorer
 from app.cli.local import URL_HELP, service_url, settings_or_exit
 from app.cli.options import choice
-from app.domain.building import Domain
-from app.domain.grid import GridDomain
-from app.viewer.remote import building_of
+from app.domain.building import Domain, domain_of
 
 
 @dataclass(frozen=True)
@@ -66,13 +64,6 @@ def _advice(decision: Decision, grid: Domain) -> npt.NDArray[np.float64] | None:
     if given is None:
         return None
     return np.array([given[a] for a in grid.actions])
-
-
-def domain_of(info: dict[str, object], name: str) -> Domain:
-    """The map of a ``GET /domains/{name}`` answer: a grid, or a building of floors."""
-    if info.get("floors") is not None:
-        return building_of(info, name)
-    return GridDomain.from_strings(info["map"], name=name)  # type: ignore[arg-type]
 
 
 async def episode(

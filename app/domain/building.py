@@ -37,11 +37,12 @@ Limits (a file cannot make the domain large): :data:`~app.domain.floors.MAX_FLOO
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 from itertools import pairwise
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -69,6 +70,7 @@ from app.domain.grid import (
     Frame,
     GridDomain,
     MapError,
+    NamedCell,
     Placed,
     bfs_distances,
     check_rows,
@@ -419,6 +421,52 @@ def load_map_file(path: str | Path, name: str | None = None) -> GridDomain | Bui
     """:func:`load_map` of a file (named by its stem unless ``name``)."""
     p = Path(path)
     return load_map(read_map_text(p), name=name or p.stem)
+
+
+def domain_of(info: Mapping[str, Any], name: str) -> Domain:
+    """The map a service describes (``GET /domains/{name}``'s answer, plain JSON data): a
+    building where it has ``floors`` (:func:`building_of`), else a grid of its ``map`` rows
+    with its destinations' names; both in its frame, when it has one. How a client of the
+    service (the viewer, ``simulate``) walks the map the service serves."""
+    if info.get("floors") is not None:
+        return building_of(info, name)
+    names = [
+        NamedCell(int(cell[0]), int(cell[1]), given)
+        for cell, given in zip(info["goals"], info.get("goal_names") or (), strict=False)
+        if given is not None
+    ]
+    return GridDomain.from_strings(info["map"], name=name, frame=_frame_of(info), names=names)
+
+
+def building_of(info: Mapping[str, Any], name: str) -> Building:
+    """A building from its ``GET /domains/{name}`` answer: its floors (lowest first), its
+    connections (stops ``[floor, row, col]``, floor the index), its goals' names (as
+    ``destination:`` lines name them) and its frame, checked as a map text's parts are."""
+    floors = [
+        Floor(int(f["ordinal"]), f["name"], tuple(f["map"]), f["elevation"]) for f in info["floors"]
+    ]
+    connections = [
+        Connection(
+            c["kind"],
+            int(c["cost"]),
+            tuple((int(f), int(r), int(k)) for f, r, k in c["stops"]),
+            c["name"],
+        )
+        for c in info["connections"]
+    ]
+    names = [
+        FloorName(int(cell[0]), NamedCell(int(cell[1]), int(cell[2]), given))
+        for cell, given in zip(info["goals"], info.get("goal_names") or (), strict=False)
+        if given is not None
+    ]
+    return Building.from_parts(floors, connections, names, _frame_of(info), name)
+
+
+def _frame_of(info: Mapping[str, Any]) -> Frame | None:
+    resolution, origin = info.get("resolution"), info.get("origin")
+    if resolution is None:
+        return None
+    return Frame(resolution, tuple(origin) if origin is not None else (0.0, 0.0, 0.0))
 
 
 # ---- checks ---------------------------------------------------------------------------------

@@ -18,7 +18,7 @@ A map of several floors is a :class:`~app.domain.building.Building`: six actions
 ``D`` the rides), distances in moves (a ride is one), an episode's steps counted in actions as
 on one floor (a ride's time, :attr:`Building.durations`, is not counted). The KL the paper's
 rule and goal-aware advice compare with kappa is in four actions' units on every map
-(:attr:`app.advice.models.AdviceTables.kl_scale`), so their kappa levels mean the same here.
+(:func:`app.advice.models.kl_scale`), so their kappa levels mean the same here.
 """
 
 from __future__ import annotations

@@ -7,9 +7,9 @@ its version changes. The feed keeps nothing else: it turns answers into the plai
 :mod:`app.viewer.state`, and a failed read fails that tick only (the pump goes on).
 
 A map of several floors (its answer has ``floors``) is rebuilt as a
-:class:`~app.domain.building.Building` from its parts (floors, connections, the destinations'
-names, the frame), checked as any map is; its cells are ``[floor, row, col]`` and its prior
-floors x rows x cols x 6.
+:class:`~app.domain.building.Building` from its parts (:func:`app.domain.building.domain_of`:
+floors, connections, the destinations' names, the frame), checked as any map is; its cells are
+``[floor, row, col]`` and its prior floors x rows x cols x 6.
 """
 
 from __future__ import annotations
@@ -20,9 +20,7 @@ import httpx
 import numpy as np
 import orjson
 
-from app.domain.building import Building, Domain
-from app.domain.floors import Connection, Floor, FloorName
-from app.domain.grid import Frame, GridDomain, NamedCell
+from app.domain.building import Domain, domain_of
 from app.viewer.state import Destination, DomainView, Figure, SessionView, Snapshot
 
 
@@ -56,17 +54,7 @@ class RemoteFeed:
         known = self._grids.get(name)
         if known is not None and known[0] == updated_at:
             return known[1]
-        info = self._get(f"/domains/{name}")
-        grid: Domain
-        if info.get("floors") is not None:
-            grid = building_of(info, name)
-        else:
-            names = [
-                NamedCell(int(cell[0]), int(cell[1]), given)
-                for cell, given in zip(info["goals"], info.get("goal_names") or (), strict=False)
-                if given is not None
-            ]
-            grid = GridDomain.from_strings(info["map"], name=name, names=names)
+        grid = domain_of(self._get(f"/domains/{name}"), name)
         self._grids[name] = (updated_at, grid)
         return grid
 
@@ -94,29 +82,6 @@ class RemoteFeed:
         return Snapshot(domains, [session_view(s) for s in snap["sessions"]], snap.get("kappa_max"))
 
 
-def building_of(info: dict[str, Any], name: str) -> Building:
-    """A building from its ``GET /domains/{name}`` answer: its floors (lowest first), its
-    connections (stops ``[floor, row, col]``, floor the index), its goals' names (as
-    ``destination:`` lines name them) and its frame, checked as a map text's parts are."""
-    floors = [
-        Floor(int(f["ordinal"]), f["name"], tuple(f["map"]), f["elevation"]) for f in info["floors"]
-    ]
-    connections = [
-        Connection(c["kind"], int(c["cost"]), tuple(_cell3(s) for s in c["stops"]), c["name"])
-        for c in info["connections"]
-    ]
-    names = [
-        FloorName(int(cell[0]), NamedCell(int(cell[1]), int(cell[2]), given))
-        for cell, given in zip(info["goals"], info.get("goal_names") or (), strict=False)
-        if given is not None
-    ]
-    resolution, origin = info.get("resolution"), info.get("origin")
-    frame = None
-    if resolution is not None:
-        frame = Frame(resolution, tuple(origin) if origin is not None else (0.0, 0.0, 0.0))
-    return Building.from_parts(floors, connections, names, frame, name)
-
-
 def theta_of(grid: Domain, theta: list[Any]) -> np.ndarray:
     """The prior's rows x cols x 4 answer (floors x rows x cols x 6 on a building; walls
     null) as (free cells, actions), in state order."""
@@ -132,10 +97,6 @@ def theta_of(grid: Domain, theta: list[Any]) -> np.ndarray:
 
 def _cell(c: list[int]) -> tuple[int, ...]:
     return tuple(int(v) for v in c)
-
-
-def _cell3(c: list[int]) -> tuple[int, int, int]:
-    return (int(c[0]), int(c[1]), int(c[2]))
 
 
 def session_view(s: dict[str, Any]) -> SessionView:

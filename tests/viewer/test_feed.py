@@ -11,12 +11,12 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from app.domain.building import Building
+from app.domain.building import Building, building_of
 from app.domain.floorplans import generate_floors
 from app.domain.grid import Frame, GridDomain, MapError
 from app.service.config import Settings
 from app.service.main import create_app
-from app.viewer.remote import RemoteFeed, building_of
+from app.viewer.remote import RemoteFeed
 from tests.viewer.conftest import free_port
 
 ADMIN = "viewer-test-admin-key"
