@@ -76,6 +76,8 @@ def test_events_of_another_shape_are_refused_saying_what_a_cell_is(
     said = detail(client.post(f"/sessions/{sid}/events", json={"state": [f, r, c],
                               "next_state": [1, r, c]}, headers=auth))  # fmt: skip
     assert "is not one move from state" in said
+    empty = client.post(f"/sessions/{sid}/events", json=[], headers=auth)
+    assert empty.status_code == 200 and empty.json() == []
     # nothing refused was applied: the session made the one move it was sent, upstairs
     seen = client.get(f"/sessions/{sid}", headers=auth).json()
     assert seen["steps"] == 1 and seen["floor"] == b.floors[1].name

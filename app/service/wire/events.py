@@ -128,6 +128,8 @@ def first_step(steps: IntArray) -> int | None:
 
 
 def _checked(domain: Domain, cells: IntArray, actions: IntArray, nexts: IntArray) -> Moves:
+    if not len(cells):  # an empty batch, whatever shape the reader gave it
+        return np.empty(0, np.int64), np.empty(0, np.int64), np.empty(0, np.int64)
     if cells.shape[1] != domain.width:  # the compiled reader's [row, col] on a building
         raise BadInput(f"event 0: state {cells[0].tolist()}: {cell_words(domain)}")
     wide = np.flatnonzero(actions >= domain.n_actions)
