@@ -39,7 +39,7 @@ MAY_IMPORT: dict[str, set[str]] = {
         "app.strategies",
         "app.agents",
         "app.mapio",
-    },  # fmt: skip
+    },
     "app.service": {
         "app.domain",
         "app.advice",
