@@ -1151,6 +1151,8 @@ def guide_decide(
         d = guide_drift(gmap, target, s)  # over the open moves; L4's over every action
         kl = kl * (1.0 + (lost - post[0]) * d + post[0] * (d * gmap[1][s] / n_actions))
     kl = kl if kl > 0.0 else 0.0
+    if n_actions != 4:  # in four actions' units, as the paper's rule (``kl_scale``)
+        kl = kl * (math.log(4.0) / math.log(float(n_actions)))
     best = 0  # the advice: theta's favourite move
     for a in range(n_actions):
         if theta[a] > theta[best]:

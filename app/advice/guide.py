@@ -47,10 +47,12 @@ connection nearest in moves, stairs or lift, and not the quickest in time where 
 ride keeps it), so the wall followers WL and WR never ride; C_g is the bug's rule on floors
 (``Building.compass_aims``: on another floor than g's, the nearest stop with a way towards g's
 floor, and there the ride), and its detours the same search over it. :meth:`GuideMap.apart`
-adds the row plus column difference only where rides keep row and column. The compiled
-kernels read the floors and stops in :attr:`GuideMap.arrays` and make the same decisions; a
-building's guide map is searched by the readable code (its compass detours are not the
-compiled one-floor search's), and the service, which serves one floor, never meets one.
+adds the row plus column difference only where rides keep row and column. The value is in
+four actions' units, as the paper's rule's KL is (times log 4 / log A, ``kl_scale``: a kappa
+means the same on one floor and on several). The compiled kernels read the floors and stops in
+:attr:`GuideMap.arrays` and make the same decisions; a building's guide map is searched by the
+readable code (its compass detours are not the compiled one-floor search's; the service does
+so in the worker thread of a PUT).
 
 The evidence fades with time constant W, the session's window::
 
@@ -175,7 +177,7 @@ from itertools import pairwise
 import numpy as np
 
 from app.advice.advisor import DEFAULT_KAPPA, DEFAULT_WINDOW, Advisor, Decision
-from app.advice.models import AdviceTables
+from app.advice.models import AdviceTables, kl_scale
 from app.advice.params import StrategyParams
 from app.advice.priors import GoalPriors
 from app.arrays import FloatArray, IntArray
@@ -1058,6 +1060,8 @@ class GuideAdvisor(Advisor):
             d = g.drift(self._target, state)  # over the open moves; L4's over every action
             kl = kl * (1.0 + (lost - post[0]) * d + post[0] * (d * int(g.n_open[state]) / n))
         kl = kl if kl > 0.0 else 0.0
+        if n != 4:  # in four actions' units, as the paper's rule's (AdviceTables.kl_scale)
+            kl = kl * kl_scale(n)
         best = 0  # the advice: theta's favourite move
         for a in range(n):
             if theta[a] > theta[best]:
