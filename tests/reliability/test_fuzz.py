@@ -60,6 +60,9 @@ SEMANTIC = (
     # gives the metres; query options go with a text/plain body, per_goal and seed with experts
     "one of them", "header lines", "only go with a text/plain body", "go with experts",
     "this text/plain body is JSON",
+    # a cell has 2 coordinates on one floor and 3 on several, U and D ride only on several;
+    # one schema serves both kinds of map, the map says which ("this map has one floor: ...")
+    "this map has",
 )  # fmt: skip
 #: JSON Schema's "integer" admits 1.0; the service takes only 1 (on purpose: a float is not a
 #: cell or a move, see schemas.py). Refusals that say so are allowed when the body has one.
