@@ -34,7 +34,11 @@ STEADY = ("advice_count", "benefit", "goals", "kappa", "p_normal", "params", "po
 def upgraded(tmp_path: Path) -> Any:
     data = tmp_path / "data"
     shutil.copytree(PREVIOUS / "data", data)
-    settings = make_settings(data, bootstrap_per_goal=1, replay_steps=8)
+    # the sessions were kept when the fixture was made: idle since, so only a long idle limit
+    # keeps them live (ten years), whenever the test runs
+    settings = make_settings(
+        data, bootstrap_per_goal=1, replay_steps=8, session_idle_seconds=10 * 365 * 86400.0
+    )
     with TestClient(create_app(settings)) as client:
         yield client
 
