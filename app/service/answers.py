@@ -17,14 +17,13 @@ from __future__ import annotations
 
 import weakref
 
-import numpy as np
 import orjson
 
 from app.advice.models import AdviceTables
 from app.domain.building import Domain
 from app.service.cache import once
 from app.service.data.domains import DomainState, PriorView
-from app.service.public import domain_public
+from app.service.public import domain_public, theta_grid
 
 NUMPY = orjson.OPT_SERIALIZE_NUMPY
 #: orjson writes NaN as null: a wall's row (4 or 6 actions), never a free cell's
@@ -39,8 +38,7 @@ _domains: weakref.WeakKeyDictionary[DomainState, tuple[PriorView, bytes]] = (
 def theta_json(grid: Domain, tables: AdviceTables) -> bytes:
     """*Worker thread.* theta as rows x cols x 4 (floors x rows x cols x 6 on a map of
     several floors), ``null`` for walls."""
-    full = np.full((*grid.shape, grid.n_actions), np.nan)
-    full[tuple(grid.cells.T)] = tables.theta
+    full = theta_grid(grid, tables.theta)
     return orjson.dumps(full, option=NUMPY).replace(WALLS[grid.n_actions], b"null")
 
 

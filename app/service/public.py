@@ -8,6 +8,7 @@ import numpy as np
 
 from app import strategies
 from app.advice.advisor import Decision
+from app.arrays import FloatArray
 from app.domain.building import Building, Domain
 from app.service.data.domains import DomainState
 from app.service.data.store import POOLED
@@ -60,12 +61,19 @@ def prior_public(d: DomainState, agent_type: str | None) -> PriorPublic:
     view = d.view
     key = view.resolve(agent_type)
     g = d.domain
-    grid = np.full((*g.shape, g.n_actions), np.nan)
-    grid[tuple(g.cells.T)] = view.tables[key].theta
+    grid = theta_grid(g, view.tables[key].theta)
     return PriorPublic(
         domain=d.name, agent_type=agent_type, table=key, actions=list(g.actions),
         alpha0=view.alpha0, trajectories=view.trajectories.get(key, 0), theta=_walls(grid.tolist()),
     )  # fmt: skip
+
+
+def theta_grid(domain: Domain, theta: FloatArray) -> FloatArray:
+    """theta (states x actions) as rows x cols x actions (floors x rows x cols x actions on
+    a map of several floors), NaN on walls."""
+    grid = np.full((*domain.shape, domain.n_actions), np.nan)
+    grid[tuple(domain.cells.T)] = theta
+    return grid
 
 
 def _walls(rows: Any) -> Any:

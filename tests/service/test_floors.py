@@ -62,6 +62,12 @@ def test_events_of_another_shape_are_refused_saying_what_a_cell_is(
         for body in ({"state": [5, 1], "action": up}, [{"state": [5, 1], "action": up}]):
             said = detail(client.post(f"/sessions/{tiny}/events", json=body, headers=tiny_auth))
             assert said.startswith("event 0: action ") and "changes floor" in said, said
+    # an expert's step up on one floor: the same words, located in the trajectory
+    up_step = {"trajectories": [{"steps": [{"state": [5, 1], "action": "U"}]}]}
+    refused = client.post("/domains/tiny/trajectories", json=up_step, headers=admin)
+    assert detail(refused) == (
+        "trajectories[0].steps[0]: action 'U' changes floor: this map has one floor (N, E, S, W)"
+    )
     # off the building: the floor, the row or the column
     for cell in ([2, r, c], [f, 20, c], [f, r, 20]):
         said = detail(client.post(f"/sessions/{sid}/events", json={"state": cell, "action": "N"},

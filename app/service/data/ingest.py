@@ -17,7 +17,7 @@ from app.domain.building import Domain
 from app.service.data.store import Trajectory
 from app.service.problems import BadInput, describe_errors
 from app.service.schemas import ACTION_CODE, TrajectoriesCreate
-from app.service.wire.events import cell_words
+from app.service.wire.events import cell_words, floor_change, off_map
 
 BODY = TypeAdapter(TrajectoriesCreate)
 
@@ -48,7 +48,7 @@ def to_trajectories(domain: Domain, body: TrajectoriesCreate, max_steps: int) ->
         if len(step["state"]) != domain.width:
             raise BadInput(f"{name(k)}: cell {list(step['state'])}: {cell_words(domain)}")
         if actions[k] >= domain.n_actions:
-            raise BadInput(f"{name(k)}: action {step['action']!r}: this map has one floor")
+            raise BadInput(f"{name(k)}: {floor_change(step['action'])}")
     cells = np.array([s["state"] for s in steps], dtype=np.int64).reshape(-1, domain.width)
 
     states = _states(domain, cells, name)
@@ -82,8 +82,7 @@ def _states(domain: Domain, cells: IntArray, name: Callable[[int], str]) -> IntA
     off = np.flatnonzero((cells >= np.array(shape)).any(axis=1))
     if off.size:
         k = int(off[0])
-        size = "x".join(map(str, shape))
-        raise BadInput(f"{name(k)}: cell {cells[k].tolist()} is off the {size} map")
+        raise BadInput(f"{name(k)}: {off_map(domain, f'cell {cells[k].tolist()}')}")
     states: IntArray = domain.state_of[tuple(cells.T)]
     walls = np.flatnonzero(states < 0)
     if walls.size:

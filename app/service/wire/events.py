@@ -54,13 +54,12 @@ AMBIGUOUS = (
 
 def reason_text(domain: Domain, reason: int, cell: list[int], nxt: list[int]) -> str:
     """The words for a reason code of :func:`check_moves` about the event at ``cell``."""
-    size = "x".join(str(n) for n in domain.shape)
     if reason == compiled.STATE_OFF:
-        return f"state {cell} is off the {size} map"
+        return off_map(domain, f"state {cell}")
     if reason == compiled.STATE_WALL:
         return f"state {cell} is a wall"
     if reason == compiled.NEXT_OFF:
-        return f"next_state {nxt} is off the {size} map"
+        return off_map(domain, f"next_state {nxt}")
     if reason == compiled.NEXT_WALL:
         return f"next_state {nxt} is a wall"
     if reason == compiled.NO_MOVE:
@@ -88,6 +87,16 @@ def cell_words(domain: Domain) -> str:
     if isinstance(domain, Building):
         return f"this map has {domain.n_floors} floors: a cell is [floor, row, col]"
     return "this map has one floor: a cell is [row, col]"
+
+
+def off_map(domain: Domain, what: str) -> str:
+    """``what`` (a key and a cell) is off this map, in the words of every such error."""
+    return f"{what} is off the {'x'.join(map(str, domain.shape))} map"
+
+
+def floor_change(action: str) -> str:
+    """Why ``U`` or ``D`` is refused on a map of one floor."""
+    return f"action {action!r} changes floor: this map has one floor (N, E, S, W)"
 
 
 def _arrays(events: list[EventIn], domain: Domain) -> Scanned:
@@ -135,10 +144,7 @@ def _checked(domain: Domain, cells: IntArray, actions: IntArray, nexts: IntArray
     wide = np.flatnonzero(actions >= domain.n_actions)
     if len(wide):
         i = int(wide[0])
-        raise BadInput(
-            f"event {i}: action {'NESWUD'[actions[i]]!r} changes floor: this map has one "
-            "floor (N, E, S, W)"
-        )
+        raise BadInput(f"event {i}: {floor_change('NESWUD'[actions[i]])}")
     state_of, flat, flat_next = domain.state_of, cells, nexts
     if isinstance(domain, Building):  # floors stacked as rows: [floor * rows + row, col]
         floors, rows, cols = domain.shape
