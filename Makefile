@@ -53,8 +53,12 @@ format: venv
 	$(BIN)/ruff check --fix $(SRC)
 
 ## Runs the whole suite; pytest exits non-zero (5) when no test ran, which fails the target.
+## TEST_WORKERS processes (pytest-xdist) share the tests, a file's tests in one of them
+## (`--dist loadfile`: a module's fixtures, such as its live server, are made once); `make test
+## TEST_WORKERS=0` runs them in this one process. The slowest 25 are listed at the end.
+TEST_WORKERS ?= 2
 test: venv chromium lint
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n $(TEST_WORKERS) --dist loadfile --durations=25
 
 ## The browser tests, then their screenshots of every page copied into docs/screenshots/
 ## (README.md, "Pages"). `make test` leaves docs/ alone: its screenshots stay in test-artifacts/.

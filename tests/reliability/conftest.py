@@ -4,6 +4,7 @@ a temporary data dir, extra ``ADVISOR_*`` settings from the environment."""
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import os
 import signal
 import subprocess
@@ -101,3 +102,20 @@ def live(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Live]:
     server = start(tmp_path_factory.mktemp("live") / "data")
     yield server
     stop(server)
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """schemathesis gives every operation's test the same node id; each gets its operation in
+    brackets, so that reports name it and pytest-xdist, which schedules a file's tests by node
+    id (``--dist loadfile``), runs every one (with one id it ran one of them, and
+    ``test_every_operation_was_fuzzed`` failed). pytest 9.2 keeps the id as a ``NodeId``
+    (``_id``), earlier versions as a string (``_nodeid``)."""
+    for item in items:
+        label = getattr(item, "operation_label", None)
+        if label is None or item.nodeid.endswith("]"):
+            continue
+        ident = getattr(item, "_id", None)
+        if ident is not None and hasattr(ident, "params"):
+            item._id = dataclasses.replace(ident, params=label)
+        else:
+            item._nodeid = f"{item.nodeid}[{label}]"  # type: ignore[attr-defined]
