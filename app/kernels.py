@@ -60,6 +60,9 @@ GuideArrays = tuple[
     IntArray,
     bool,
 ]
+#: what a guide batch fills (:func:`guide_stream`): kl, p_normal, advise, count, benefit,
+#: advice (n, A)
+GuideOut = tuple[FloatArray, FloatArray, BoolArray, IntArray, FloatArray, FloatArray]
 #: (lam, p_lost, slack, spread, bump, the most destinations a tour is planned through)
 GuideParams = tuple[
     float, float, float, float, float, int, float, float, float, float, float, int, float, float,
@@ -579,21 +582,21 @@ def goal_stream(
 # than a destination's arithmetic: the loops over destinations read the arrays in one function,
 # their helpers take scalars, and the per-decision functions are inlined into their callers
 # (numba's inline="always"). benchmarks/bench_guide.py measures it.
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def guide_open(
-    next_state: IntArray, n_open: IntArray, s: int, out: FloatArray
+    next_state: IntArray, n_open: IntArray, s: int, out: FloatArray, k: int
 ) -> None:  # pragma: no cover - compiled
-    """``GuideMap.open_policy``: uniform over the open moves of ``s`` into ``out`` (A,)."""
-    n, mask, k = n_open[s], guide_open_moves(next_state, s), next_state.shape[1]
+    """``GuideMap.open_policy``: uniform over the open moves of ``s`` into ``out`` (k,)."""
+    n, mask = n_open[s], guide_open_moves(next_state, s, k)
     for a in range(k):
         out[a] = guide_open_share(n, mask, a, k)
 
 
-@njit(cache=True)
-def guide_open_moves(next_state: IntArray, s: int) -> int:  # pragma: no cover - compiled
-    """The open moves of ``s`` as bits (bit a: move a leaves ``s``)."""
+@njit(cache=True, inline="always")
+def guide_open_moves(next_state: IntArray, s: int, k: int) -> int:  # pragma: no cover
+    """The open moves of ``s`` among the first ``k`` as bits (bit a: move a leaves ``s``)."""
     mask = 0
-    for a in range(next_state.shape[1]):
+    for a in range(k):
         if next_state[s, a] != s:
             mask |= 1 << a
     return mask
@@ -627,14 +630,15 @@ def guide_own_moves(dr: int, dc: int, mask: int) -> tuple[int, int]:  # pragma: 
 
 @njit(cache=True, inline="always")
 def guide_compass(
-    gmap: GuideArrays, goal: int, s: int, mask: int
+    gmap: GuideArrays, goal: int, s: int, mask: int, k: int
 ) -> tuple[int, int]:  # pragma: no cover - compiled
     """``GuideMap.compass_moves`` of someone at ``s`` heading for ``goal``: up to two moves
-    (-1: none); in a building, on another floor than the goal's, towards the nearest stop
-    with a way towards the goal's floor, and at it the ride (``Building.compass_aims``)."""
+    (-1: none); in a building (``k`` > 4 actions), on another floor than the goal's, towards
+    the nearest stop with a way towards the goal's floor, and at it the ride
+    (``Building.compass_aims``). Compiled with the constant 4, the floors' branch is gone."""
     cells, floor, stops = gmap[2], gmap[8], gmap[9]
     aim = goal
-    if floor.shape[0] > 0 and floor[s] != floor[goal]:
+    if k > 4 and floor.shape[0] > 0 and floor[s] != floor[goal]:
         k = 0 if floor[goal] > floor[s] else 1
         aim = stops[s, k]
         if aim == s:
@@ -646,7 +650,7 @@ def guide_compass(
 
 @njit(cache=True, inline="always")
 def guide_fill_rows(
-    gmap: GuideArrays, goals: IntArray, s: int, rows: FloatArray
+    gmap: GuideArrays, goals: IntArray, s: int, rows: FloatArray, k: int
 ) -> None:  # pragma: no cover - compiled  # fmt: skip
     """Fill ``rows`` (2 G, A) with every destination's pi_g(. | s) (``GuideMap.policy``),
     then its c_g(. | s) (``GuideMap.compass``). One loop, the arrays read in it (a compiled
@@ -654,8 +658,7 @@ def guide_fill_rows(
     next_state, n_open, _, dist, _, counts, _, _, _, _, _ = gmap
     n_goals = goals.shape[0]
     n = n_open[s]
-    k = next_state.shape[1]
-    mask = guide_open_moves(next_state, s)
+    mask = guide_open_moves(next_state, s, k)
     for g in range(n_goals):
         d = dist[g, s]  # pi_g: the shortest moves, weighted 1 + the experts' count
         if d > 0:
@@ -672,7 +675,7 @@ def guide_fill_rows(
             for a in range(k):
                 rows[g, a] = guide_open_share(n, mask, a, k)
         # c_g: uniform over its own moves, the open moves where it has none
-        m0, m1 = guide_compass(gmap, goals[g], s, mask)
+        m0, m1 = guide_compass(gmap, goals[g], s, mask, k)
         r = n_goals + g
         for a in range(k):
             if m0 < 0:
@@ -684,7 +687,7 @@ def guide_fill_rows(
 @njit(cache=True, inline="always")
 def guide_route_rows(
     gmap: GuideArrays, goals: IntArray, alive: BoolArray, any_alive: bool, s: int,
-    pcs: FloatArray,
+    pcs: FloatArray, k: int,
 ) -> None:  # pragma: no cover - compiled  # fmt: skip
     """``GuideMap.compass_route``: pc_g(. | s) into ``pcs[g]`` for every destination g not
     ruled out (every one when none is left): the open moves after which the fewest moves it
@@ -692,8 +695,7 @@ def guide_route_rows(
     reached, the open moves)."""
     next_state, n_open, _, _, _, _, detour, _, _, _, _ = gmap
     n = n_open[s]
-    k = next_state.shape[1]
-    mask = guide_open_moves(next_state, s)
+    mask = guide_open_moves(next_state, s, k)
     for g in range(goals.shape[0]):
         if not (alive[g] or not any_alive):
             continue
@@ -702,7 +704,7 @@ def guide_route_rows(
             for a in range(k):
                 pcs[g, a] = guide_open_share(n, mask, a, k)
             continue
-        m0, m1 = guide_compass(gmap, goal, s, mask)
+        m0, m1 = guide_compass(gmap, goal, s, mask, k)
         best = -1
         for a in range(k):  # pcs[g, a]: moves it would not make, counting this one (-1: shut)
             pcs[g, a] = -1.0
@@ -733,6 +735,7 @@ def guide_append(
     gmap: GuideArrays, params: GuideParams, goals: IntArray, ll: FloatArray, alive: BoolArray,
     doubt: IntArray, s: int, a: int, advised: bool, advice: FloatArray, heading: int,
     pi: FloatArray, rows: FloatArray, known: bool, comply: FloatArray, came: int,
+    n_actions: int,
 ) -> tuple[int, int]:  # pragma: no cover - compiled  # fmt: skip
     """``GuideAdvisor.append``: fade the evidence, add log P(a | s, k), rule out a destination
     the explorer stood on. ``goals`` holds each destination's state; ``advised``: the last
@@ -742,21 +745,20 @@ def guide_append(
     decision for ``s`` came just before), else they are made here. ``comply``
     (:func:`guide_observe_compliance`) learns whether the explorer took the advice. ``came``:
     where the last move led on the map (-1: none); a destination is ruled out only where it
-    can have led, or set aside (``doubt``, :func:`guide_rule_out`). Returns (the heading,
-    where this move leads)."""
+    can have led, or set aside (``doubt``, :func:`guide_rule_out`). ``n_actions``: the
+    domain's (:func:`guide_stream`). Returns (the heading, where this move leads)."""
     lam, slack, bump = params[0], params[2], params[4]
     next_state = gmap[0]
     n_goals = alive.shape[0]
-    n_actions = next_state.shape[1]
     guide_observe_compliance(params, comply, advised, advice, a, s, next_state[s, a])
     if not known:
-        guide_fill_rows(gmap, goals, s, rows)
-    guide_open(next_state, gmap[1], s, pi)
+        guide_fill_rows(gmap, goals, s, rows, n_actions)
+    guide_open(next_state, gmap[1], s, pi, n_actions)
     lo = (1.0 - bump) * pi[a] + bump / n_actions
     # LO, LA and LS: their rule (bump 0), with a bump now and then
     o_lo = pi[a]
-    o_la = guide_ahead(next_state, gmap[1], s, heading, a, 0.0)
-    o_ls = guide_straight(next_state, gmap[1], s, heading, a, 0.0)
+    o_la = guide_ahead(next_state, gmap[1], s, heading, a, 0.0, n_actions)
+    o_ls = guide_straight(next_state, gmap[1], s, heading, a, 0.0, n_actions)
     if advised:  # lost or not, it takes the advice or its own rule, half each
         o_lo, o_la, o_ls = (
             0.5 * (o_lo + advice[a]),
@@ -793,13 +795,12 @@ def guide_append(
 
 @njit(cache=True, inline="always")
 def guide_ahead(
-    next_state: IntArray, n_open: IntArray, s: int, heading: int, a: int, bump: float
+    next_state: IntArray, n_open: IntArray, s: int, heading: int, a: int, bump: float, k: int
 ) -> float:  # pragma: no cover - compiled
     """LA's move (``GuideAdvisor._ahead(s)[a]``, with ``bump`` spread over all four as
     ``GuideAdvisor._bumped`` spreads LOST_BUMP): uniform over the open moves but back (against
     ``heading``) where another is open and it has moved, over the open moves otherwise."""
     n = n_open[s]
-    k: int = next_state.shape[1]
     back = (heading + 2) % 4
     if heading >= 0 and n > 1 and next_state[s, back] != s:
         o = 1.0 / (n - 1) if a != back and next_state[s, a] != s else 0.0
@@ -812,14 +813,13 @@ def guide_ahead(
 
 @njit(cache=True, inline="always")
 def guide_straight(
-    next_state: IntArray, n_open: IntArray, s: int, heading: int, a: int, bump: float
+    next_state: IntArray, n_open: IntArray, s: int, heading: int, a: int, bump: float, k: int
 ) -> float:  # pragma: no cover - compiled
     """LS's move (``GuideAdvisor._straight(s)[a]``, ``bump`` as in :func:`guide_ahead`): on
     along ``heading`` where it is open, else LA's."""
     if heading >= 0 and next_state[s, heading] != s:
-        k: int = next_state.shape[1]
         return (1.0 - bump) * (1.0 if a == heading else 0.0) + bump / k
-    return guide_ahead(next_state, n_open, s, heading, a, bump)
+    return guide_ahead(next_state, n_open, s, heading, a, bump, k)
 
 
 @njit(cache=True)
@@ -972,8 +972,8 @@ def guide_wall(next_state: IntArray, s: int, heading: int, w: int) -> int:  # pr
     return -1
 
 
-@njit(cache=True)
-def guide_drift(gmap: GuideArrays, t: int, s: int) -> float:  # pragma: no cover - compiled
+@njit(cache=True, inline="always")
+def guide_drift(gmap: GuideArrays, t: int, s: int, k: int) -> float:  # pragma: no cover
     """``GuideMap.drift``: the mean change of the BFS distance to destination ``t`` over the
     open moves of ``s`` (0 at ``t``, where it cannot be reached, or with no open move)."""
     next_state, dist = gmap[0], gmap[3]
@@ -982,7 +982,7 @@ def guide_drift(gmap: GuideArrays, t: int, s: int) -> float:  # pragma: no cover
         return 0.0
     n = 0
     change = 0
-    for a in range(next_state.shape[1]):
+    for a in range(k):
         u = next_state[s, a]
         if u != s:
             n += 1
@@ -1044,7 +1044,7 @@ def guide_first_of_tour(
 def guide_decide(
     gmap: GuideArrays, params: GuideParams, goals: IntArray, ll: FloatArray, alive: BoolArray,
     target: int, heading: int, s: int, theta: FloatArray, scratch: FloatArray,
-    comply: FloatArray, run: IntArray, fresh: bool,
+    comply: FloatArray, run: IntArray, fresh: bool, n_actions: int,
 ) -> tuple[float, float, int, bool]:  # pragma: no cover - compiled  # fmt: skip
     """``GuideAdvisor.decide``: fills ``theta`` (A,) with the advice; returns (the value
     compared with kappa, 1 - P(lost | H), the target, whether advice may be given at all: not
@@ -1059,7 +1059,6 @@ def guide_decide(
     backoff = params[10]
     dist = gmap[3]
     n_goals = alive.shape[0]
-    n_actions = gmap[0].shape[1]
     n_models = 4 + 3 * n_goals + 2  # LA and LS last
     la_k, ls_k = n_models - 2, n_models - 1
     any_alive = False
@@ -1100,11 +1099,11 @@ def guide_decide(
     lost = post[0] + post[1] + post[2] + post[3] + post[la_k] + post[ls_k]
     # each destination's policies here, and the target
     rows = guide_rows(scratch, n_goals, n_actions)  # pi_g and c_g (guide_append reads them)
-    guide_fill_rows(gmap, goals, s, rows)
+    guide_fill_rows(gmap, goals, s, rows, n_actions)
     pis, cs = rows[:n_goals], rows[n_goals:]
     at = n_models + 2 * n_goals * n_actions
     pcs = scratch[at : at + n_goals * n_actions].reshape((n_goals, n_actions))
-    guide_route_rows(gmap, goals, alive, any_alive, s, pcs)
+    guide_route_rows(gmap, goals, alive, any_alive, s, pcs, n_actions)
     if target < 0 or not (alive[target] or not any_alive):
         target = guide_first_of_tour(dist, goals, alive, any_alive, s, max_tour)
     pi_t = scratch[at + n_goals * n_actions :]
@@ -1120,9 +1119,9 @@ def guide_decide(
         for a in range(n_actions):
             pi_t[a] = 1.0 if a == pick else 0.0
     else:
-        guide_open(gmap[0], gmap[1], s, pi_t)
+        guide_open(gmap[0], gmap[1], s, pi_t, n_actions)
     op = theta  # the open moves' policy, read before theta is written in its place
-    guide_open(gmap[0], gmap[1], s, op)
+    guide_open(gmap[0], gmap[1], s, op, n_actions)
     wl = guide_wall(gmap[0], s, heading, 0)
     wr = guide_wall(gmap[0], s, heading, 1)
     kl = 0.0
@@ -1133,8 +1132,8 @@ def guide_decide(
         m = post[0] * (1.0 / n_actions) + post[1] * lo
         m += post[2] * ((1.0 - slack) * (1.0 if a == wl else 0.0) + slack * lo)
         m += post[3] * ((1.0 - slack) * (1.0 if a == wr else 0.0) + slack * lo)
-        m += post[la_k] * guide_ahead(gmap[0], gmap[1], s, heading, a, bump)
-        m += post[ls_k] * guide_straight(gmap[0], gmap[1], s, heading, a, bump)
+        m += post[la_k] * guide_ahead(gmap[0], gmap[1], s, heading, a, bump, n_actions)
+        m += post[ls_k] * guide_straight(gmap[0], gmap[1], s, heading, a, bump, n_actions)
         for g in range(n_goals):
             if alive[g] or not any_alive:
                 k = 4 + 3 * g
@@ -1148,7 +1147,7 @@ def guide_decide(
         if th > 0.0:
             kl += th * (math.log(th) - math.log(m))
     if target >= 0:  # the value: weighted by what a lost explorer's move costs here
-        d = guide_drift(gmap, target, s)  # over the open moves; L4's over every action
+        d = guide_drift(gmap, target, s, n_actions)  # over the open moves; L4's over every action
         kl = kl * (1.0 + (lost - post[0]) * d + post[0] * (d * gmap[1][s] / n_actions))
     kl = kl if kl > 0.0 else 0.0
     if n_actions != 4:  # in four actions' units, as the paper's rule (``kl_scale``)
@@ -1188,13 +1187,13 @@ def guide_decide(
 def guide_learner_decides(
     gmap: GuideArrays, params: GuideParams, goals: IntArray, ll: FloatArray, alive: BoolArray,
     target: int, heading: int, s: int, theta: FloatArray, scratch: FloatArray,
-    comply: FloatArray, run: IntArray, given: int, kappa: float,
+    comply: FloatArray, run: IntArray, given: int, kappa: float, n_actions: int,
 ) -> tuple[float, float, int, bool, int]:  # pragma: no cover - compiled  # fmt: skip
     """:func:`guide_decide` for a Q-learner's session, and the piece given if it advises
     (:func:`guide_advised`): (value, 1 - P(lost | H), target, allowed, pieces given)."""
     kl, p, target, allowed = guide_decide(
         gmap, params, goals, ll, alive, target, heading, s, theta, scratch, comply, run,
-        given == 0,
+        given == 0, n_actions,
     )  # fmt: skip
     if kl >= kappa and allowed:
         guide_advised(params, comply, run, s)
@@ -1321,8 +1320,8 @@ def guide_rows(
     return scratch[start : start + 2 * n_goals * n_actions].reshape((2 * n_goals, n_actions))
 
 
-@njit(cache=True)
-def guide_stream(
+@njit(cache=True, inline="always")
+def guide_stream_loop(
     gmap: GuideArrays,
     params: GuideParams,
     goals: IntArray,
@@ -1341,7 +1340,8 @@ def guide_stream(
     benefit: float,
     cap: int,
     moves: tuple[IntArray, IntArray, IntArray],
-    out: tuple[FloatArray, FloatArray, BoolArray, IntArray, FloatArray, FloatArray],
+    out: GuideOut,
+    n_actions: int,
 ) -> tuple[int, int, int, int, int, float]:  # pragma: no cover - compiled
     """A batch of ``GuideAdvisor.observe``; ``last`` is the state the last decision advised
     (-1 if it did not), ``advice`` (A,) that advice, updated in place, ``heading`` the last
@@ -1349,22 +1349,21 @@ def guide_stream(
     compliance evidence (:func:`guide_observe_compliance`) and ``run`` the states decided for
     since the last piece of advice (:func:`guide_run_push`), updated in place. Fills ``out``
     (kl, p_normal, advise, count, benefit, advice (n, A)); returns (target, last, heading,
-    came, advice count, benefit)."""
+    came, advice count, benefit). ``n_actions``: the domain's (:func:`guide_stream`)."""
     states, actions, next_states = moves
     kl_out, p_out, advise_out, count_out, benefit_out, advice_out = out
     n_goals = alive.shape[0]
-    n_actions = gmap[0].shape[1]
     scratch, pi, theta = guide_buffers(n_goals, n_actions)
     rows = guide_rows(scratch, n_goals, n_actions)
     for i in range(states.shape[0]):
         known = i > 0 and states[i] == next_states[i - 1]  # decided there just before
         heading, came = guide_append(
             gmap, params, goals, ll, alive, doubt, states[i], actions[i], last == states[i],
-            advice, heading, pi, rows, known, comply, came,
+            advice, heading, pi, rows, known, comply, came, n_actions,
         )  # fmt: skip
         kl, p0, target, allowed = guide_decide(
             gmap, params, goals, ll, alive, target, heading, next_states[i], theta, scratch,
-            comply, run, count == 0,
+            comply, run, count == 0, n_actions,
         )  # fmt: skip
         if kl >= kappa and count < cap and allowed:
             count += 1
@@ -1384,6 +1383,36 @@ def guide_stream(
         count_out[i] = count
         benefit_out[i] = benefit
     return target, last, heading, came, count, benefit
+
+
+@njit(cache=True)
+def guide_stream(
+    gmap: GuideArrays, params: GuideParams, goals: IntArray, ll: FloatArray, alive: BoolArray,
+    doubt: IntArray, target: int, last: int, heading: int, came: int, advice: FloatArray,
+    comply: FloatArray, run: IntArray, kappa: float, count: int, benefit: float, cap: int,
+    moves: tuple[IntArray, IntArray, IntArray], out: GuideOut,
+) -> tuple[int, int, int, int, int, float]:  # pragma: no cover - compiled  # fmt: skip
+    """:func:`guide_stream_loop` on a domain of any number of actions (a building's six)."""
+    return guide_stream_loop(
+        gmap, params, goals, ll, alive, doubt, target, last, heading, came, advice, comply, run,
+        kappa, count, benefit, cap, moves, out, gmap[0].shape[1],
+    )  # fmt: skip
+
+
+@njit(cache=True)
+def guide_stream_four(
+    gmap: GuideArrays, params: GuideParams, goals: IntArray, ll: FloatArray, alive: BoolArray,
+    doubt: IntArray, target: int, last: int, heading: int, came: int, advice: FloatArray,
+    comply: FloatArray, run: IntArray, kappa: float, count: int, benefit: float, cap: int,
+    moves: tuple[IntArray, IntArray, IntArray], out: GuideOut,
+) -> tuple[int, int, int, int, int, float]:  # pragma: no cover - compiled  # fmt: skip
+    """:func:`guide_stream_loop` compiled with the constant 4, for a domain of one floor: its
+    loops over actions unrolled and the floors' branches gone (with the number read from the
+    map, a one-floor decision cost 1.3-1.7 times as much: docs/PERFORMANCE.md)."""
+    return guide_stream_loop(
+        gmap, params, goals, ll, alive, doubt, target, last, heading, came, advice, comply, run,
+        kappa, count, benefit, cap, moves, out, 4,
+    )  # fmt: skip
 
 
 # ---- a domain's guide map, built without the GIL -------------------------------------------------
@@ -1448,7 +1477,7 @@ def guide_detours(
                     continue
                 back = (a + 2) % 4  # u's move into v
                 dr, dc = cells[t, 0] - cells[u, 0], cells[t, 1] - cells[u, 1]
-                m0, m1 = guide_own_moves(dr, dc, guide_open_moves(next_state, u))
+                m0, m1 = guide_own_moves(dr, dc, guide_open_moves(next_state, u, 4))
                 cost = 0 if (m0 == back or m1 == back) else 1
                 if best[v] + cost < best[u]:
                     best[u] = best[v] + cost
@@ -1716,7 +1745,7 @@ def episode(
         elif rule == GUIDE:
             kl, p, g_target, allowed = guide_decide(
                 gmap, gparams, g_goals, g_ll, g_alive, g_target, g_heading, s, theta_w,
-                g_scratch, g_comply, g_run, advice_count == 0,
+                g_scratch, g_comply, g_run, advice_count == 0, n_actions,
             )  # fmt: skip
             advise = kl >= kappa and allowed
             if advise:
@@ -1776,7 +1805,7 @@ def episode(
         if rule == GUIDE:  # guide keeps its own evidence, not the paper's window
             g_heading, g_came = guide_append(  # the decision for s came just before
                 gmap, gparams, g_goals, g_ll, g_alive, g_doubt, s, a, advise, theta_w,
-                g_heading, g_pi, g_rows, True, g_comply, g_came,
+                g_heading, g_pi, g_rows, True, g_comply, g_came, n_actions,
             )  # fmt: skip
         else:
             pos = push(ring, loglik, pos, t + 1, period, log_probs, s, a, n_actions)
@@ -1866,7 +1895,7 @@ def q_learning(
             if rule == GUIDE:
                 kl, p, g_target, allowed, g_given = guide_learner_decides(
                     gmap, gparams, g_goals, g_ll, g_alive, g_target, g_heading, s, theta_w,
-                    g_scratch, g_comply, g_run, g_given, kappa,
+                    g_scratch, g_comply, g_run, g_given, kappa, n_actions,
                 )  # fmt: skip
                 row = theta_w
             else:
@@ -1908,7 +1937,7 @@ def q_learning(
             if rule == GUIDE:
                 g_heading, g_came = guide_append(  # the decision for s came just before
                     gmap, gparams, g_goals, g_ll, g_alive, g_doubt, s, a, advise, theta_w,
-                    g_heading, g_pi, g_rows, True, g_comply, g_came,
+                    g_heading, g_pi, g_rows, True, g_comply, g_came, n_actions,
                 )  # fmt: skip
             else:
                 pos = push(ring, loglik, pos, appended, period, log_probs, s, a, n_actions)
@@ -1920,7 +1949,7 @@ def q_learning(
             # as a session kept for the next episode remembers
             _, _, g_target, _, g_given = guide_learner_decides(
                 gmap, gparams, g_goals, g_ll, g_alive, g_target, g_heading, s, theta_w,
-                g_scratch, g_comply, g_run, g_given, kappa,
+                g_scratch, g_comply, g_run, g_given, kappa, n_actions,
             )  # fmt: skip
         total_steps += t
         steps_out[e] = t

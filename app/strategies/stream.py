@@ -451,7 +451,9 @@ class StreamGuide(GuideAdvisor):
         run = run_ring(self._run)
         out, rows = columns(n), np.empty((n, g.n_actions))
         params = kernel_params(self.window, GuideParams(self.p_lost, self.slack, self.spread))
-        got = kernels.guide_stream(
+        # one floor: the loop compiled with the constant 4 (kernels.guide_stream_four)
+        stream = kernels.guide_stream_four if g.n_actions == 4 else kernels.guide_stream
+        got = stream(
             g.arrays, params, g.goal_states, ll, alive, doubt, self._target, self._last,
             self._heading, self._came, last_advice, comply, run, self.kappa, count_before,
             benefit_before, self.cap, (states, actions, next_states), (*out, rows),
