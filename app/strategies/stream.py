@@ -39,6 +39,9 @@ from app.advice.models import AdviceTables
 from app.advice.rules import RuleAdvisor
 from app.arrays import BoolArray, FloatArray, IntArray
 
+#: guide's batch (kernels.guide_stream) compiled for the domain's number of actions: four on
+#: one floor, six in a building of several floors
+STREAMS = {4: kernels.guide_stream_four, 6: kernels.guide_stream_six}
 _NO_RING = np.zeros((0, 0))  # no value kept: the window's values are those of the tables
 
 
@@ -451,8 +454,8 @@ class StreamGuide(GuideAdvisor):
         run = run_ring(self._run)
         out, rows = columns(n), np.empty((n, g.n_actions))
         params = kernel_params(self.window, GuideParams(self.p_lost, self.slack, self.spread))
-        # one floor: the loop compiled with the constant 4 (kernels.guide_stream_four)
-        stream = kernels.guide_stream_four if g.n_actions == 4 else kernels.guide_stream
+        # the loop compiled with the constant 4 on one floor, 6 in a building
+        stream = STREAMS[g.n_actions]
         got = stream(
             g.arrays, params, g.goal_states, ll, alive, doubt, self._target, self._last,
             self._heading, self._came, last_advice, comply, run, self.kappa, count_before,
