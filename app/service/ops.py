@@ -448,16 +448,39 @@ async def viewer_snapshot(state: ServiceState) -> bytes:
     return orjson.dumps({"domains": domains, "sessions": sessions, "kappa_max": max(highest)})
 
 
+#: a building of two floors and a lift, for :func:`warm_up`: what a building's events run
+#: (six actions, guide's batch compiled for six) is loaded before any request needs it
+_WARM_BUILDING = """\
+connection: lift 1 0:1,1 1:1,1 Lift
+floor: 0 Ground
+#####
+#S.G#
+#####
+floor: 1 First
+#####
+#..G#
+#####"""
+
+
 def warm_up() -> None:
     """Load (or compile, the first time) every compiled loop of the event paths (reader,
-    checks, every strategy's service advisor, writers), so that no request waits for it."""
-    grid = GridDomain.from_strings(["#####", "#S.G#", "#####"])
-    tables = AdviceTables.paper(np.full((grid.n_states, 4), 0.25))
+    checks, every strategy's service advisor, writers), on one floor and in a building, so
+    that no request waits for it."""
+    for grid in (GridDomain.from_strings(["#####", "#S.G#", "#####"]),
+                 Building.from_text(_WARM_BUILDING)):  # fmt: skip
+        _warm(grid)
+
+
+def _warm(grid: Domain) -> None:
+    uniform = np.full((grid.n_states, grid.n_actions), 1.0 / grid.n_actions)
+    tables = AdviceTables.paper(uniform)
     event = {"state": list(grid.cell(grid.start)), "action": ACTIONS[1]}
     moves, _, _ = read_moves(grid, json.dumps([event] * 3), 3)
 
     def goals() -> GoalPriors:
-        return GoalPriors(grid.n_states, grid.goals).add([np.array([[0, 1]])], [0])
+        return GoalPriors(grid.n_states, grid.goals, n_actions=grid.n_actions).add(
+            [np.array([[0, 1]])], [0]
+        )
 
     data = DomainData(
         tables, goals(),
@@ -476,7 +499,7 @@ def warm_up() -> None:
             advisor.start(grid.start)
             out = advisor.observe_batch(*moves)
             # a prior update (new tables, new goal counts), then one event and a batch
-            advisor.use_tables(AdviceTables.paper(np.full((grid.n_states, 4), 0.25)), goals())
+            advisor.use_tables(AdviceTables.paper(uniform.copy()), goals())
             advisor.observe(*(int(m[0]) for m in moves))
             advisor.observe_batch(*moves)
             advisor.goal_beliefs()

@@ -14,6 +14,8 @@ from pathlib import Path
 import httpx
 import pytest
 
+from tests.conftest import service_kernels_compiled
+
 REPO = Path(__file__).resolve().parents[2]
 
 
@@ -34,6 +36,7 @@ def free_port() -> int:
 
 def start_server(data_dir: Path, timeout: float = 60.0) -> Server:
     """Start the service and wait until /health answers (or fail with its output)."""
+    service_kernels_compiled()  # not on the clock below
     port = free_port()
     env = os.environ | {"ADVISOR_BOOTSTRAP_PER_GOAL": "2", "ADVISOR_SWEEP_SECONDS": "3600"}
     cmd = [sys.executable, "-m", "app", "serve", "--port", str(port), "--data-dir", str(data_dir),

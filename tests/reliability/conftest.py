@@ -18,6 +18,7 @@ import httpx
 import pytest
 
 from tests.client.conftest import free_port
+from tests.conftest import service_kernels_compiled
 from tests.service.conftest import db_url  # noqa: F401  (the fixture: SQLite or PostgreSQL)
 
 REPO = Path(__file__).resolve().parents[2]
@@ -50,6 +51,7 @@ def start(
     log). ``env``: extra settings, e.g. ``ADVISOR_MAX_SESSIONS="5"``; ``log_level`` "info"
     writes uvicorn's access log too; ``viewer_port``: with its viewer there (else none);
     ``preexec_fn``: run in the server's process before it starts (e.g. to lower a limit)."""
+    service_kernels_compiled()  # not on the clock below
     port = port or free_port()
     data_dir.mkdir(parents=True, exist_ok=True)
     log = data_dir.parent / f"server-{port}.log"
