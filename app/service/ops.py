@@ -7,6 +7,7 @@ the others run on the event loop and never block.
 from __future__ import annotations
 
 import asyncio
+import functools
 import json
 from typing import Any
 
@@ -464,11 +465,18 @@ floor: 1 First
 
 def warm_up() -> None:
     """Load (or compile, the first time) every compiled loop of the event paths (reader,
-    checks, every strategy's service advisor, writers), on one floor and in a building, so
-    that no request waits for it."""
-    for grid in (GridDomain.from_strings(["#####", "#S.G#", "#####"]),
-                 Building.from_text(_WARM_BUILDING)):  # fmt: skip
-        _warm(grid)
+    checks, every strategy's service advisor, writers) on one floor, so that no request waits
+    for it (a building's: :func:`warm_building`)."""
+    _warm(GridDomain.from_strings(["#####", "#S.G#", "#####"]))
+
+
+@functools.cache
+def warm_building() -> None:
+    """*Worker thread.* :func:`warm_up`'s work in a building (six actions; guide's batch is
+    compiled for six apart from four), once, when a map of several floors is first made ready
+    (:func:`app.service.wire.warm.warm`: at the start, a PUT or another worker's change), so
+    that a service of one floor never compiles it."""
+    _warm(Building.from_text(_WARM_BUILDING))
 
 
 def _warm(grid: Domain) -> None:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+from app.domain.building import Building
 from app.service.wire.encode import theta_text
 from app.service.wire.events import read_move
 
@@ -23,4 +24,8 @@ def warm(domain: DomainState) -> None:
     for tables in domain.view.tables.values():
         theta_text(tables)
     grid = domain.domain
+    if isinstance(grid, Building):
+        from app.service.ops import warm_building  # ops reads this module
+
+        warm_building()
     read_move(grid, _START_MOVE.format(", ".join(map(str, grid.cell(grid.start)))))
