@@ -449,7 +449,7 @@ async def viewer_snapshot(state: ServiceState) -> bytes:
     return orjson.dumps({"domains": domains, "sessions": sessions, "kappa_max": max(highest)})
 
 
-#: a building of two floors and a lift, for :func:`warm_up`: what a building's events run
+#: a building of two floors and a lift, for :func:`warm_building`: what a building's events run
 #: (six actions, guide's batch compiled for six) is loaded before any request needs it
 _WARM_BUILDING = """\
 connection: lift 1 0:1,1 1:1,1 Lift
