@@ -38,10 +38,10 @@ def small_maze(tmp_path_factory: pytest.TempPathFactory) -> Path:
 @functools.cache
 def service_kernels_compiled() -> None:
     """Compile (or load from numba's cache) what a service compiles as it starts
-    (:func:`app.service.ops.warm_up`), once in this test process, before a test starts a
+    (:func:`app.service.wire.loops.warm_up`), once in this test process, before a test starts a
     server: the server then loads it from the cache (``app/__pycache__``), and the time it is
     given to answer ``/health`` is its own start's, not a cold cache's compile (40 s alone,
     over 60 s with the other test process and a busy machine, from a fresh clone)."""
-    from app.service.ops import warm_up
+    from app.service.wire.loops import warm_up
 
     warm_up()

@@ -25,12 +25,12 @@ from app.service.errors import (
 )
 from app.service.logs import announce, quiet_event_routes
 from app.service.openapi import install_openapi, operation_id
-from app.service.ops import warm_up
 from app.service.routes import ROUTERS, apidocs
 from app.service.routes import metrics as metrics_route
 from app.service.routes.sessions import add_event_route
 from app.service.security import redact_access_log
 from app.service.state import ServiceState, open_state
+from app.service.wire.loops import warm_up
 
 Stop = Callable[[], Awaitable[None]]
 

@@ -7,25 +7,19 @@ the others run on the event loop and never block.
 from __future__ import annotations
 
 import asyncio
-import functools
-import json
 from typing import Any
 
 import numpy as np
 import orjson
 from starlette.concurrency import run_in_threadpool
 
-from app import kernels, strategies
+from app import strategies
 from app.advice.advisor import Decision, DecisionBatch
-from app.advice.guide import GuideMap
-from app.advice.models import AdviceTables
-from app.advice.params import StrategyParams
-from app.advice.priors import GoalPriors
 from app.arrays import IntArray
 from app.domain.building import Building, Domain
-from app.domain.grid import ACTIONS, GridDomain, MapError
+from app.domain.grid import GridDomain, MapError
 from app.domain.paths import expert_trajectories, walked_cells
-from app.service.data.domains import DomainNotFound, DomainState, compiled_searches, needed
+from app.service.data.domains import DomainNotFound, DomainState, needed
 from app.service.data.ingest import parse_trajectories, to_trajectories
 from app.service.data.store import POOLED, Trajectory
 from app.service.live.registry import (
@@ -60,7 +54,7 @@ from app.service.state import ServiceState
 from app.service.wire.encode import batch_binary, batch_json, decision_json
 from app.service.wire.events import cell_words, read_move, read_moves, share_lists
 from app.service.wire.warm import warm
-from app.strategies import DomainData, Need
+from app.strategies import Need
 
 #: an expert walk's longest (``expert_trajectory``'s default ``max_steps``)
 EXPERT_MAX_STEPS = 10_000
@@ -447,69 +441,3 @@ async def viewer_snapshot(state: ServiceState) -> bytes:
     sessions = [viewer_session(s) for s in await state.sessions.snapshot(VIEWER_SESSIONS)]
     highest = [e.kappa_max for e in strategies.STRATEGIES.values() if e.kappa_max is not None]
     return orjson.dumps({"domains": domains, "sessions": sessions, "kappa_max": max(highest)})
-
-
-#: a building of two floors and a lift, for :func:`warm_building`: what a building's events run
-#: (six actions, guide's batch compiled for six) is loaded before any request needs it
-_WARM_BUILDING = """\
-connection: lift 1 0:1,1 1:1,1 Lift
-floor: 0 Ground
-#####
-#S.G#
-#####
-floor: 1 First
-#####
-#..G#
-#####"""
-
-
-def warm_up() -> None:
-    """Load (or compile, the first time) every compiled loop of the event paths (reader,
-    checks, every strategy's service advisor, writers) on one floor, so that no request waits
-    for it (a building's: :func:`warm_building`)."""
-    _warm(GridDomain.from_strings(["#####", "#S.G#", "#####"]))
-
-
-@functools.cache
-def warm_building() -> None:
-    """*Worker thread.* :func:`warm_up`'s work in a building (six actions; guide's batch is
-    compiled for six apart from four), once, when a map of several floors is first made ready
-    (:func:`app.service.wire.warm.warm`: at the start, a PUT or another worker's change), so
-    that a service of one floor never compiles it."""
-    _warm(Building.from_text(_WARM_BUILDING))
-
-
-def _warm(grid: Domain) -> None:
-    uniform = np.full((grid.n_states, grid.n_actions), 1.0 / grid.n_actions)
-    tables = AdviceTables.paper(uniform)
-    event = {"state": list(grid.cell(grid.start)), "action": ACTIONS[1]}
-    moves, _, _ = read_moves(grid, json.dumps([event] * 3), 3)
-
-    def goals() -> GoalPriors:
-        return GoalPriors(grid.n_states, grid.goals, n_actions=grid.n_actions).add(
-            [np.array([[0, 1]])], [0]
-        )
-
-    data = DomainData(
-        tables, goals(),
-        GuideMap.of(grid, goals(), searches=compiled_searches, distances=kernels.guide_distances),
-    )  # fmt: skip
-    for entry in strategies.STRATEGIES.values():
-        # the per-goal window too where a strategy keeps one (goal_aware's beta > 0)
-        half: list[dict[str, Any]] = [{p: 0.5} for p in entry.reads]
-        swept = [StrategyParams(), *(StrategyParams(**h) for h in half)]
-        for params in swept:
-            try:
-                settings = entry.settings(0.0, 2, params)
-            except ValueError:
-                continue  # 0.5 is out of this parameter's bounds
-            advisor = entry.service_advisor(data, settings)
-            advisor.start(grid.start)
-            out = advisor.observe_batch(*moves)
-            # a prior update (new tables, new goal counts), then one event and a batch
-            advisor.use_tables(AdviceTables.paper(uniform.copy()), goals())
-            advisor.observe(*(int(m[0]) for m in moves))
-            advisor.observe_batch(*moves)
-            advisor.goal_beliefs()
-            batch_json(out, grid)
-            batch_binary(out, grid)

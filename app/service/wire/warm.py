@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 from app.domain.building import Building
 from app.service.wire.encode import theta_text
 from app.service.wire.events import read_move
+from app.service.wire.loops import warm_building
 
 if TYPE_CHECKING:
     from app.service.data.domains import DomainState
@@ -25,7 +26,5 @@ def warm(domain: DomainState) -> None:
         theta_text(tables)
     grid = domain.domain
     if isinstance(grid, Building):
-        from app.service.ops import warm_building  # ops reads this module
-
         warm_building()
     read_move(grid, _START_MOVE.format(", ".join(map(str, grid.cell(grid.start)))))
