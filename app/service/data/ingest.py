@@ -48,7 +48,7 @@ def to_trajectories(domain: Domain, body: TrajectoriesCreate, max_steps: int) ->
         if len(step["state"]) != domain.width:
             raise BadInput(f"{name(k)}: cell {list(step['state'])}: {cell_words(domain)}")
         if actions[k] >= domain.n_actions:
-            raise BadInput(f"{name(k)}: {floor_change('NESWUD'[actions[k]])}")
+            raise BadInput(f"{name(k)}: {floor_change(int(actions[k]))}")
     cells = np.array([s["state"] for s in steps], dtype=np.int64).reshape(-1, domain.width)
 
     states = _states(domain, cells, name)

@@ -34,6 +34,7 @@ import numpy as np
 from pydantic import TypeAdapter, ValidationError
 
 from app.arrays import IntArray, Moves
+from app.domain.building import ACTIONS as FLOOR_ACTIONS
 from app.domain.building import Building, Domain
 from app.domain.grid import GridDomain, packed
 from app.service.problems import BadInput, describe_errors
@@ -94,9 +95,9 @@ def off_map(domain: Domain, what: str) -> str:
     return f"{what} is off the {'x'.join(map(str, domain.shape))} map"
 
 
-def floor_change(action: str) -> str:
-    """Why ``U`` or ``D`` is refused on a map of one floor."""
-    return f"action {action!r} changes floor: this map has one floor (N, E, S, W)"
+def floor_change(code: int) -> str:
+    """Why action ``code`` (``U`` or ``D``) is refused on a map of one floor."""
+    return f"action {FLOOR_ACTIONS[code]!r} changes floor: this map has one floor (N, E, S, W)"
 
 
 def _arrays(events: list[EventIn], domain: Domain) -> Scanned:
@@ -144,7 +145,7 @@ def _checked(domain: Domain, cells: IntArray, actions: IntArray, nexts: IntArray
     wide = np.flatnonzero(actions >= domain.n_actions)
     if len(wide):
         i = int(wide[0])
-        raise BadInput(f"event {i}: {floor_change('NESWUD'[actions[i]])}")
+        raise BadInput(f"event {i}: {floor_change(int(actions[i]))}")
     state_of, flat, flat_next = domain.state_of, cells, nexts
     if isinstance(domain, Building):  # floors stacked as rows: [floor * rows + row, col]
         floors, rows, cols = domain.shape
