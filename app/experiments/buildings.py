@@ -429,10 +429,10 @@ def floors_note(maps: list[dict[str, Any]]) -> list[str]:
     return [
         f"Maps of several floors ({', '.join(several)}): six actions (U and D the rides); "
         "distances, steps and the step limits count actions (a ride is one, its time is not "
-        "counted). The KL the paper's rule and goal_aware compare with kappa is multiplied by "
-        "log 4 / log 6 there (AdviceTables.kl_scale), so a certain theta against a lost "
-        "explorer is worth log 4 on every map and their kappa levels mean the same on one "
-        "floor and on several; guide's value is its own (not so multiplied).",
+        "counted). The KL the paper's rule and goal_aware compare with kappa, and guide's "
+        "value, are multiplied by log 4 / log 6 there (AdviceTables.kl_scale), so a certain "
+        "theta against a lost explorer is worth log 4 on every map and every strategy's "
+        "kappa levels mean the same on one floor and on several.",
         "",
     ]
 

@@ -1,10 +1,11 @@
 """A map's fixed nodes, drawn once: each floor's floor, walls, start, destinations and their
-labels, and on a building each floor's name and its connections' stops, and the connections
-between floors.
+labels, and on a building each floor's name and its connections' stops labelled by name, and
+the connections between floors.
 
 Node names (:func:`app.viewer.sessions.node`): ``/maze/floor``, ``/maze/walls`` (one batched
 mesh), ``/maze/start``, ``/maze/goals``, ``/maze/goal_labels/G0``... on a one-floor map;
-``/maze/f1/walls``, ``/maze/f1/name``, ``/maze/f1/stops``... on each floor of a building, and
+``/maze/f1/walls``, ``/maze/f1/name``, ``/maze/f1/stops``, ``/maze/f1/stop_labels/C0`` (each
+connection's name at its stop)... on each floor of a building, and
 ``/maze/connections/lift``, ``/maze/connections/stairs``... (one node a kind) between them:
 lifts and ramps straight from stop to stop, stairs and escalators zigzagging
 (:func:`app.viewer.geometry.connection_segments`), each kind in its colour. A map of more than
@@ -100,9 +101,16 @@ def draw_floor(
         scene.add_label(node("maze", floor, f"goal_labels/G{i}"), domain.goal_label(int(i)),
                         position=tuple(pos))  # fmt: skip
     if isinstance(domain, Building):
-        stops = [(s, c.kind) for c in domain.connections for s in c.stops if s[0] == floor]
-        colours = [CONNECTION_STYLE[kind][0] for _, kind in stops]
-        tiles(scene, domain, node("maze", floor, "stops"), [s for s, _ in stops], colours)
+        stops = [(k, s) for k, c in enumerate(domain.connections) for s in c.stops
+                 if s[0] == floor]  # fmt: skip
+        kinds = [domain.connections[k].kind for k, _ in stops]
+        tiles(scene, domain, node("maze", floor, "stops"), [s for _, s in stops],
+              [CONNECTION_STYLE[kind][0] for kind in kinds])  # fmt: skip
+        at = geo.cell_centres(domain, [s for _, s in stops], 0.006) + np.array([0.0, 0.0, 0.2])
+        for (k, _), pos in zip(stops, at, strict=True):
+            c = domain.connections[k]
+            scene.add_label(node("maze", floor, f"stop_labels/C{k}"), c.name or c.kind,
+                            position=tuple(pos))  # fmt: skip
     return handle
 
 

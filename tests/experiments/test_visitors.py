@@ -1,6 +1,7 @@
 """The visitors experiment runs in seconds with a tiny budget, writes its files, repeats the
 buildings experiment's tasks for a plain walker, and its floor is the best order of the
-destinations (checked against every order)."""
+destinations (checked against every order); beyond the exact search, a searched order bounds
+it from above."""
 
 from __future__ import annotations
 
@@ -69,6 +70,10 @@ def test_writes_every_file_and_a_row_per_map_visitor_and_config(
     for m in result["maps"]:
         assert m["floor"] is not None and m["floor_on_tasks"] is not None
         assert sorted(m["order"]) == list(range(m["goals"]))
+        assert m["floor_exact"] is True  # a few destinations: the exact search
+        assert m["floor_reach_exact"] is True  # the most any walk reaches in 300 / 4 moves
+        assert np.mean(np.array(m["arrival"]) <= 75) <= m["floor_reach"] <= 1
+    assert "destinations within 75 moves" in text
     # positions read off against exact ones: "optimal q=0.2" and the positions visitor that
     # jumps have their exact twins here
     assert "## Positions read one cell off against exact positions" in text
@@ -124,6 +129,75 @@ def test_floor_is_the_best_order_of_the_destinations() -> None:
         every = itertools.permutations(range(len(d.goals)))
         assert sum(arrival) == min(latency(d, p) for p in every)
         assert latency(d, tuple(order)) == sum(arrival)
+
+
+def nearest_first(d: GridDomain) -> tuple[int, ...]:
+    """The nearest-neighbour order from the start (ties to the lower index)."""
+    dist, order, at = d.goal_distances, [], d.start
+    left = set(range(len(d.goals)))
+    while left:
+        j = min(left, key=lambda j: (int(dist[j, at]), j))
+        order.append(j)
+        left.remove(j)
+        at = d.goals[j]
+    return tuple(order)
+
+
+def test_the_searched_order_bounds_the_floor_from_above() -> None:
+    for seed in range(6):
+        d = generate_domain(15, 17, seed, braid=0.3, n_goals=7)
+        exact = visitors.min_latency_order(d)
+        got = visitors.searched_latency_order(d)
+        assert exact is not None and got is not None
+        order, arrival = got
+        assert sorted(order) == list(range(len(d.goals)))
+        assert latency(d, tuple(order)) == sum(arrival)
+        assert sum(exact[1]) <= sum(arrival) <= latency(d, nearest_first(d))
+
+
+def within(d: GridDomain, order: tuple[int, ...], budget: int) -> int:
+    """How many destinations the walk along ``order`` reaches within ``budget`` moves."""
+    dist = d.goal_distances
+    t, at, out = 0, -1, 0
+    for j in order:
+        t += int(dist[j, d.start] if at < 0 else dist[j, d.goals[at]])
+        out, at = out + (t <= budget), j
+    return out
+
+
+def test_the_most_within_a_budget_is_the_best_orders(monkeypatch: pytest.MonkeyPatch) -> None:
+    for seed in range(4):
+        d = generate_domain(15, 17, seed, braid=0.3, n_goals=6)
+        every = list(itertools.permutations(range(len(d.goals))))
+        got = visitors.searched_latency_order(d)
+        assert got is not None
+        order = got[0]
+        for budget in (0, 10, 25, 40, 80, 10_000):
+            most, exact = visitors.most_within(d, order, budget)
+            assert exact and most == max(within(d, p, budget) for p in every)
+            with monkeypatch.context() as m:
+                m.setattr(visitors, "MAX_FLOOR_GOALS", 3)
+                found, exact = visitors.most_within(d, order, budget)
+            assert not exact and within(d, tuple(order), budget) <= found <= most
+
+
+def test_a_floor_beyond_the_exact_search_is_marked_as_a_bound(
+    floor: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    args = visitors.Args(mazes=(floor,), **{**TINY, "buildings": ()})
+    spec = suite.map_suite(args.suite())[0]
+    exact = visitors.floor_of(args, spec)
+    monkeypatch.setattr(visitors, "MAX_FLOOR_GOALS", 2)  # the map has 3 destinations
+    bound = visitors.floor_of(args, spec)
+    assert exact["floor_exact"] is True and bound["floor_exact"] is False
+    assert bound["floor"] >= exact["floor"]
+    reach = visitors.reach_of(args)
+    assert reach == 75  # 300 steps at a piece in four
+    assert bound["floor_reach_exact"] is False and exact["floor_reach_exact"] is True
+    assert np.mean(np.array(bound["arrival"]) <= reach) <= bound["floor_reach"]
+    assert bound["floor_reach"] <= exact["floor_reach"]
+    assert visitors._bound(bound, "floor").startswith("≤ ")
+    assert not visitors._bound(exact, "floor").startswith("≤")
 
 
 def test_trapped_moves_count_windows_of_few_cells() -> None:

@@ -162,6 +162,21 @@ def test_scene_labels_each_destination_by_name_on_its_floor(
         assert label.position[2] == pytest.approx(floor_levels(tower)[f] + 0.206)
 
 
+def test_scene_labels_each_stop_by_its_connection_name(stacked: MazeScene, tower: Building) -> None:
+    handles = stacked.server.scene._handle_from_node_name
+    assert tower.connections
+    for i, c in enumerate(tower.connections):
+        assert c.name
+        for f, r, col in c.stops:
+            label: Any = handles[f"/maze/f{f}/stop_labels/C{i}"]
+            assert label.text == c.name
+            centre = geo.cell_centres(tower, [(f, r, col)])[0]
+            np.testing.assert_allclose(label.position[:2], centre[:2], atol=1e-6)
+    on = {f for c in tower.connections for f, _, _ in c.stops}
+    labelled = {n.split("/")[2] for n in handles if "/stop_labels/" in n}
+    assert labelled == {f"f{f}" for f in on}
+
+
 def test_scene_draws_stairs_and_lifts_between_the_floors(
     stacked: MazeScene, tower: Building
 ) -> None:
