@@ -196,6 +196,10 @@ def test_a_floor_beyond_the_exact_search_is_marked_as_a_bound(
     assert bound["floor_reach_exact"] is False and exact["floor_reach_exact"] is True
     assert np.mean(np.array(bound["arrival"]) <= reach) <= bound["floor_reach"]
     assert bound["floor_reach"] <= exact["floor_reach"]
+    d = visitors.place(args, spec).world.domain
+    assert isinstance(d, GridDomain)
+    assert exact["nearest_first"] == pytest.approx(latency(d, nearest_first(d)) / len(d.goals))
+    assert exact["floor"] <= exact["nearest_first"]
     assert visitors._bound(bound, "floor").startswith("≤ ")
     assert not visitors._bound(exact, "floor").startswith("≤")
 
