@@ -24,6 +24,7 @@ from playwright.sync_api import Browser, ConsoleMessage, Page, sync_playwright
 
 from app.service.config import Settings
 from app.service.main import create_app
+from app.service.wire.loops import warm_building
 from app.viewer.remote import RemoteFeed
 from app.viewer.viewer import Viewer
 
@@ -88,7 +89,13 @@ def service(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Service]:
     """The service and its viewer for the browser tests, stopped after the last of them: the
     viewer reads the service every tick, and in this process those requests would count in
     the metrics and take CPU from every later test. Idle connections are kept open (uvicorn
-    closes them after 5 s by default, which raced with a client reusing one: a reset)."""
+    closes them after 5 s by default, which raced with a client reusing one: a reset).
+
+    A building's loops are compiled here first (:func:`warm_building`, cached for the
+    process): the server compiles them in the first PUT of a building, and the tests put
+    buildings with a client that waits 30 s; from a cold cache, with another process busy,
+    that PUT outlasted it."""
+    warm_building()
     settings = Settings(
         host="127.0.0.1",
         port=free_port(),
