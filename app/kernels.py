@@ -1425,9 +1425,10 @@ def guide_stream_six(
 @njit(cache=True, nogil=True)
 def guide_distances(next_state: IntArray, targets: IntArray) -> IntArray:  # pragma: no cover
     """``grid.bfs_distances_each``: ``out[i, s]``, the fewest moves from ``s`` to
-    ``targets[i]`` (-1: none), one breadth-first search outward from each target (moves are
-    reversible on a grid)."""
-    n = next_state.shape[0]
+    ``targets[i]`` (-1: none), one breadth-first search outward from each target over every
+    action, the rides of a building's too (moves are reversible: a ride up is undone by the
+    ride down)."""
+    n, k = next_state.shape
     out = np.full((targets.shape[0], n), -1, dtype=np.int64)
     queue = np.empty(n, dtype=np.int64)
     for i in range(targets.shape[0]):
@@ -1438,7 +1439,7 @@ def guide_distances(next_state: IntArray, targets: IntArray) -> IntArray:  # pra
         while head < tail:
             v = queue[head]
             head += 1
-            for a in range(4):
+            for a in range(k):
                 u = next_state[v, a]
                 if dist[u] < 0:
                     dist[u] = dist[v] + 1
@@ -1482,6 +1483,67 @@ def guide_detours(
                 back = (a + 2) % 4  # u's move into v
                 dr, dc = cells[t, 0] - cells[u, 0], cells[t, 1] - cells[u, 1]
                 m0, m1 = guide_own_moves(dr, dc, guide_open_moves(next_state, u, 4))
+                cost = 0 if (m0 == back or m1 == back) else 1
+                if best[v] + cost < best[u]:
+                    best[u] = best[v] + cost
+                    if cost == 0:  # to the front: the same number of detours as v
+                        head = (head - 1 + size) % size
+                        ring[head] = u
+                    else:
+                        ring[(head + count) % size] = u
+                    count += 1
+        for s in range(n):
+            if done[s]:
+                out[i, s] = best[s]
+    return out
+
+
+@njit(cache=True, nogil=True)
+def guide_detours_floors(
+    next_state: IntArray, cells: IntArray, stops: IntArray, targets: IntArray
+) -> IntArray:  # pragma: no cover
+    """:func:`guide_detours` in a building of several floors (``next_state`` (S, 6), ``cells``
+    (S, 3) ``[floor, row, col]``, ``stops`` ``Building.nearest_stops``): the fewest moves on
+    any way that someone heading for the target by ``Building.compass_takes`` would not make
+    by itself. On the target's floor its own moves are the compass's towards the target; on
+    another, towards the nearest stop with a way towards the target's floor, and there the
+    ride (``U`` up, ``D`` down); none where its floor has no such stop. The numbers of
+    ``grid.compass_detours_each`` with ``takes=Building.compass_takes``."""
+    n = next_state.shape[0]
+    out = np.full((targets.shape[0], n), -1, dtype=np.int64)
+    size = 6 * n + 2  # every move relaxed once at most, and the target
+    ring = np.empty(size, dtype=np.int64)
+    best = np.empty(n, dtype=np.int64)
+    done = np.empty(n, dtype=np.bool_)
+    for i in range(targets.shape[0]):
+        t = targets[i]
+        best[:] = n * 6 + 1  # more than any way's detours
+        done[:] = False
+        best[t] = 0
+        ring[0] = t
+        head, count = 0, 1
+        while count > 0:
+            v = ring[head]
+            head = (head + 1) % size
+            count -= 1
+            if done[v]:
+                continue
+            done[v] = True
+            for a in range(6):
+                u = next_state[v, a]
+                if u == v or done[u]:
+                    continue
+                back = (a + 2) % 4 if a < 4 else 9 - a  # u's move into v (U and D: 4, 5)
+                m0, m1 = -1, -1
+                aim = t
+                if cells[u, 0] != cells[t, 0]:
+                    up = 0 if cells[t, 0] > cells[u, 0] else 1
+                    aim = stops[u, up]
+                    if aim == u:
+                        m0 = 4 + up  # at the stop: the ride
+                if aim >= 0 and aim != u:
+                    dr, dc = cells[aim, 1] - cells[u, 1], cells[aim, 2] - cells[u, 2]
+                    m0, m1 = guide_own_moves(dr, dc, guide_open_moves(next_state, u, 4))
                 cost = 0 if (m0 == back or m1 == back) else 1
                 if best[v] + cost < best[u]:
                     best[u] = best[v] + cost

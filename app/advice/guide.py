@@ -50,9 +50,9 @@ floor, and there the ride), and its detours the same search over it. :meth:`Guid
 adds the row plus column difference only where rides keep row and column. The value is in
 four actions' units, as the paper's rule's KL is (times log 4 / log A, ``kl_scale``: a kappa
 means the same on one floor and on several). The compiled kernels read the floors and stops in
-:attr:`GuideMap.arrays` and make the same decisions; a building's guide map is searched by the
-readable code (its compass detours are not the compiled one-floor search's; the service does
-so in the worker thread of a PUT).
+:attr:`GuideMap.arrays` and make the same decisions; the service searches a guide map, a
+building's too, with compiled searches that do not hold the GIL (``kernels.guide_distances``,
+``guide_detours``, ``guide_detours_floors``), in the worker thread of a PUT.
 
 The evidence fades with time constant W, the session's window::
 
@@ -250,8 +250,11 @@ PURPOSE_WALK_PART = 4
 SET_ASIDE, BROUGHT_BACK = 1, 2
 
 
-#: (next_state (S, 4), cells (S, 2), destinations) -> (distances (G, S), detours (G, S))
-Searches = Callable[[IntArray, IntArray, tuple[int, ...]], tuple[IntArray, IntArray]]
+#: (next_state (S, A), cells (S, 2) or (S, 3), destinations, a building's nearest_stops or
+#: None) -> (distances (G, S), detours (G, S))
+Searches = Callable[
+    [IntArray, IntArray, tuple[int, ...], IntArray | None], tuple[IntArray, IntArray]
+]
 #: (next_state (S, 4), targets) -> the BFS distance from every state to each target (k, S)
 Distances = Callable[[IntArray, IntArray], IntArray]
 
@@ -317,10 +320,12 @@ class GuideMap:
         searches: Searches | None = None, distances: Distances | None = None,
     ) -> GuideMap:  # fmt: skip
         """``domain``'s guide map (:class:`GuideError` first if it cannot have one), with the
-        experts' counts of ``goal_priors``. ``searches(next_state, cells, goals)``: the
-        distances and detours of every destination, (G, S) each, by another implementation
-        of the same searches (the service's compiled ones); by default
-        :attr:`GridDomain.goal_distances` and :func:`compass_detours_each`. ``distances``:
+        experts' counts of ``goal_priors``. ``searches(next_state, cells, goals, stops)``:
+        the distances and detours of every destination, (G, S) each, by another
+        implementation of the same searches (the service's compiled ones; ``stops`` is a
+        building's ``nearest_stops``, None on one floor); by default
+        :attr:`GridDomain.goal_distances` and :func:`compass_detours_each` (in a building,
+        :func:`bfs_distances_each` and the building's compass). ``distances``:
         the searches of the landmarks (:func:`landmarks`), by default
         :func:`~app.domain.grid.bfs_distances_each`."""
         goals = tuple(int(g) for g in domain.goals)
@@ -335,18 +340,19 @@ class GuideMap:
         s = domain.n_states
         of_state = np.full(s, -1, dtype=np.int64)
         of_state[list(goals)] = np.arange(len(goals))
-        if isinstance(domain, Building):  # readable searches: the compiled ones are one floor's
+        if searches is not None:
+            nearest = domain.nearest_stops if isinstance(domain, Building) else None
+            dist, detour = searches(domain.next_state, domain.cells, goals, nearest)
+            if dist.shape != (len(goals), s) or detour.shape != (len(goals), s):
+                raise ValueError("searches must give (destinations, states) arrays")
+        elif isinstance(domain, Building):
             dist = bfs_distances_each(domain.next_state, goals)
             detour = compass_detours_each(
                 domain.next_state, domain.cells, goals, takes=domain.compass_takes
             )
-        elif searches is None:
+        else:
             dist = domain.goal_distances
             detour = compass_detours_each(domain.next_state, domain.cells, goals)
-        else:
-            dist, detour = searches(domain.next_state, domain.cells, goals)
-            if dist.shape != (len(goals), s) or detour.shape != (len(goals), s):
-                raise ValueError("searches must give (destinations, states) arrays")
         floor = stops = None  # writeable, as a one-floor map's arrays are (numba compiles
         if isinstance(domain, Building):  # read-only arrays anew)
             floor = np.require(domain.cells[:, 0], requirements=["C", "W"])

@@ -23,14 +23,17 @@ import numpy as np
 import orjson
 import pytest
 from fastapi.testclient import TestClient
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from app import kernels
 from app.advice import guide as guide_module
 from app.advice.guide import GuideMap
 from app.advice.models import AdviceTables
 from app.advice.priors import GoalPriors
 from app.domain import grid as grid_module
+from app.domain.building import Building
+from app.domain.floorplans import generate_floors
 from app.domain.generate import generate_building, generate_maze
 from app.domain.grid import GridDomain, bfs_distances_each, compass_detours_each
 from app.service.data import domains as domains_module
@@ -42,6 +45,8 @@ from app.service.state import ServiceState
 from app.service.wire import encode as encode_module
 from app.service.wire import events as events_module
 from app.strategies import Need, names
+from tests.domain.test_building_property import build
+from tests.domain.test_building_property import buildings as generated_buildings
 from tests.service.conftest import REDIS_URL, TINY, drop_redis_keys, make_settings, redis_problem
 
 #: a maze of 3 destinations, small enough to build in a moment
@@ -346,6 +351,44 @@ def test_the_compiled_searches_are_the_numpy_ones(rows: list[str], data: st.Data
         assert isinstance(a, np.ndarray) and isinstance(b, np.ndarray)
         assert a.dtype == b.dtype and np.array_equal(a, b)
     assert compiled.cells_bound and plain.cells_bound
+
+
+BUILDINGS = st.one_of(
+    generated_buildings().map(build),
+    st.builds(
+        lambda side, floors, seed, goals: generate_floors(
+            side, side, floors, np.random.default_rng(seed), purpose="hospital",
+            n_goals=goals, name="h",
+        ),
+        st.integers(32, 40), st.integers(2, 3), st.integers(0, 10_000), st.integers(1, 3),
+    ),
+)  # fmt: skip
+
+
+@settings(max_examples=60, deadline=None)
+@given(BUILDINGS, st.data())
+def test_the_compiled_searches_of_a_building_are_the_numpy_ones(
+    tower: Building, data: st.DataObject
+) -> None:
+    """A building's guide map in the service (compiled searches, without the GIL) is the
+    experiments' (numpy's, the building's compass), landmarks included (their distances
+    cross floors: a search over the compass moves alone left them -1 on other floors)."""
+    extra = data.draw(st.lists(st.integers(0, tower.n_states - 1), max_size=4))
+    targets = (*tower.goals, *extra)
+    dist, detour = domains_module.compiled_searches(
+        tower.next_state, tower.cells, targets, tower.nearest_stops
+    )
+    assert np.array_equal(dist, bfs_distances_each(tower.next_state, targets))
+    want = compass_detours_each(tower.next_state, tower.cells, targets, takes=tower.compass_takes)
+    assert np.array_equal(detour, want)
+    compiled = GuideMap.of(
+        tower, searches=domains_module.compiled_searches, distances=kernels.guide_distances
+    )
+    plain = GuideMap.of(tower)
+    for a, b in zip(compiled.arrays, plain.arrays, strict=True):
+        if isinstance(a, np.ndarray):
+            assert isinstance(b, np.ndarray) and a.dtype == b.dtype and np.array_equal(a, b)
+    assert compiled.cells_bound == plain.cells_bound
 
 
 # ---- workers sharing Redis: the other worker prepares when it reads the change ----------------

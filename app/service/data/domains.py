@@ -150,13 +150,17 @@ def preparation_bytes(
 
 
 def compiled_searches(
-    next_state: IntArray, cells: IntArray, goals: tuple[int, ...]
+    next_state: IntArray, cells: IntArray, goals: tuple[int, ...], stops: IntArray | None = None
 ) -> tuple[IntArray, IntArray]:
     """A guide map's searches (``GuideMap.of``'s ``searches``), compiled without the GIL:
-    the numbers of ``GridDomain.goal_distances`` and ``compass_detours_each``."""
+    the numbers of ``GridDomain.goal_distances`` and ``compass_detours_each``; in a building
+    (``stops``: ``Building.nearest_stops``), of ``bfs_distances_each`` over every action and
+    ``compass_detours_each`` with the building's compass (``Building.compass_takes``)."""
     targets = np.array(goals, dtype=np.int64)
     dist = kernels.guide_distances(next_state, targets)
-    return dist, kernels.guide_detours(next_state, cells, targets)
+    if stops is None:
+        return dist, kernels.guide_detours(next_state, cells, targets)
+    return dist, kernels.guide_detours_floors(next_state, cells, stops, targets)
 
 
 class DomainCatalog:
