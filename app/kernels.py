@@ -759,13 +759,14 @@ def guide_append(
     o_lo = pi[a]
     o_la = guide_ahead(next_state, gmap[1], s, heading, a, 0.0, n_actions)
     o_ls = guide_straight(next_state, gmap[1], s, heading, a, 0.0, n_actions)
-    if advised:  # lost or not, it takes the advice or its own rule, half each
+    if advised:  # lost or not, it takes the advice or its own rule, half each (L4 too)
         o_lo, o_la, o_ls = (
             0.5 * (o_lo + advice[a]),
             0.5 * (o_la + advice[a]),
             0.5 * (o_ls + advice[a]),
         )
-    ll[0] = lam * ll[0] + math.log(1.0 / n_actions)  # L4: any action, advised or not
+    o_l4 = 0.5 * (1.0 / n_actions + advice[a]) if advised else 1.0 / n_actions
+    ll[0] = lam * ll[0] + math.log(o_l4)  # L4: any action, or the advice half the time
     ll[1] = lam * ll[1] + math.log((1.0 - bump) * o_lo + bump / n_actions)
     last = ll.shape[0] - 1  # LA, then LS
     ll[last - 1] = lam * ll[last - 1] + math.log((1.0 - bump) * o_la + bump / n_actions)

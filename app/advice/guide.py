@@ -6,7 +6,7 @@ it can lead into another destination's dead end. A building knows more: its map 
 destinations. ``guide`` keeps a posterior over what the explorer is doing, with these models of
 its next action ``a`` at ``s`` (docs/ARCHITECTURE.md has the equations beside the paper's)::
 
-    L4      lost, any action:                1/4
+    L4      lost, any action:                (1/4)'
     LO      lost, any open move:             lo(a | s) = (1 - b) open(s, a) / n_open(s) + b/4
     WL, WR  lost, a hand on the wall:        (1 - slack) [a = w(s, h)]' + slack lo(a | s)
     LA      lost, never turning back:        la(a | s) = (1 - b) ahead(s, a) + b/4
@@ -31,13 +31,14 @@ its next action ``a`` at ``s`` (docs/ARCHITECTURE.md has the equations beside th
   axis of the larger row or column difference if that way is open, else along the other axis
   if that way is open (both on a tie); where neither is, uniform over the open moves.
 * ``'``: on a move where the last decision advised, each of these explorers, lost or not
-  (LO, LA and LS: their rule, in their own evidence; L4 is any action, advised or not),
+  (LO, LA and LS: their rule, in their own evidence; L4: any action),
   takes the advice or its own way, half each (its rule averaged with the advice): they
   follow advice, and those that have a way of their own go back to it when it stops, so a
   detour must be advised step by step. Taking a piece is thus no evidence either way of
   being lost (when the lost models did not take advice, every piece taken counted for the
   destinations' models, and a walker led one move in six was soon taken for one on its way
-  and left alone).
+  and left alone; while L4 alone took none, a walker that bumps into walls, explained by L4
+  only, was taken for one on its way and its budget filled unspent).
 
 **A building of several floors** (six actions, ``U`` and ``D`` the rides): the same models
 over every action (each ``/4`` above reads ``/A``: L4, the bumps, the slack, the spread, and
@@ -824,12 +825,14 @@ class GuideAdvisor(Advisor):
         # LO, LA and LS: their rule, with a bump now and then
         o_lo = self.guide.open_policy(state)[action]
         o_la, o_ls = self._ahead(state)[action], self._straight(state)[action]
-        if advised:  # lost or not, it takes the advice or its own rule, half each
+        n = g.n_actions
+        o_l4 = 1.0 / n
+        if advised:  # lost or not, it takes the advice or its own rule, half each (L4 too)
             took = self._last_advice[action]
             o_lo, o_la, o_ls = 0.5 * (o_lo + took), 0.5 * (o_la + took), 0.5 * (o_ls + took)
-        n = g.n_actions
+            o_l4 = 0.5 * (o_l4 + took)
         bump = LOST_BUMP / n
-        ll[0] = lam * ll[0] + math.log(1.0 / n)  # L4: any action, advised or not
+        ll[0] = lam * ll[0] + math.log(o_l4)  # L4: any action, or the advice half the time
         ll[1] = lam * ll[1] + math.log((1.0 - LOST_BUMP) * o_lo + bump)
         ll[-2] = lam * ll[-2] + math.log((1.0 - LOST_BUMP) * o_la + bump)
         ll[-1] = lam * ll[-1] + math.log((1.0 - LOST_BUMP) * o_ls + bump)

@@ -614,6 +614,32 @@ def test_a_lost_walker_that_takes_every_piece_is_still_taken_for_lost_and_on_a_b
         assert adv.advice_count >= adv.decisions / 4 - 8  # the budget, not kappa, holds it
 
 
+def test_a_lost_walker_that_bumps_into_walls_and_takes_every_piece_spends_its_budget() -> None:
+    """A random walker (any action, walls included) that takes every piece of advice: only
+    L4 explains its own moves, and L4 takes advice half the time as every model does, so the
+    pieces it takes do not make it look bound for the target (while L4 took none, it was taken
+    for one on its way in 23% of these decisions, its budget left full: 138 pieces in 601
+    decisions here, against 147 now)."""
+    d = generate_building_domain(96, 96, 7)
+    prior, goal_priors = train_goal_priors(d, np.random.default_rng(0), "start", 10, 1.0)
+    tables, gmap = AdviceTables.paper(prior.theta()), GuideMap.of(d, goal_priors)
+    adv = make_advisor("guide", tables, 0.5, 300, StrategyParams(), goal_priors, gmap)
+    rng = np.random.default_rng(0)
+    walker = make_explorer("random", d)
+    dec, s, lost = adv.start(d.start), d.start, []
+    for _ in range(600):
+        if dec.advise and dec.advice is not None:
+            a = max(range(4), key=lambda b: (dec.advice[b], -b))  # type: ignore[index]
+        else:
+            a = walker.act(s, rng)
+        s2 = int(d.next_state[s, a])
+        dec = adv.observe(s, a, s2)
+        s = s2
+        lost.append(dec.p_normal < 0.5)
+    assert np.mean(lost) >= 0.9
+    assert adv.advice_count >= adv.decisions / 4 - 8  # the budget, not kappa, holds it
+
+
 def test_pieces_a_visitor_does_not_take_are_given_back_to_its_budget() -> None:
     """A random walker that takes a piece of advice half the time: guide learns that it takes
     only some (compliance below PARTLY more likely than not) and gives the pieces it does not
