@@ -25,8 +25,8 @@ kernel                    the readable form (and its test)
 
 Tables are passed as the tuple ``AdviceTables.arrays``: (log_probs (M, S*A), log_weights (M,),
 probs (M, S*A), theta (S*A,), neg_entropy (S,)), A the domain's actions (4 on one floor, 6 in
-a building of several floors: every kernel but the one-floor searches ``guide_distances`` and
-``guide_detours`` takes any A); goal tables as (goal_of_state (S,),
+a building of several floors: every kernel takes any A, the searches ``guide_distances`` and
+``guide_detours`` a building's too); goal tables as (goal_of_state (S,),
 alpha0, unknown counts (S*A,), goal counts (S*A, G), each goal's log theta (S*A, G)).
 """
 
@@ -1451,21 +1451,29 @@ def guide_distances(next_state: IntArray, targets: IntArray) -> IntArray:  # pra
 
 @njit(cache=True, nogil=True)
 def guide_detours(
-    next_state: IntArray, cells: IntArray, targets: IntArray
+    next_state: IntArray, cells: IntArray, targets: IntArray, stops: IntArray
 ) -> IntArray:  # pragma: no cover
     """``grid.compass_detours_each``: ``out[i, s]``, the fewest moves on any way from ``s`` to
     ``targets[i]`` that someone heading there as the crow flies would not make by itself (-1:
     no way): a 0-1 breadth-first search outward from each target over a double-ended queue,
-    the move of ``u`` into ``v`` costing 0 when it is one of :func:`guide_own_moves`'s."""
-    n = next_state.shape[0]
+    the move of ``u`` into ``v`` costing 0 when it is one of ``u``'s own moves.
+
+    On one floor (``stops`` empty, (0, 2); ``cells`` (S, 2)) its own moves are
+    :func:`guide_own_moves`' towards the target. In a building (``next_state`` (S, 6),
+    ``cells`` (S, 3) ``[floor, row, col]``, ``stops`` ``Building.nearest_stops``), as
+    ``Building.compass_takes``: on the target's floor the compass's towards it; on another,
+    towards the nearest stop with a way towards the target's floor, and there the ride (``U``
+    up, ``D`` down); none where its floor has no such stop."""
+    n, k = next_state.shape
+    at = 0 if stops.shape[0] == 0 else 1  # the row's column in cells
     out = np.full((targets.shape[0], n), -1, dtype=np.int64)
-    size = 4 * n + 2  # every move relaxed once at most, and the target
+    size = k * n + 2  # every move relaxed once at most, and the target
     ring = np.empty(size, dtype=np.int64)
     best = np.empty(n, dtype=np.int64)
     done = np.empty(n, dtype=np.bool_)
     for i in range(targets.shape[0]):
         t = targets[i]
-        best[:] = n * 4 + 1  # more than any way's detours
+        best[:] = n * k + 1  # more than any way's detours
         done[:] = False
         best[t] = 0
         ring[0] = t
@@ -1477,73 +1485,20 @@ def guide_detours(
             if done[v]:
                 continue
             done[v] = True
-            for a in range(4):
-                u = next_state[v, a]
-                if u == v or done[u]:
-                    continue
-                back = (a + 2) % 4  # u's move into v
-                dr, dc = cells[t, 0] - cells[u, 0], cells[t, 1] - cells[u, 1]
-                m0, m1 = guide_own_moves(dr, dc, guide_open_moves(next_state, u, 4))
-                cost = 0 if (m0 == back or m1 == back) else 1
-                if best[v] + cost < best[u]:
-                    best[u] = best[v] + cost
-                    if cost == 0:  # to the front: the same number of detours as v
-                        head = (head - 1 + size) % size
-                        ring[head] = u
-                    else:
-                        ring[(head + count) % size] = u
-                    count += 1
-        for s in range(n):
-            if done[s]:
-                out[i, s] = best[s]
-    return out
-
-
-@njit(cache=True, nogil=True)
-def guide_detours_floors(
-    next_state: IntArray, cells: IntArray, stops: IntArray, targets: IntArray
-) -> IntArray:  # pragma: no cover
-    """:func:`guide_detours` in a building of several floors (``next_state`` (S, 6), ``cells``
-    (S, 3) ``[floor, row, col]``, ``stops`` ``Building.nearest_stops``): the fewest moves on
-    any way that someone heading for the target by ``Building.compass_takes`` would not make
-    by itself. On the target's floor its own moves are the compass's towards the target; on
-    another, towards the nearest stop with a way towards the target's floor, and there the
-    ride (``U`` up, ``D`` down); none where its floor has no such stop. The numbers of
-    ``grid.compass_detours_each`` with ``takes=Building.compass_takes``."""
-    n = next_state.shape[0]
-    out = np.full((targets.shape[0], n), -1, dtype=np.int64)
-    size = 6 * n + 2  # every move relaxed once at most, and the target
-    ring = np.empty(size, dtype=np.int64)
-    best = np.empty(n, dtype=np.int64)
-    done = np.empty(n, dtype=np.bool_)
-    for i in range(targets.shape[0]):
-        t = targets[i]
-        best[:] = n * 6 + 1  # more than any way's detours
-        done[:] = False
-        best[t] = 0
-        ring[0] = t
-        head, count = 0, 1
-        while count > 0:
-            v = ring[head]
-            head = (head + 1) % size
-            count -= 1
-            if done[v]:
-                continue
-            done[v] = True
-            for a in range(6):
+            for a in range(k):
                 u = next_state[v, a]
                 if u == v or done[u]:
                     continue
                 back = (a + 2) % 4 if a < 4 else 9 - a  # u's move into v (U and D: 4, 5)
                 m0, m1 = -1, -1
                 aim = t
-                if cells[u, 0] != cells[t, 0]:
+                if at == 1 and cells[u, 0] != cells[t, 0]:
                     up = 0 if cells[t, 0] > cells[u, 0] else 1
                     aim = stops[u, up]
                     if aim == u:
                         m0 = 4 + up  # at the stop: the ride
                 if aim >= 0 and aim != u:
-                    dr, dc = cells[aim, 1] - cells[u, 1], cells[aim, 2] - cells[u, 2]
+                    dr, dc = cells[aim, at] - cells[u, at], cells[aim, at + 1] - cells[u, at + 1]
                     m0, m1 = guide_own_moves(dr, dc, guide_open_moves(next_state, u, 4))
                 cost = 0 if (m0 == back or m1 == back) else 1
                 if best[v] + cost < best[u]:

@@ -6,7 +6,7 @@ detours to each (the building's compass: the nearest stop towards the destinatio
 and the ride there) and the landmarks' distances. Measured two ways on a generated hospital
 (``maze generate --kind building --floors F --purpose hospital``): the numpy searches the
 experiments use and the compiled ones the service
-uses (``kernels.guide_distances`` and ``guide_detours_floors``, compiled ``nogil``, so the
+uses (``kernels.guide_distances`` and ``guide_detours``, compiled ``nogil``, so the
 event loop runs while they do). The two maps are checked equal, array by array, before
 anything is timed; the compiled searches are compiled (or read from numba's cache) first.
 Each figure is the median of ``--repeats`` runs, the two ways in turn within each.

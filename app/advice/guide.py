@@ -53,7 +53,7 @@ four actions' units, as the paper's rule's KL is (times log 4 / log A, ``kl_scal
 means the same on one floor and on several). The compiled kernels read the floors and stops in
 :attr:`GuideMap.arrays` and make the same decisions; the service searches a guide map, a
 building's too, with compiled searches that do not hold the GIL (``kernels.guide_distances``,
-``guide_detours``, ``guide_detours_floors``), in the worker thread of a PUT.
+``guide_detours``, one floor or several), in the worker thread of a PUT.
 
 The evidence fades with time constant W, the session's window::
 

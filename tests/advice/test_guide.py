@@ -5,6 +5,7 @@ leaves competent ones alone."""
 from __future__ import annotations
 
 import itertools
+from typing import Any
 
 import numpy as np
 import pytest
@@ -12,7 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from app.advice import guide
-from app.advice.advisor import Advisor
+from app.advice.advisor import Advisor, Decision
 from app.advice.guide import GuideError, GuideMap
 from app.advice.models import AdviceTables
 from app.advice.params import StrategyParams
@@ -226,6 +227,20 @@ def test_compiled_guide_q_learning_is_the_core_s(
     np.testing.assert_array_equal(fast.q, learner.q)
 
 
+def step_taking(
+    d: GridDomain, adv: Advisor, walker: Any, rng: np.random.Generator, s: int,
+    dec: Decision, takes: bool,
+) -> tuple[int, Decision]:  # fmt: skip
+    """One move of ``walker`` from ``s``: the advised move (the mode of the advice) where
+    ``takes`` and ``dec`` advised, else its own; the advisor's decision after it."""
+    if takes and dec.advise and dec.advice is not None:
+        a = max(range(4), key=lambda b: (dec.advice[b], -b))  # type: ignore[index]
+    else:
+        a = walker.act(s, rng)
+    s2 = int(d.next_state[s, a])
+    return s2, adv.observe(s, a, s2)
+
+
 def test_advice_that_is_ignored_stops_and_comes_back_once_it_is_taken() -> None:
     """A random walker that ignores every piece of advice is advised at most 5 times per 100
     steps after its first 20 ignored pieces (it learns how far this visitor takes advice);
@@ -246,13 +261,7 @@ def test_advice_that_is_ignored_stops_and_comes_back_once_it_is_taken() -> None:
         takes = t >= 1000  # ignores all advice, then takes all of it
         if t == 1000:
             estimate = adv.compliance  # type: ignore[attr-defined]
-        if takes and dec.advise and dec.advice is not None:
-            a = max(range(4), key=lambda b: (dec.advice[b], -b))  # type: ignore[index]
-        else:
-            a = walker.act(s, rng)
-        s2 = int(d.next_state[s, a])
-        dec = adv.observe(s, a, s2)
-        s = s2
+        s, dec = step_taking(d, adv, walker, rng, s, dec, takes)
     ignoring = [t for t in given_at if t < 1000]
     assert len(ignoring) >= 5  # it was advised, and ignored it
     after = [t for t in ignoring if t > ignoring[min(19, len(ignoring) - 1)]]
@@ -628,13 +637,7 @@ def test_a_lost_walker_that_bumps_into_walls_and_takes_every_piece_spends_its_bu
     walker = make_explorer("random", d)
     dec, s, lost = adv.start(d.start), d.start, []
     for _ in range(600):
-        if dec.advise and dec.advice is not None:
-            a = max(range(4), key=lambda b: (dec.advice[b], -b))  # type: ignore[index]
-        else:
-            a = walker.act(s, rng)
-        s2 = int(d.next_state[s, a])
-        dec = adv.observe(s, a, s2)
-        s = s2
+        s, dec = step_taking(d, adv, walker, rng, s, dec, True)
         lost.append(dec.p_normal < 0.5)
     assert np.mean(lost) >= 0.9
     assert adv.advice_count >= adv.decisions / 4 - 8  # the budget, not kappa, holds it

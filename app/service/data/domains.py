@@ -158,9 +158,8 @@ def compiled_searches(
     ``compass_detours_each`` with the building's compass (``Building.compass_takes``)."""
     targets = np.array(goals, dtype=np.int64)
     dist = kernels.guide_distances(next_state, targets)
-    if stops is None:
-        return dist, kernels.guide_detours(next_state, cells, targets)
-    return dist, kernels.guide_detours_floors(next_state, cells, stops, targets)
+    on = np.zeros((0, 2), dtype=np.int64) if stops is None else stops
+    return dist, kernels.guide_detours(next_state, cells, targets, on)
 
 
 class DomainCatalog:
