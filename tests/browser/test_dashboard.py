@@ -231,8 +231,8 @@ def test_dashboard_says_what_each_strategy_believes_plain_words_first(
     made = service.http.post("/domains/named-dash/sessions", json={"strategy": "guide", "kappa": 0})
     led, auth = made.json()["session_id"], {"Authorization": f"Bearer {made.json()['token']}"}
     decision = made.json()["decision"]
-    for i in range(8):  # bumps into the walls, then follows the advice
-        a = "SW"[i % 2] if i < 6 or not decision["advise"] else max(
+    for i in range(14):  # bumps into the walls, then follows the advice
+        a = "SW"[i % 2] if i < 12 or not decision["advise"] else max(
             "NESW", key=lambda k: decision["advice"][k])  # fmt: skip
         r = service.http.post(f"/sessions/{led}/events", headers=auth,
                               json={"state": decision["state"], "action": a})  # fmt: skip
