@@ -160,7 +160,12 @@ def place(args: Args, spec: MapSpec) -> Place:
     return _PLACES[key]
 
 
-def latency_legs(domain: Domain) -> tuple[list[int], list[list[int]]]:
+#: the moves from the start to each destination, and between destinations (``leg[i][j]``: from
+#: destination i to j)
+Legs = tuple[list[int], list[list[int]]]
+
+
+def latency_legs(domain: Domain) -> Legs:
     """The moves from the start to each destination and between destinations (``leg[i][j]``:
     from destination i to j), BFS distances."""
     dist = goal_moves(domain)  # (G, S): moves from a cell to destination g
@@ -179,15 +184,16 @@ def arrivals_along(order: list[int], first: list[int], leg: list[list[int]]) -> 
     return arrival
 
 
-def min_latency_order(domain: Domain) -> tuple[list[int], list[int]] | None:
+def min_latency_order(legs: Legs) -> tuple[list[int], list[int]] | None:
     """The order of the destinations that minimises the mean arrival (over destinations drawn
     uniformly) of a walker from the start along shortest paths, and the arrival at each
     destination (by index) on it: exact, a dynamic programme over subsets (latency: each leg
-    delays every destination not yet reached). None beyond MAX_FLOOR_GOALS destinations."""
-    n = len(domain.goals)
+    delays every destination not yet reached). None beyond MAX_FLOOR_GOALS destinations.
+    ``legs``: :func:`latency_legs`."""
+    first, leg = legs
+    n = len(first)
     if n == 0 or n > MAX_FLOOR_GOALS:
         return None
-    first, leg = latency_legs(domain)
     full = (1 << n) - 1
     best = [[math.inf] * n for _ in range(1 << n)]
     came = [[-1] * n for _ in range(1 << n)]
@@ -215,15 +221,14 @@ def min_latency_order(domain: Domain) -> tuple[list[int], list[int]] | None:
     return order, arrivals_along(order, first, leg)
 
 
-def searched_latency_order(domain: Domain) -> tuple[list[int], list[int]] | None:
+def searched_latency_order(legs: Legs) -> tuple[list[int], list[int]] | None:
     """An order of the destinations with a low mean arrival where the exact search is out of
     reach: the nearest-neighbour order from the start, improved by :func:`local_search` on
     the sum of the arrivals. Its mean arrival is at least the floor's: an upper bound on it.
     None without destinations."""
-    n = len(domain.goals)
-    if n == 0:
+    first, leg = legs
+    if not first:
         return None
-    first, leg = latency_legs(domain)
     order = local_search(nearest_order(first, leg),
                          lambda o: sum(arrivals_along(o, first, leg)))  # fmt: skip
     return order, arrivals_along(order, first, leg)
@@ -266,13 +271,13 @@ def local_search(order: list[int], cost: Callable[[list[int]], Any]) -> list[int
     return order
 
 
-def most_within(domain: Domain, order: list[int], budget: int) -> tuple[int, bool]:
+def most_within(legs: Legs, order: list[int], budget: int) -> tuple[int, bool]:
     """The most destinations a walk from the start along shortest paths reaches within
     ``budget`` moves, and whether that is exact: a dynamic programme over subsets (the
     shortest walk through each subset, ending at each of its destinations) up to
     MAX_FLOOR_GOALS destinations; beyond, the most :func:`local_search` found from ``order``
     (the true most is at least that)."""
-    first, leg = latency_legs(domain)
+    first, leg = legs
     n = len(first)
     if n > MAX_FLOOR_GOALS:
 
@@ -402,16 +407,17 @@ def floor_of(args: Args, spec: MapSpec) -> dict[str, Any]:
     of the destinations a walk reaches within ``reach_of(args)`` moves (:func:`most_within`)."""
     world = place(args, spec).world
     d = world.domain
+    legs = latency_legs(d)  # a BFS from every destination: once for each figure below
     exact = len(d.goals) <= MAX_FLOOR_GOALS
-    got = min_latency_order(d) if exact else searched_latency_order(d)
+    got = min_latency_order(legs) if exact else searched_latency_order(legs)
     if got is None:
         return {"floor": None, "order": None, "floor_on_tasks": None, "floor_exact": None,
                 "floor_reach": None, "floor_reach_exact": None,
                 "nearest_first": None}  # fmt: skip
     order, arrival = got
     index = {g: i for i, g in enumerate(d.goals)}
-    most, most_exact = most_within(d, order, reach_of(args))
-    first, leg = latency_legs(d)
+    most, most_exact = most_within(legs, order, reach_of(args))
+    first, leg = legs
     return {
         "nearest_first": float(np.mean(arrivals_along(nearest_order(first, leg), first, leg))),
         "floor": float(np.mean(arrival)), "order": order, "arrival": arrival,
