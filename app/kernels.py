@@ -46,7 +46,8 @@ GoalTables = tuple[IntArray, float, FloatArray, FloatArray, FloatArray]
 #: fewest moves against the compass on a way to each destination (G, S), the distance to each
 #: landmark (L, S); in a building of several floors each state's floor (S,) and
 #: ``Building.nearest_stops`` (S, 2), (0,) and (0, 2) on one floor; whether the row plus column
-#: difference bounds a walk's moves): ``GuideMap.arrays``
+#: difference bounds a walk's moves; the moves more a quickest walk may take a floor it rides,
+#: 0 on one floor): ``GuideMap.arrays``
 GuideArrays = tuple[
     IntArray,
     IntArray,
@@ -59,6 +60,7 @@ GuideArrays = tuple[
     IntArray,
     IntArray,
     bool,
+    int,
 ]
 #: what a guide batch fills (:func:`guide_stream`): kl, p_normal, advise, count, benefit,
 #: advice (n, A)
@@ -655,7 +657,7 @@ def guide_fill_rows(
     """Fill ``rows`` (2 G, A) with every destination's pi_g(. | s) (``GuideMap.policy``),
     then its c_g(. | s) (``GuideMap.compass``). One loop, the arrays read in it (a compiled
     call per destination that takes arrays costs more than the arithmetic)."""
-    next_state, n_open, _, dist, _, counts, _, _, _, _, _ = gmap
+    next_state, n_open, _, dist, _, counts, _, _, _, _, _, _ = gmap
     n_goals = goals.shape[0]
     n = n_open[s]
     mask = guide_open_moves(next_state, s, k)
@@ -693,7 +695,7 @@ def guide_route_rows(
     ruled out (every one when none is left): the open moves after which the fewest moves it
     would not make by itself remain, its own moves first (at g, or where g cannot be
     reached, the open moves)."""
-    next_state, n_open, _, _, _, _, detour, _, _, _, _ = gmap
+    next_state, n_open, _, _, _, _, detour, _, _, _, _, _ = gmap
     n = n_open[s]
     mask = guide_open_moves(next_state, s, k)
     for g in range(goals.shape[0]):
@@ -1272,7 +1274,8 @@ def guide_purposeful(
     k_run, k_slack, k_long, long_slack, part = (
         params[15], params[16], params[17], params[18], params[20],
     )  # fmt: skip
-    cells, dist, marks, bound = gmap[2], gmap[3], gmap[7], gmap[10]
+    cells, dist, marks, floor = gmap[2], gmap[3], gmap[7], gmap[8]
+    bound, spread = gmap[10], gmap[11]
     m = run[0]
     if m == 0 or (m <= k_run and not fresh):
         return False
@@ -1295,8 +1298,11 @@ def guide_purposeful(
             k, slack = min(k_long, n), long_slack
         else:
             k, slack = n, max(long_slack, n // part)
-        apart = guide_apart(cells, dist, marks, bound, run[2 + (newest - k + size) % size], now)
-        if not k - slack <= apart <= k:
+        u = run[2 + (newest - k + size) % size]
+        apart = guide_apart(cells, dist, marks, bound, u, now)
+        # in a building, a quickest walk may take ``spread`` moves more a floor it rides
+        rides = abs(floor[u] - floor[now]) if floor.shape[0] > 0 else 0
+        if not k - slack - rides * spread <= apart <= k:
             return False
     return True
 

@@ -145,9 +145,11 @@ there (a lost "straight" walker) passes the first test for a while and fails the
 once it comes back. Which walks are shortest paths the map tells without a search per session:
 a walk of k moves from u to v is one when k is at most a lower bound on the moves between them
 (:meth:`GuideMap.apart`: the larger of the row plus column difference and, for each
-destination and each of ``MARKS`` landmarks, the difference of their BFS distances to it); the
-bound can fall short of the true distance, more so over longer walks, hence the slacks.
-Before any advice the walk counts
+destination and each landmark, ``MARKS`` a floor, the difference of their BFS distances to
+it); the bound can fall short of the true distance, more so over longer walks, hence the
+slacks. In a building the quickest way can be more moves than the fewest (a lift farther
+than the stairs, quicker a floor), so each slack grows by ``GuideMap.ride_spread`` moves for
+each floor between the walk's ends. Before any advice the walk counts
 from the first decision (one walking its way from the start is not told otherwise); after a
 piece of advice only once ``PURPOSE_RUN`` moves were walked since, and not while it walks all
 along the way to the target, or while each of its moves since the piece was the one the
@@ -196,8 +198,19 @@ MAX_TOUR = 10
 MAX_GUIDE_CELLS = 16_777_216
 #: cells besides the destinations whose BFS distances tighten :meth:`GuideMap.apart`'s lower
 #: bound (landmarks: each the free cell farthest from the destinations and the ones before;
-#: 8 bytes a cell each)
+#: 8 bytes a cell each), MARKS a floor: a building of F floors has F x MARKS (its walks
+#: between floors are bound well only by landmarks on their floors), as far as MAX_MARK_CELLS
+#: landmarks x states allow (MARKS at least)
 MARKS = 8
+MAX_MARK_CELLS = 4_194_304
+
+
+def marks_for(n_states: int, n_floors: int) -> int:
+    """How many landmarks a guide map of ``n_states`` states on ``n_floors`` floors has
+    (:data:`MARKS` a floor, as far as :data:`MAX_MARK_CELLS` allows; MARKS at least)."""
+    return max(MARKS, min(MARKS * n_floors, MAX_MARK_CELLS // max(n_states, 1)))
+
+
 #: how far the explorer takes advice, per session: a posterior over COMPLY_LEVELS compliance
 #: levels c_j = (j + 1/2) / COMPLY_LEVELS (uniform prior, mean 1/2), its evidence fading by
 #: COMPLY_FADE per piece of advice (about the last 30 pieces count)
@@ -260,6 +273,22 @@ Searches = Callable[
 Distances = Callable[[IntArray, IntArray], IntArray]
 
 
+def floors_of(domain: Domain) -> int:
+    """The floors of ``domain`` (1: a one-floor map)."""
+    return domain.n_floors if isinstance(domain, Building) else 1
+
+
+def ride_spread(building: Building) -> int:
+    """The most moves of time a ride of ``building`` takes a floor less than another (0
+    without rides): the rides' time a floor, largest less least, rounded up."""
+    rides = building.rides
+    if rides.shape[0] == 0:
+        return 0
+    floors = np.abs(building.cells[rides[:, 1], 0] - building.cells[rides[:, 0], 0])
+    per = rides[:, 2] / np.maximum(floors, 1)
+    return math.ceil(float(per.max() - per.min()))
+
+
 def _bfs_each(next_state: IntArray, targets: IntArray) -> IntArray:
     return bfs_distances_each(next_state, [int(t) for t in targets])
 
@@ -306,7 +335,7 @@ class GuideMap:
     goal_of_state: IntArray  # (S,) destination index, -1 elsewhere
     counts: FloatArray  # (G, S * A) experts' goal counts
     goals: tuple[int, ...]
-    marks: IntArray  # (L, S) distances to MARKS landmarks (:func:`landmarks`), -1: none
+    marks: IntArray  # (L, S) distances to the landmarks (:func:`marks_for`, :func:`landmarks`)
     #: a building of several floors (None, None on one floor): each state's floor, and
     #: ``Building.nearest_stops``, the compass's way to another floor (:meth:`compass_moves`)
     floor: IntArray | None = None
@@ -314,6 +343,10 @@ class GuideMap:
     #: whether a walk's row plus column difference bounds its moves (:meth:`apart`): on one
     #: floor, and in a building whose rides keep row and column
     cells_bound: bool = True
+    #: in a building, the most moves of time a ride takes a floor less than another ride
+    #: (0 on one floor): a quickest walk may take up to that many moves more than the fewest
+    #: for each floor it rides (:attr:`GuideAdvisor.purposeful`)
+    ride_spread: int = 0
 
     @classmethod
     def of(
@@ -367,10 +400,13 @@ class GuideMap:
             of_state,
             np.zeros((len(goals), s * domain.n_actions)),
             goals,
-            landmarks(domain.next_state, dist, MARKS, distances or _bfs_each),
+            landmarks(
+                domain.next_state, dist, marks_for(s, floors_of(domain)), distances or _bfs_each
+            ),
             floor,
             stops,
             domain.rides_keep_cells if isinstance(domain, Building) else True,
+            ride_spread(domain) if isinstance(domain, Building) else 0,
         )
         return plain if goal_priors is None else plain.replace_counts(goal_priors)
 
@@ -391,14 +427,14 @@ class GuideMap:
         self,
     ) -> tuple[
         IntArray, IntArray, IntArray, IntArray, IntArray, FloatArray, IntArray, IntArray,
-        IntArray, IntArray, bool,
+        IntArray, IntArray, bool, int,
     ]:  # fmt: skip
         """As app/kernels.py reads it (``GuideArrays``)."""
         floor = _NO_FLOOR if self.floor is None else self.floor
         stops = _NO_STOPS if self.stops is None else self.stops
         return (
             self.next_state, self.n_open, self.cells, self.dist, self.goal_of_state, self.counts,
-            self.detour, self.marks, floor, stops, self.cells_bound,
+            self.detour, self.marks, floor, stops, self.cells_bound, self.ride_spread,
         )  # fmt: skip
 
     @property
@@ -508,6 +544,10 @@ class GuideMap:
                 if du >= 0 and dv >= 0 and abs(du - dv) > far:
                     far = abs(du - dv)
         return far
+
+    def floors_apart(self, u: int, v: int) -> int:
+        """The floors between ``u`` and ``v`` (0 on one floor)."""
+        return 0 if self.floor is None else abs(int(self.floor[u]) - int(self.floor[v]))
 
     def drift(self, t: int, s: int) -> float:
         """delta_t(s): the mean change of the BFS distance to destination t over the open
@@ -807,7 +847,12 @@ class GuideAdvisor(Advisor):
             (min(PURPOSE_LONG, n), PURPOSE_LONG_SLACK),
             (n, max(PURPOSE_LONG_SLACK, n // PURPOSE_WALK_PART)),
         )
-        return all(k - slack <= g.apart(run[-1 - k], run[-1]) <= k for k, slack in tests)
+        for k, slack in tests:
+            u, v = run[-1 - k], run[-1]
+            # in a building, a quickest walk may take ``ride_spread`` moves more a floor it rides
+            if not k - slack - g.floors_apart(u, v) * g.ride_spread <= g.apart(u, v) <= k:
+                return False
+        return True
 
     @property
     def target(self) -> int:

@@ -320,6 +320,20 @@ def test_the_memory_estimate_covers_what_is_built(
     assert built >= 0.9 * estimate
 
 
+def test_the_memory_estimate_of_a_building_s_guide_map_counts_its_landmarks() -> None:
+    """A building's guide map holds MARKS landmarks a floor (``marks_for``): the estimate
+    counts them, and the floors and nearest stops."""
+    tower = generate_floors(32, 32, 3, np.random.default_rng(1), purpose="hospital", n_goals=2)
+    gmap = GuideMap.of(tower)
+    assert gmap.marks.shape[0] == 3 * guide_module.MARKS
+    assert gmap.floor is not None and gmap.stops is not None
+    kept = [gmap.dist, gmap.detour, gmap.marks, gmap.n_open, gmap.goal_of_state, gmap.floor,
+            gmap.stops, tower.open_moves]  # fmt: skip
+    built = sum(a.nbytes for a in kept)
+    estimate = preparation_bytes(len(tower.goals), tower.n_states, [Need.GUIDE_MAP], 6, 3)
+    assert 0.9 * estimate <= built <= estimate
+
+
 SEARCHED = st.one_of(
     st.builds(
         lambda rows, cols, seed, braid: generate_maze(

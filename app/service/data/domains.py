@@ -27,7 +27,7 @@ from datetime import datetime
 import numpy as np
 
 from app import kernels, strategies
-from app.advice.guide import MARKS, GuideMap
+from app.advice.guide import GuideMap, floors_of, marks_for
 from app.advice.models import AdviceTables
 from app.advice.priors import ActionPrior, GoalPriors
 from app.arrays import IntArray
@@ -131,20 +131,21 @@ def needed() -> frozenset[Need]:
 
 
 def preparation_bytes(
-    n_goals: int, n_states: int, needs: Iterable[Need], n_actions: int = 4
+    n_goals: int, n_states: int, needs: Iterable[Need], n_actions: int = 4, n_floors: int = 1
 ) -> int:
     """Bytes what ``needs`` keep of a domain of ``n_goals`` destinations, ``n_states`` free
-    cells and ``n_actions`` actions (A): the goal priors' counts and each goal's log theta
-    (G x S x A float64 each), the counts of unknown goal (S x A) and the goal of each state
-    (S); a guide map's distances and detours (G x S int64 each), its landmarks' distances
-    (MARKS x S int64), its open moves (S int64, S x A booleans) and the destination of each
-    state (S), on a map of several floors each state's floor and nearest stops (3 S int64);
-    its counts are the goal priors' own."""
+    cells, ``n_actions`` actions (A) and ``n_floors`` floors: the goal priors' counts and
+    each goal's log theta (G x S x A float64 each), the counts of unknown goal (S x A) and
+    the goal of each state (S); a guide map's distances and detours (G x S int64 each), its
+    landmarks' distances (``marks_for`` x S int64), its open moves (S int64, S x A booleans)
+    and the destination of each state (S), on a map of several floors each state's floor and
+    nearest stops (3 S int64); its counts are the goal priors' own."""
     gs, s, a = n_goals * n_states, n_states, n_actions
     floors = 24 * s if a != 4 else 0
+    marks = marks_for(n_states, n_floors)
     sizes = {
         Need.GOAL_PRIORS: 16 * a * gs + (8 * a + 8) * s,
-        Need.GUIDE_MAP: 16 * gs + (16 + a + 8 * MARKS) * s + floors,
+        Need.GUIDE_MAP: 16 * gs + (16 + a + 8 * marks) * s + floors,
     }
     return sum(sizes[n] for n in set(needs))
 
@@ -319,7 +320,9 @@ class DomainCatalog:
         """Why what ``needs`` keep of ``grid`` is more than this catalog allows a domain
         (None: it is not)."""
         needs = set(needs)
-        size = preparation_bytes(len(grid.goals), grid.n_states, needs, grid.n_actions)
+        size = preparation_bytes(
+            len(grid.goals), grid.n_states, needs, grid.n_actions, floors_of(grid)
+        )
         if not needs or self.max_memory is None or size <= self.max_memory:
             return None
         what = ", ".join(sorted(n.value for n in needs))
