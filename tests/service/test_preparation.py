@@ -361,10 +361,11 @@ def test_the_compiled_searches_are_the_numpy_ones(rows: list[str], data: st.Data
     assert np.array_equal(detour, compass_detours_each(grid.next_state, grid.cells, targets))
     compiled = GuideMap.of(grid, searches=domains_module.compiled_searches)
     plain = GuideMap.of(grid)
-    for a, b in zip(compiled.arrays[:-1], plain.arrays[:-1], strict=True):  # the arrays
+    for a, b in zip(compiled.arrays[:-2], plain.arrays[:-2], strict=True):  # the arrays
         assert isinstance(a, np.ndarray) and isinstance(b, np.ndarray)
         assert a.dtype == b.dtype and np.array_equal(a, b)
     assert compiled.cells_bound and plain.cells_bound
+    assert compiled.ride_spread == plain.ride_spread == 0  # one floor
 
 
 BUILDINGS = st.one_of(
@@ -403,6 +404,7 @@ def test_the_compiled_searches_of_a_building_are_the_numpy_ones(
         if isinstance(a, np.ndarray):
             assert isinstance(b, np.ndarray) and a.dtype == b.dtype and np.array_equal(a, b)
     assert compiled.cells_bound == plain.cells_bound
+    assert compiled.ride_spread == plain.ride_spread
 
 
 # ---- workers sharing Redis: the other worker prepares when it reads the change ----------------
