@@ -28,7 +28,12 @@ many moves it spent so; the paired 95% interval of each change against no advice
 the floor: the mean arrival, over destinations drawn uniformly, of a walker led at every step
 along the order of destinations that minimises that mean (no advisor that does not know the
 goal can do better), and each strategy's mean arrival against it (destination-bound visitors;
-a task that did not arrive counts as --steps).
+a task that did not arrive counts as --steps). Exact up to 12 destinations (a dynamic
+programme over subsets); beyond, bounded from above by the order a local search finds
+(marked ``≤``). Beside it the mean arrival nearest first (guide's order beyond 10
+destinations) and the largest share of the destinations a walk from the start reaches within
+the moves a drift-free walker can be led in a task (--steps at 25 pieces per 100; exact up to
+12 destinations, beyond the most a local search found, marked ``≥``).
 
     python -m app experiment visitors --mazes maps/brc202d.txt --visitors "random p=0.5"
 """

@@ -20,6 +20,7 @@ from typing import Any
 import pytest
 from fastapi.testclient import TestClient
 
+from app.advice.advisor import Advisor
 from app.service.live import codec
 from app.service.main import create_app
 from app.service.state import ServiceState
@@ -45,6 +46,13 @@ def strategy(s: dict[str, Any]) -> str:
 def continued(service: ServiceState, i: int, s: dict[str, Any]) -> list[dict[str, Any]]:
     """Session ``i``'s answers to its further events by this version's core advisor, going on
     from the session as the previous version kept it in Redis."""
+    return going_on(service, i, s)[0]
+
+
+def going_on(
+    service: ServiceState, i: int, s: dict[str, Any]
+) -> tuple[list[dict[str, Any]], Advisor]:
+    """:func:`continued`, and the core advisor after those events."""
     domain = service.catalog.get(s["domain"])
     raw = (PREVIOUS / "redis" / f"{i}.session").read_bytes()
     session = codec.load(codec.unpacked(raw), domain, 8)
@@ -54,7 +62,7 @@ def continued(service: ServiceState, i: int, s: dict[str, Any]) -> list[dict[str
         a = "NESW".index(event["action"])
         d = session.advisor.observe(here, a, int(grid.next_state[here, a]))
         out.append(json.loads(json.dumps(decision_dict(d, grid))))
-    return out
+    return out, session.advisor
 
 
 @pytest.fixture
@@ -82,7 +90,7 @@ def test_the_previous_version_s_database_and_kept_sessions_go_on_as_they_would_h
     assert {strategy(s) for s in EXPECTED["sessions"]} - set(CHANGED)  # some did not change
     for i, s in enumerate(EXPECTED["sessions"]):
         changed = strategy(s) in CHANGED
-        want = continued(service, i, s) if changed else s["answers"]
+        want, core = going_on(service, i, s) if changed else (s["answers"], None)
         auth = {"Authorization": f"Bearer {s['token']}"}
         r = client.post(f"/sessions/{s['id']}/events", json=s["more"], headers=auth)
         assert r.status_code == 200, r.text
@@ -92,6 +100,12 @@ def test_the_previous_version_s_database_and_kept_sessions_go_on_as_they_would_h
         summary = client.get(f"/sessions/{s['id']}", headers=auth).json()
         keys = KEPT if changed else STEADY
         assert {k: summary[k] for k in keys} == {k: s["summary"][k] for k in keys}
+        if core is not None:  # the rest of a changed one's summary: the core advisor's
+            cost = want[-1]["cost"]
+            assert summary["advice_count"] == core.advice_count == cost["advice_count"]
+            assert summary["benefit"] == core.benefit == cost["benefit"]
+            assert summary["total_cost"] == cost["total"]
+            assert summary["p_normal"] == want[-1]["p_normal"]
 
 
 def test_sessions_the_previous_version_kept_in_redis_read_as_they_were(
