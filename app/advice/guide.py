@@ -184,7 +184,7 @@ from app.advice.models import AdviceTables, kl_scale
 from app.advice.params import StrategyParams
 from app.advice.priors import GoalPriors
 from app.arrays import FloatArray, IntArray
-from app.domain.building import Building, Domain
+from app.domain.building import Building, Domain, n_floors
 from app.domain.grid import N_ACTIONS, bfs_distances_each, compass_detours_each
 
 #: probability mass the open-moves lost model gives to bumping into walls
@@ -271,11 +271,6 @@ Searches = Callable[
 ]
 #: (next_state (S, 4), targets) -> the BFS distance from every state to each target (k, S)
 Distances = Callable[[IntArray, IntArray], IntArray]
-
-
-def floors_of(domain: Domain) -> int:
-    """The floors of ``domain`` (1: a one-floor map)."""
-    return domain.n_floors if isinstance(domain, Building) else 1
 
 
 def ride_spread(building: Building) -> int:
@@ -387,10 +382,14 @@ class GuideMap:
         else:
             dist = domain.goal_distances
             detour = compass_detours_each(domain.next_state, domain.cells, goals)
-        floor = stops = None  # writeable, as a one-floor map's arrays are (numba compiles
-        if isinstance(domain, Building):  # read-only arrays anew)
+        # a building's floors and stops writeable, as a one-floor map's arrays are (numba
+        # compiles read-only arrays anew)
+        floor = stops = None
+        keep, spread = True, 0
+        if isinstance(domain, Building):
             floor = np.require(domain.cells[:, 0], requirements=["C", "W"])
             stops = np.require(domain.nearest_stops, requirements=["C", "W"])
+            keep, spread = domain.rides_keep_cells, ride_spread(domain)
         plain = cls(
             np.ascontiguousarray(domain.next_state, dtype=np.int64),
             np.ascontiguousarray(domain.open_moves.sum(axis=1), dtype=np.int64),
@@ -401,12 +400,12 @@ class GuideMap:
             np.zeros((len(goals), s * domain.n_actions)),
             goals,
             landmarks(
-                domain.next_state, dist, marks_for(s, floors_of(domain)), distances or _bfs_each
+                domain.next_state, dist, marks_for(s, n_floors(domain)), distances or _bfs_each
             ),
             floor,
             stops,
-            domain.rides_keep_cells if isinstance(domain, Building) else True,
-            ride_spread(domain) if isinstance(domain, Building) else 0,
+            keep,
+            spread,
         )
         return plain if goal_priors is None else plain.replace_counts(goal_priors)
 

@@ -409,6 +409,11 @@ def time_distances(next_state: IntArray, durations: IntArray, sources: Sequence[
 Domain = GridDomain | Building
 
 
+def n_floors(domain: Domain) -> int:
+    """The floors of ``domain`` (1: a one-floor map)."""
+    return domain.n_floors if isinstance(domain, Building) else 1
+
+
 def load_map(text: str, name: str = "maze") -> GridDomain | Building:
     """A map file's text as its domain: a :class:`Building` when it has ``floor:`` lines,
     else a :class:`~app.domain.grid.GridDomain`; :class:`MapError` names where it is wrong."""

@@ -33,7 +33,7 @@ from typing import Any, Literal
 import numpy as np
 
 from app.arrays import IntArray
-from app.domain.building import Building, Domain, load_map_file
+from app.domain.building import Building, Domain, load_map_file, n_floors
 from app.domain.floorplans import generate_floors
 from app.domain.generate import generate_building_domain
 from app.domain.grid import GridDomain, bfs_distances_each, compass_detours_each
@@ -174,10 +174,6 @@ def imdf_hospital() -> Building:
     if made is None:  # the sample's levels are joined by its lifts and stairs
         raise ValueError("the IMDF sample venue imported as one floor")
     return made
-
-
-def n_floors(domain: Domain) -> int:
-    return domain.n_floors if isinstance(domain, Building) else 1
 
 
 def goal_moves(domain: Domain) -> IntArray:

@@ -27,11 +27,11 @@ from datetime import datetime
 import numpy as np
 
 from app import kernels, strategies
-from app.advice.guide import GuideMap, floors_of, marks_for
+from app.advice.guide import GuideMap, marks_for
 from app.advice.models import AdviceTables
 from app.advice.priors import ActionPrior, GoalPriors
 from app.arrays import IntArray
-from app.domain.building import Domain, load_map
+from app.domain.building import Domain, load_map, n_floors
 from app.domain.grid import Frame, GridDomain, MapError, NamedCell, name_goals
 from app.service.data.store import POOLED, DomainRecord, Store, TableCounts, Trajectory
 from app.strategies import DomainData, Need
@@ -321,7 +321,7 @@ class DomainCatalog:
         (None: it is not)."""
         needs = set(needs)
         size = preparation_bytes(
-            len(grid.goals), grid.n_states, needs, grid.n_actions, floors_of(grid)
+            len(grid.goals), grid.n_states, needs, grid.n_actions, n_floors(grid)
         )
         if not needs or self.max_memory is None or size <= self.max_memory:
             return None
