@@ -44,10 +44,10 @@ GoalTables = tuple[IntArray, float, FloatArray, FloatArray, FloatArray]
 #: (next_state (S, A), open moves per state (S,), cells (S, 2: row, column), distance to each
 #: destination (G, S), destination of each state (S,), the experts' goal counts (G, S * A), the
 #: fewest moves against the compass on a way to each destination (G, S), the distance to each
-#: landmark (L, S); in a building of several floors each state's floor (S,) and
-#: ``Building.nearest_stops`` (S, 2), (0,) and (0, 2) on one floor; whether the row plus column
-#: difference bounds a walk's moves; the moves more a quickest walk may take a floor it rides,
-#: 0 on one floor): ``GuideMap.arrays``
+#: landmark (L, S); in a building of several floors each state's floor (S,), (0,) on one floor;
+#: the compass moves of every state and destination (S, G: ``compass_table``); whether the row
+#: plus column difference bounds a walk's moves; the moves more a quickest walk may take a floor
+#: it rides, 0 on one floor): ``GuideMap.arrays``
 GuideArrays = tuple[
     IntArray,
     IntArray,
@@ -58,7 +58,7 @@ GuideArrays = tuple[
     IntArray,
     IntArray,
     IntArray,
-    IntArray,
+    ByteArray,
     bool,
     int,
 ]
@@ -631,23 +631,11 @@ def guide_own_moves(dr: int, dc: int, mask: int) -> tuple[int, int]:  # pragma: 
 
 
 @njit(cache=True, inline="always")
-def guide_compass(
-    gmap: GuideArrays, goal: int, s: int, mask: int, k: int
-) -> tuple[int, int]:  # pragma: no cover - compiled
-    """``GuideMap.compass_moves`` of someone at ``s`` heading for ``goal``: up to two moves
-    (-1: none); in a building (``k`` > 4 actions), on another floor than the goal's, towards
-    the nearest stop with a way towards the goal's floor, and at it the ride
-    (``Building.compass_aims``). Compiled with the constant 4, the floors' branch is gone."""
-    cells, floor, stops = gmap[2], gmap[8], gmap[9]
-    aim = goal
-    if k > 4 and floor.shape[0] > 0 and floor[s] != floor[goal]:
-        down = 0 if floor[goal] > floor[s] else 1
-        aim = stops[s, down]
-        if aim == s:
-            return 4 + down, -1  # U or D
-        if aim < 0:
-            return -1, -1
-    return guide_own_moves(cells[aim, 0] - cells[s, 0], cells[aim, 1] - cells[s, 1], mask)
+def guide_compass(table: ByteArray, s: int, g: int) -> tuple[int, int]:  # pragma: no cover
+    """``GuideMap.compass_moves`` of someone at ``s`` heading for destination ``g``, as
+    ``compass_table`` keeps them: up to two moves (-1: none)."""
+    c = int(table[s, g])
+    return (c & 15) - 1, (c >> 4) - 1
 
 
 @njit(cache=True, inline="always")
@@ -657,7 +645,7 @@ def guide_fill_rows(
     """Fill ``rows`` (2 G, A) with every destination's pi_g(. | s) (``GuideMap.policy``),
     then its c_g(. | s) (``GuideMap.compass``). One loop, the arrays read in it (a compiled
     call per destination that takes arrays costs more than the arithmetic)."""
-    next_state, n_open, _, dist, _, counts, _, _, _, _, _, _ = gmap
+    next_state, n_open, _, dist, _, counts, _, _, _, table, _, _ = gmap
     n_goals = goals.shape[0]
     n = n_open[s]
     mask = guide_open_moves(next_state, s, k)
@@ -677,7 +665,7 @@ def guide_fill_rows(
             for a in range(k):
                 rows[g, a] = guide_open_share(n, mask, a, k)
         # c_g: uniform over its own moves, the open moves where it has none
-        m0, m1 = guide_compass(gmap, goals[g], s, mask, k)
+        m0, m1 = guide_compass(table, s, g)
         r = n_goals + g
         for a in range(k):
             if m0 < 0:
@@ -695,7 +683,7 @@ def guide_route_rows(
     ruled out (every one when none is left): the open moves after which the fewest moves it
     would not make by itself remain, its own moves first (at g, or where g cannot be
     reached, the open moves)."""
-    next_state, n_open, _, _, _, _, detour, _, _, _, _, _ = gmap
+    next_state, n_open, _, _, _, _, detour, _, _, table, _, _ = gmap
     n = n_open[s]
     mask = guide_open_moves(next_state, s, k)
     for g in range(goals.shape[0]):
@@ -706,7 +694,7 @@ def guide_route_rows(
             for a in range(k):
                 pcs[g, a] = guide_open_share(n, mask, a, k)
             continue
-        m0, m1 = guide_compass(gmap, goal, s, mask, k)
+        m0, m1 = guide_compass(table, s, g)
         best = -1
         for a in range(k):  # pcs[g, a]: moves it would not make, counting this one (-1: shut)
             pcs[g, a] = -1.0
@@ -1401,8 +1389,8 @@ def guide_stream_four(
     moves: tuple[IntArray, IntArray, IntArray], out: GuideOut,
 ) -> tuple[int, int, int, int, int, float]:  # pragma: no cover - compiled  # fmt: skip
     """:func:`guide_stream` compiled with the constant 4, for a domain of one floor: its
-    loops over actions unrolled and the floors' branches gone (with the number read from the
-    map, a one-floor decision cost 1.3-1.7 times as much: docs/PERFORMANCE.md). A domain has
+    loops over actions unrolled (with the number read from the map, a one-floor decision cost
+    1.3-1.7 times as much: docs/PERFORMANCE.md). A domain has
     four actions or, in a building of several floors, six (:func:`guide_stream_six`)."""
     return guide_stream(
         gmap, params, goals, ll, alive, doubt, target, last, heading, came, advice, comply, run,
@@ -1455,6 +1443,47 @@ def guide_distances(next_state: IntArray, targets: IntArray) -> IntArray:  # pra
     return out
 
 
+@njit(cache=True, inline="always")
+def guide_compass_at(
+    mask: int, cells: IntArray, stops: IntArray, at: int, u: int, t: int
+) -> tuple[int, int]:  # pragma: no cover - compiled
+    """The compass moves of someone at ``u`` heading for ``t`` (``GuideMap.compass_moves``):
+    up to two moves (-1: none); ``mask``: u's open moves (:func:`guide_open_moves` of the
+    four on a floor). ``at``: 0 on one floor (``cells`` (S, 2)), 1 in a building (``cells``
+    (S, 3), ``stops`` ``Building.nearest_stops``): on another floor than t's, towards the
+    nearest stop with a way towards t's floor, and there the ride (``U`` up, ``D`` down);
+    none where u's floor has no such stop."""
+    aim = t
+    if at == 1 and cells[u, 0] != cells[t, 0]:
+        up = 0 if cells[t, 0] > cells[u, 0] else 1
+        aim = stops[u, up]
+        if aim == u:
+            return 4 + up, -1  # at the stop: the ride
+    if aim < 0 or aim == u:
+        return -1, -1
+    dr, dc = cells[aim, at] - cells[u, at], cells[aim, at + 1] - cells[u, at + 1]
+    return guide_own_moves(dr, dc, mask)
+
+
+@njit(cache=True, nogil=True)
+def guide_compass_table(
+    next_state: IntArray, cells: IntArray, targets: IntArray, stops: IntArray
+) -> ByteArray:  # pragma: no cover - compiled
+    """``guide.compass_table``: the compass moves of every state (rows) and target (columns)
+    as one byte each (the first move + 1 in the low four bits, the second + 1 in the high
+    four; 0: none), what :func:`guide_compass` reads; ``cells`` and ``stops`` as
+    :func:`guide_detours` takes them."""
+    n = next_state.shape[0]
+    at = 0 if stops.shape[0] == 0 else 1
+    out = np.zeros((n, targets.shape[0]), dtype=np.uint8)
+    for u in range(n):
+        mask = guide_open_moves(next_state, u, 4)
+        for i in range(targets.shape[0]):
+            m0, m1 = guide_compass_at(mask, cells, stops, at, u, targets[i])
+            out[u, i] = (m0 + 1) | ((m1 + 1) << 4)
+    return out
+
+
 @njit(cache=True, nogil=True)
 def guide_detours(
     next_state: IntArray, cells: IntArray, targets: IntArray, stops: IntArray
@@ -1496,16 +1525,8 @@ def guide_detours(
                 if u == v or done[u]:
                     continue
                 back = (a + 2) % 4 if a < 4 else 9 - a  # u's move into v (U and D: 4, 5)
-                m0, m1 = -1, -1
-                aim = t
-                if at == 1 and cells[u, 0] != cells[t, 0]:
-                    up = 0 if cells[t, 0] > cells[u, 0] else 1
-                    aim = stops[u, up]
-                    if aim == u:
-                        m0 = 4 + up  # at the stop: the ride
-                if aim >= 0 and aim != u:
-                    dr, dc = cells[aim, at] - cells[u, at], cells[aim, at + 1] - cells[u, at + 1]
-                    m0, m1 = guide_own_moves(dr, dc, guide_open_moves(next_state, u, 4))
+                mask = guide_open_moves(next_state, u, 4)
+                m0, m1 = guide_compass_at(mask, cells, stops, at, u, t)
                 cost = 0 if (m0 == back or m1 == back) else 1
                 if best[v] + cost < best[u]:
                     best[u] = best[v] + cost

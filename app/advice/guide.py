@@ -50,7 +50,8 @@ ride keeps it), so the wall followers WL and WR never ride; C_g is the bug's rul
 floor, and there the ride), and its detours the same search over it. :meth:`GuideMap.apart`
 adds the row plus column difference only where rides keep row and column. The value is in
 four actions' units, as the paper's rule's KL is (times log 4 / log A, ``kl_scale``: a kappa
-means the same on one floor and on several). The compiled kernels read the floors and stops in
+means the same on one floor and on several). The compiled kernels read the floors, and the
+compass moves of every cell and destination worked out once (:func:`compass_table`), in
 :attr:`GuideMap.arrays` and make the same decisions; the service searches a guide map, a
 building's too, with compiled searches that do not hold the GIL (``kernels.guide_distances``,
 ``guide_detours``, one floor or several), in the worker thread of a PUT.
@@ -183,7 +184,7 @@ from app.advice.advisor import DEFAULT_KAPPA, DEFAULT_WINDOW, Advisor, Decision
 from app.advice.models import AdviceTables, kl_scale
 from app.advice.params import StrategyParams
 from app.advice.priors import GoalPriors
-from app.arrays import FloatArray, IntArray
+from app.arrays import ByteArray, FloatArray, IntArray
 from app.domain.building import Building, Domain, n_floors
 from app.domain.grid import N_ACTIONS, bfs_distances_each, compass_detours_each
 
@@ -265,9 +266,10 @@ SET_ASIDE, BROUGHT_BACK = 1, 2
 
 
 #: (next_state (S, A), cells (S, 2) or (S, 3), destinations, a building's nearest_stops or
-#: None) -> (distances (G, S), detours (G, S))
+#: None) -> (distances (G, S), detours (G, S), compass moves (S, G): :func:`compass_table`)
 Searches = Callable[
-    [IntArray, IntArray, tuple[int, ...], IntArray | None], tuple[IntArray, IntArray]
+    [IntArray, IntArray, tuple[int, ...], IntArray | None],
+    tuple[IntArray, IntArray, ByteArray],
 ]
 #: (next_state (S, 4), targets) -> the BFS distance from every state to each target (k, S)
 Distances = Callable[[IntArray, IntArray], IntArray]
@@ -308,9 +310,45 @@ def landmarks(next_state: IntArray, dist: IntArray, n: int, distances: Distances
     return np.ascontiguousarray(np.array(out, dtype=np.int64).reshape(shape))
 
 
-#: a one-floor map's floors and stops, as app/kernels.py reads them (none)
+def compass_table(
+    next_state: IntArray, cells: IntArray, goals: tuple[int, ...], floor: IntArray | None,
+    stops: IntArray | None,
+) -> ByteArray:  # fmt: skip
+    """:meth:`GuideMap.compass_moves` of every state (rows) and destination (columns), each
+    as one byte: the first move + 1 in its low four bits, the second + 1 in its high four (0:
+    none), what the compiled decisions read instead of working the compass out at every
+    decision. ``cells`` (S, 2): row and column; ``floor`` and ``stops``: a building's
+    (:attr:`GuideMap.floor`, :attr:`GuideMap.stops`), None on one floor."""
+    n = next_state.shape[0]
+    states = np.arange(n)
+    out = np.zeros((n, len(goals)), dtype=np.uint8)
+    for g, goal in enumerate(goals):
+        aim = np.full(n, goal, dtype=np.int64)
+        ride = np.full(n, -1, dtype=np.int64)  # U (4) or D (5) at a stop, -1 elsewhere
+        if floor is not None and stops is not None:
+            away = floor != floor[goal]
+            down = (floor[goal] < floor).astype(np.int64)
+            aim = np.where(away, stops[states, down], aim)
+            ride = np.where(away & (aim == states), 4 + down, -1)
+        dr = cells[np.maximum(aim, 0), 0] - cells[:, 0]
+        dc = cells[np.maximum(aim, 0), 1] - cells[:, 1]
+        vert = np.where(dr < 0, 0, 2)
+        horiz = np.where(dc > 0, 1, 3)
+        v_ok = (dr != 0) & (next_state[states, vert] != states)
+        h_ok = (dc != 0) & (next_state[states, horiz] != states)
+        tie, wide = np.abs(dr) == np.abs(dc), np.abs(dr) > np.abs(dc)
+        v_first = np.where(v_ok, vert, np.where(h_ok, horiz, -1))
+        h_first = np.where(h_ok, horiz, np.where(v_ok, vert, -1))
+        first = np.where(tie | wide, v_first, h_first)
+        second = np.where(tie & v_ok & h_ok, horiz, -1)
+        first = np.where(ride >= 0, ride, np.where(aim < 0, -1, first))
+        second = np.where((ride >= 0) | (aim < 0), -1, second)
+        out[:, g] = (first + 1) | ((second + 1) << 4)
+    return out
+
+
+#: a one-floor map's floors, as app/kernels.py reads them (none)
 _NO_FLOOR = np.zeros(0, dtype=np.int64)
-_NO_STOPS = np.zeros((0, 2), dtype=np.int64)
 
 
 class GuideError(ValueError):
@@ -331,6 +369,9 @@ class GuideMap:
     counts: FloatArray  # (G, S * A) experts' goal counts
     goals: tuple[int, ...]
     marks: IntArray  # (L, S) distances to the landmarks (:func:`marks_for`, :func:`landmarks`)
+    #: (S, G) :meth:`compass_moves` of every state and destination, as the kernels read them
+    #: (:func:`compass_table`)
+    compass_of: ByteArray
     #: a building of several floors (None, None on one floor): each state's floor, and
     #: ``Building.nearest_stops``, the compass's way to another floor (:meth:`compass_moves`)
     floor: IntArray | None = None
@@ -350,11 +391,12 @@ class GuideMap:
     ) -> GuideMap:  # fmt: skip
         """``domain``'s guide map (:class:`GuideError` first if it cannot have one), with the
         experts' counts of ``goal_priors``. ``searches(next_state, cells, goals, stops)``:
-        the distances and detours of every destination, (G, S) each, by another
-        implementation of the same searches (the service's compiled ones; ``stops`` is a
-        building's ``nearest_stops``, None on one floor); by default
-        :attr:`GridDomain.goal_distances` and :func:`compass_detours_each` (in a building,
-        :func:`bfs_distances_each` and the building's compass). ``distances``:
+        the distances and detours of every destination, (G, S) each, and the compass moves
+        (S, G), by another implementation of the same searches (the service's compiled ones;
+        ``stops`` is a building's ``nearest_stops``, None on one floor); by default
+        :attr:`GridDomain.goal_distances`, :func:`compass_detours_each` (in a building,
+        :func:`bfs_distances_each` and the building's compass) and :func:`compass_table`.
+        ``distances``:
         the searches of the landmarks (:func:`landmarks`), by default
         :func:`~app.domain.grid.bfs_distances_each`."""
         goals = tuple(int(g) for g in domain.goals)
@@ -371,9 +413,11 @@ class GuideMap:
         of_state[list(goals)] = np.arange(len(goals))
         if searches is not None:
             nearest = domain.nearest_stops if isinstance(domain, Building) else None
-            dist, detour = searches(domain.next_state, domain.cells, goals, nearest)
+            dist, detour, compass = searches(domain.next_state, domain.cells, goals, nearest)
             if dist.shape != (len(goals), s) or detour.shape != (len(goals), s):
                 raise ValueError("searches must give (destinations, states) arrays")
+            if compass.shape != (s, len(goals)) or compass.dtype != np.uint8:
+                raise ValueError("searches must give (states, destinations) compass bytes")
         elif isinstance(domain, Building):
             dist = bfs_distances_each(domain.next_state, goals)
             detour = compass_detours_each(
@@ -390,10 +434,14 @@ class GuideMap:
             floor = np.require(domain.cells[:, 0], requirements=["C", "W"])
             stops = np.require(domain.nearest_stops, requirements=["C", "W"])
             keep, spread = domain.rides_keep_cells, ride_spread(domain)
+        next_state = np.ascontiguousarray(domain.next_state, dtype=np.int64)
+        cells = np.ascontiguousarray(domain.cells[:, -2:], dtype=np.int64)  # row, column
+        if searches is None:
+            compass = compass_table(next_state, cells, goals, floor, stops)
         plain = cls(
-            np.ascontiguousarray(domain.next_state, dtype=np.int64),
+            next_state,
             np.ascontiguousarray(domain.open_moves.sum(axis=1), dtype=np.int64),
-            np.ascontiguousarray(domain.cells[:, -2:], dtype=np.int64),  # row, column
+            cells,
             np.ascontiguousarray(dist, dtype=np.int64),
             np.ascontiguousarray(detour, dtype=np.int64),
             of_state,
@@ -402,6 +450,7 @@ class GuideMap:
             landmarks(
                 domain.next_state, dist, marks_for(s, n_floors(domain)), distances or _bfs_each
             ),
+            np.ascontiguousarray(compass),
             floor,
             stops,
             keep,
@@ -426,14 +475,13 @@ class GuideMap:
         self,
     ) -> tuple[
         IntArray, IntArray, IntArray, IntArray, IntArray, FloatArray, IntArray, IntArray,
-        IntArray, IntArray, bool, int,
+        IntArray, ByteArray, bool, int,
     ]:  # fmt: skip
         """As app/kernels.py reads it (``GuideArrays``)."""
         floor = _NO_FLOOR if self.floor is None else self.floor
-        stops = _NO_STOPS if self.stops is None else self.stops
         return (
             self.next_state, self.n_open, self.cells, self.dist, self.goal_of_state, self.counts,
-            self.detour, self.marks, floor, stops, self.cells_bound, self.ride_spread,
+            self.detour, self.marks, floor, self.compass_of, self.cells_bound, self.ride_spread,
         )  # fmt: skip
 
     @property

@@ -46,7 +46,7 @@ _NO_GUIDE: kernels.GuideArrays = (
     np.zeros((0, 4), dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, 2), dtype=np.int64),
     np.zeros((0, 0), dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, 0)),
     np.zeros((0, 0), dtype=np.int64), np.zeros((0, 0), dtype=np.int64),
-    np.zeros(0, dtype=np.int64), np.zeros((0, 2), dtype=np.int64), True, 0,
+    np.zeros(0, dtype=np.int64), np.zeros((0, 0), dtype=np.uint8), True, 0,
 )  # fmt: skip
 _NO_GOALS = np.zeros(0, dtype=np.int64)
 _NO_OPTIMAL = np.zeros((0, 4), dtype=np.bool_)  # read by the optimal explorer only

@@ -23,6 +23,8 @@ from app.agents.experts import train_goal_priors
 from app.agents.explorers import FIXED_EXPLORERS, make_explorer
 from app.agents.qlearning import QLearningExplorer
 from app.agents.simulate import FixedRun, QParams, Simulator
+from app.domain.building import Domain
+from app.domain.floorplans import generate_floors
 from app.domain.generate import generate_building_domain, generate_domain
 from app.domain.grid import GridDomain, compass_moves
 from app.strategies import make_advisor
@@ -472,6 +474,30 @@ def test_landmarks_are_the_farthest_cells_one_at_a_time(seed: int, building: boo
         rows.append(row)
     if got.shape[0] < n:  # no cell is farther than 0 from them all
         assert all(any(r[s] == 0 for r in rows) for s in range(d.n_states) if dist[:, s].max() >= 0)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 10_000), st.sampled_from(["maze", "building", "floors"]))
+def test_the_compass_table_is_the_compass_of_every_cell_and_destination(
+    seed: int, kind: str
+) -> None:
+    """``compass_table``, what the compiled decisions read: for every state and destination
+    the moves of ``GuideMap.compass_moves`` (on one floor and in buildings of several floors,
+    where it aims at a stop and rides there), as the kernel's ``guide_compass`` unpacks them."""
+    from app import kernels
+
+    if kind == "floors":
+        rng = np.random.default_rng(seed)
+        d: Domain = generate_floors(20, 20, 2 + seed % 2, rng, n_goals=1 + seed % 3, room=(3, 5))
+    else:
+        d = world(seed, kind == "building")[0]
+    gm = GuideMap.of(d)
+    table = gm.arrays[9]
+    assert table.shape == (gm.n_states, gm.n_goals) and table.dtype == np.uint8
+    for g in range(gm.n_goals):
+        for s in range(gm.n_states):
+            m0, m1 = kernels.guide_compass(table, s, g)
+            assert [m for m in (m0, m1) if m >= 0] == gm.compass_moves(g, s), (g, s)
 
 
 @given(st.lists(st.integers(0, 10**6), max_size=guide.PURPOSE_WALK + 1), st.integers(0, 600))

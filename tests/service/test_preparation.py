@@ -312,7 +312,7 @@ def test_the_memory_estimate_covers_what_is_built(
     assert goals is not None and gmap is not None
     arrays = goals.arrays()
     kept = [goals.goal_counts, goals.unknown_counts, arrays[0], arrays[4].base,
-            gmap.dist, gmap.detour, gmap.marks, gmap.n_open, gmap.goal_of_state,
+            gmap.dist, gmap.detour, gmap.marks, gmap.n_open, gmap.goal_of_state, gmap.compass_of,
             state.domain.open_moves]  # fmt: skip
     built = sum(a.nbytes for a in kept if a is not None)
     estimate = preparation_bytes(len(state.domain.goals), state.domain.n_states, needed())
@@ -327,8 +327,10 @@ def test_the_memory_estimate_of_a_building_s_guide_map_counts_its_landmarks() ->
     gmap = GuideMap.of(tower)
     assert gmap.marks.shape[0] == 3 * guide_module.MARKS
     assert gmap.floor is not None and gmap.stops is not None
-    kept = [gmap.dist, gmap.detour, gmap.marks, gmap.n_open, gmap.goal_of_state, gmap.floor,
-            gmap.stops, tower.open_moves]  # fmt: skip
+    kept: list[np.ndarray[Any, Any]] = [
+        gmap.dist, gmap.detour, gmap.compass_of, gmap.marks, gmap.n_open, gmap.goal_of_state,
+        gmap.floor, gmap.stops, tower.open_moves,
+    ]  # fmt: skip
     built = sum(a.nbytes for a in kept)
     estimate = preparation_bytes(len(tower.goals), tower.n_states, [Need.GUIDE_MAP], 6, 3)
     assert 0.9 * estimate <= built <= estimate
@@ -356,9 +358,11 @@ def test_the_compiled_searches_are_the_numpy_ones(rows: list[str], data: st.Data
     grid = GridDomain.from_strings(rows)
     extra = data.draw(st.lists(st.integers(0, grid.n_states - 1), max_size=4))
     targets = (*grid.goals, *extra)
-    dist, detour = domains_module.compiled_searches(grid.next_state, grid.cells, targets)
+    dist, detour, compass = domains_module.compiled_searches(grid.next_state, grid.cells, targets)
     assert np.array_equal(dist, bfs_distances_each(grid.next_state, targets))
     assert np.array_equal(detour, compass_detours_each(grid.next_state, grid.cells, targets))
+    want = guide_module.compass_table(grid.next_state, grid.cells, targets, None, None)
+    assert compass.dtype == want.dtype and np.array_equal(compass, want)
     compiled = GuideMap.of(grid, searches=domains_module.compiled_searches)
     plain = GuideMap.of(grid)
     for a, b in zip(compiled.arrays[:-2], plain.arrays[:-2], strict=True):  # the arrays
@@ -386,16 +390,20 @@ def test_the_compiled_searches_of_a_building_are_the_numpy_ones(
     tower: Building, data: st.DataObject
 ) -> None:
     """A building's guide map in the service (compiled searches, without the GIL) is the
-    experiments' (numpy's, the building's compass), landmarks included (their distances
-    cross floors: a search over the compass moves alone left them -1 on other floors)."""
+    experiments' (numpy's, the building's compass), compass table and landmarks included
+    (their distances cross floors: a search over the compass moves alone left them -1 on
+    other floors)."""
     extra = data.draw(st.lists(st.integers(0, tower.n_states - 1), max_size=4))
     targets = (*tower.goals, *extra)
-    dist, detour = domains_module.compiled_searches(
+    dist, detour, compass = domains_module.compiled_searches(
         tower.next_state, tower.cells, targets, tower.nearest_stops
     )
     assert np.array_equal(dist, bfs_distances_each(tower.next_state, targets))
     want = compass_detours_each(tower.next_state, tower.cells, targets, takes=tower.compass_takes)
     assert np.array_equal(detour, want)
+    floor, stops = tower.cells[:, 0], tower.nearest_stops
+    table = guide_module.compass_table(tower.next_state, tower.cells[:, 1:], targets, floor, stops)
+    assert np.array_equal(compass, table)
     compiled = GuideMap.of(
         tower, searches=domains_module.compiled_searches, distances=kernels.guide_distances
     )

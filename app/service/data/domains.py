@@ -30,7 +30,7 @@ from app import kernels, strategies
 from app.advice.guide import GuideMap, marks_for
 from app.advice.models import AdviceTables
 from app.advice.priors import ActionPrior, GoalPriors
-from app.arrays import IntArray
+from app.arrays import ByteArray, IntArray
 from app.domain.building import Domain, load_map, n_floors
 from app.domain.grid import Frame, GridDomain, MapError, NamedCell, name_goals
 from app.service.data.store import POOLED, DomainRecord, Store, TableCounts, Trajectory
@@ -136,31 +136,34 @@ def preparation_bytes(
     """Bytes what ``needs`` keep of a domain of ``n_goals`` destinations, ``n_states`` free
     cells, ``n_actions`` actions (A) and ``n_floors`` floors: the goal priors' counts and
     each goal's log theta (G x S x A float64 each), the counts of unknown goal (S x A) and
-    the goal of each state (S); a guide map's distances and detours (G x S int64 each), its
-    landmarks' distances (``marks_for`` x S int64), its open moves (S int64, S x A booleans)
-    and the destination of each state (S), on a map of several floors each state's floor and
-    nearest stops (3 S int64); its counts are the goal priors' own."""
+    the goal of each state (S); a guide map's distances and detours (G x S int64 each) and
+    compass moves (G x S bytes), its landmarks' distances (``marks_for`` x S int64), its open
+    moves (S int64, S x A booleans) and the destination of each state (S), on a map of several
+    floors each state's floor and nearest stops (3 S int64); its counts are the goal priors'
+    own."""
     gs, s, a = n_goals * n_states, n_states, n_actions
     floors = 24 * s if a != 4 else 0
     marks = marks_for(n_states, n_floors)
     sizes = {
         Need.GOAL_PRIORS: 16 * a * gs + (8 * a + 8) * s,
-        Need.GUIDE_MAP: 16 * gs + (16 + a + 8 * marks) * s + floors,
+        Need.GUIDE_MAP: 17 * gs + (16 + a + 8 * marks) * s + floors,
     }
     return sum(sizes[n] for n in set(needs))
 
 
 def compiled_searches(
     next_state: IntArray, cells: IntArray, goals: tuple[int, ...], stops: IntArray | None = None
-) -> tuple[IntArray, IntArray]:
+) -> tuple[IntArray, IntArray, ByteArray]:
     """A guide map's searches (``GuideMap.of``'s ``searches``), compiled without the GIL:
-    the numbers of ``GridDomain.goal_distances`` and ``compass_detours_each``; in a building
-    (``stops``: ``Building.nearest_stops``), of ``bfs_distances_each`` over every action and
-    ``compass_detours_each`` with the building's compass (``Building.compass_takes``)."""
+    the numbers of ``GridDomain.goal_distances``, ``compass_detours_each`` and
+    ``guide.compass_table``; in a building (``stops``: ``Building.nearest_stops``), of
+    ``bfs_distances_each`` over every action and ``compass_detours_each`` with the
+    building's compass (``Building.compass_takes``)."""
     targets = np.array(goals, dtype=np.int64)
     dist = kernels.guide_distances(next_state, targets)
     on = np.zeros((0, 2), dtype=np.int64) if stops is None else stops
-    return dist, kernels.guide_detours(next_state, cells, targets, on)
+    detour = kernels.guide_detours(next_state, cells, targets, on)
+    return dist, detour, kernels.guide_compass_table(next_state, cells, targets, on)
 
 
 class DomainCatalog:
