@@ -20,7 +20,8 @@ kernel                    the readable form (and its test)
                           app/agents/explorers.py and every compiled strategy's advisor
 ``q_learning``            ``run_learning`` with ``QLearningExplorer`` (app/agents/qlearning.py)
 ``guide_distances``,      ``bfs_distances_each`` and ``compass_detours_each``
-``guide_detours``         (app/domain/grid.py): a guide map's searches, without the GIL
+``guide_detours``,        (app/domain/grid.py) and ``compass_table`` (app/advice/guide.py): a
+``guide_compass_table``   guide map's searches, without the GIL
 ========================  ====================================================================
 
 Tables are passed as the tuple ``AdviceTables.arrays``: (log_probs (M, S*A), log_weights (M,),
@@ -1390,8 +1391,8 @@ def guide_stream_four(
 ) -> tuple[int, int, int, int, int, float]:  # pragma: no cover - compiled  # fmt: skip
     """:func:`guide_stream` compiled with the constant 4, for a domain of one floor: its
     loops over actions unrolled (with the number read from the map, a one-floor decision cost
-    1.3-1.7 times as much: docs/PERFORMANCE.md). A domain has
-    four actions or, in a building of several floors, six (:func:`guide_stream_six`)."""
+    1.3-1.7 times as much: docs/PERFORMANCE.md). A domain has four actions or, in a building
+    of several floors, six (:func:`guide_stream_six`)."""
     return guide_stream(
         gmap, params, goals, ll, alive, doubt, target, last, heading, came, advice, comply, run,
         kappa, count, benefit, cap, moves, out, 4,
