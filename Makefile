@@ -31,17 +31,24 @@ venv: $(STAMP)
 
 run-venv: $(RUN_STAMP)
 
+## Installs a Debian package when its command is missing: one install at a time (flock), so
+## that two checkouts set up side by side do not race for apt's lock; the command is looked
+## for again once the lock is held.
+APT_LOCK := /tmp/hidden-goal-advisor-apt.lock
+define apt_install
+	@command -v $(1) >/dev/null 2>&1 || flock $(APT_LOCK) sh -c '\
+		command -v $(1) >/dev/null 2>&1 || { \
+		$(SUDO) apt-get update -qq && \
+		DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq $(1) >/dev/null; }'
+endef
+
 ## Debian's chromium for the browser tests (Playwright cannot download browsers here).
 chromium:
-	@command -v chromium >/dev/null 2>&1 || { \
-		$(SUDO) apt-get update -qq && \
-		DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq chromium >/dev/null; }
+	$(call apt_install,chromium)
 
 ## Debian's wrk drives the HTTP benchmarks (installed the same way when missing).
 wrk:
-	@command -v wrk >/dev/null 2>&1 || { \
-		$(SUDO) apt-get update -qq && \
-		DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq wrk >/dev/null; }
+	$(call apt_install,wrk)
 
 lint: venv
 	$(BIN)/ruff check $(SRC)
