@@ -840,16 +840,18 @@ def guide_observe_compliance(
     s: int, to: int,
 ) -> None:  # pragma: no cover - compiled  # fmt: skip
     """``GuideAdvisor._observe_compliance`` of move ``a`` at ``s``, leading to ``to``.
-    ``comply`` (L + 11,): the log-likelihood of each compliance level (j + 1/2) / L, the
+    ``comply`` (L + 13,): the log-likelihood of each compliance level (j + 1/2) / L, the
     chance that the explorer's own move is the last decision's advice, the decisions since
     the last piece of advice, whether advice is held back (1.0: from P(compliance < IGNORED)
     >= SURE until it is below RELEASE); the last chain of pieces taken in a row (where it
     began, -1: none open; its length k; the explorer's own moves since: undone if they lead
-    back there within k moves, else kept); how many chains in a row were undone, where the
-    last began (-1: none) and whether the explorer has left it since by its own moves, no
-    piece taken since (back there by its own moves, none undoing a chain, the run is
-    forgotten); the last decision's advice (theta's favourite move, -1: none) and whether
-    every move since the last piece was that of the decision before it."""
+    back there within k moves, or if a piece is taken where the first of them took back the
+    chain's last piece, else kept); how many chains in a row were undone, where the last
+    began (-1: none) and whether the explorer has left it since by its own moves, no piece
+    taken since (back there by its own moves, none undoing a chain, the run is forgotten);
+    the last decision's advice (theta's favourite move, -1: none) and whether every move
+    since the last piece was that of the decision before it; the advice budget; where the
+    last piece taken was given (-1: none)."""
     fade, ignored, sure, release = params[6], params[7], params[8], params[9]
     n = params[11]
     took = False  # the advised move, if advice was given
@@ -864,6 +866,13 @@ def guide_observe_compliance(
     comply[n + 10] = 1.0 if on else 0.0
     undid = False
     if took and to != s:  # a piece taken
+        if comply[n + 3] >= 0.0 and comply[n + 5] == 1.0 and s == comply[n + 12]:
+            # given where its first own move after the chain took back the chain's last
+            # piece: it was undoing the chain, which the piece interrupts
+            comply[n + 6] += 1.0
+            comply[n + 7] = float(s)
+            comply[n + 3] = -1.0
+        comply[n + 12] = float(s)
         if comply[n + 3] < 0.0 or comply[n + 5] > 0.0:  # the first of a chain
             comply[n + 3] = float(s)
             comply[n + 4] = 1.0
@@ -914,15 +923,17 @@ def guide_observe_compliance(
 def guide_compliance_state(params: GuideParams) -> FloatArray:  # pragma: no cover - compiled
     """``compliance_state``: no advice yet (``COMPLY_LEVELS`` levels, chance 1/2, ``BACKOFF``
     decisions since the last piece, not held back, no chain of taken pieces open, no run of
-    undone chains, no decision yet, not led, one piece of the advice budget saved)."""
+    undone chains, no decision yet, not led, one piece of the advice budget saved, no piece
+    taken yet)."""
     n = params[11]
-    comply = np.zeros(n + 12)
+    comply = np.zeros(n + 13)
     comply[n] = 0.5
     comply[n + 1] = params[10]
     comply[n + 3] = -1.0
     comply[n + 7] = -1.0
     comply[n + 9] = -1.0
     comply[n + 11] = 1.0  # one piece of the advice budget saved
+    comply[n + 12] = -1.0  # no piece taken yet
     return comply
 
 

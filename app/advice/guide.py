@@ -124,11 +124,15 @@ could not show that it takes it (docs/RESULTS.md, "Advice that is not taken").
 
 Pieces taken in a row (a chain of k) are followed further: if the explorer's own moves
 after them lead back to where the chain began within k moves, they undid it; after k own
-moves elsewhere it is kept. An explorer that undid ``UNDO_RUN`` (4) chains in a row is held
-back the same way until it keeps one, or until its own moves, none of them undoing a chain
-and no piece taken since it left, bring it back to where it undid the last (it circles
-there, as a bug in a pocket does, rather than goes its own way; one led away and back, or
-undoing the next detour there, does not circle).
+moves elsewhere it is kept. A piece taken where the first own move after the chain took back
+its last piece interrupts an undoing: that chain counts as undone too (else a visitor going
+its own way, led two cells off it, stepping back one and led off again, was neither undoing
+nor keeping any chain, and was advised the same detour again and again). An explorer that
+undid ``UNDO_RUN`` (4) chains in a row is held back the same way until it keeps one, or
+until its own moves, none of them undoing a chain and no piece taken since it left, bring
+it back to where it undid the last (it circles there, as a bug in a pocket does, rather
+than goes its own way; one led away and back, or undoing the next detour there, does not
+circle).
 One bound for a place of its own, taken for one bound for a listed destination, that takes
 the advice and goes back to its way, is not advised the same detour again and again. A lost
 walker undoes a chain only when its own moves happen to retrace it: four one-piece chains
@@ -729,10 +733,12 @@ def run_list(ring: IntArray) -> list[int]:
 #: whether it has left that state by its own moves, no piece taken since (1.0) or not (0.0);
 #: the last decision's advice (theta's favourite move, given or not; -1: none yet) and whether
 #: every move since the last piece was that of the decision before it (1.0: it walks the way
-#: it is led) or not (0.0); the pieces of the advice budget saved (:data:`ADVICE_RATE`)
+#: it is led) or not (0.0); the pieces of the advice budget saved (:data:`ADVICE_RATE`);
+#: where the last piece taken was given (-1: none yet)
 CHANCE, SINCE, HELD, CHAIN_FROM, CHAIN_LEN, OWN, UNDONE, UNDONE_AT, AWAY, MODE, ON_LEAD, SAVED = (
     range(COMPLY_LEVELS, COMPLY_LEVELS + 12)
 )
+PIECE_AT = COMPLY_LEVELS + 12
 
 
 def compliance_state() -> list[float]:
@@ -742,18 +748,18 @@ def compliance_state() -> list[float]:
     back (1.0) or not (0.0), the last chain of pieces taken in a row (where it began, -1:
     none open; its length; the explorer's own moves since), how many chains in a row were
     undone, where the last began (-1: none) and whether the explorer has left it since; no
-    decision yet, not led; one piece of the advice budget saved."""
+    decision yet, not led; one piece of the advice budget saved; no piece taken yet."""
     return [
         *[0.0] * COMPLY_LEVELS, 0.5, float(BACKOFF), 0.0, -1.0, 0.0, 0.0, 0.0, -1.0, 0.0, -1.0,
-        0.0, 1.0,
+        0.0, 1.0, -1.0,
     ]  # fmt: skip
 
 
 def upgraded_compliance(comply: list[float]) -> list[float]:
     """A session's compliance evidence as written by an earlier version, without the slots
-    of undone advice (``COMPLY_LEVELS + 3`` values), of the way it is led (``+ 9``) or of the
-    advice budget (``+ 11``), with them as a session starts them (none taken, none undone, no
-    decision yet, one piece saved)."""
+    of undone advice (``COMPLY_LEVELS + 3`` values), of the way it is led (``+ 9``), of the
+    advice budget (``+ 11``) or of where the last piece was taken (``+ 12``), with them as a
+    session starts them (none taken, none undone, no decision yet, one piece saved)."""
     full = compliance_state()
     if not COMPLY_LEVELS + 3 <= len(comply) < len(full):
         return comply
@@ -974,7 +980,7 @@ class GuideAdvisor(Advisor):
         """After a piece of advice: did the explorer take it? Weighed against the chance
         that its own move was the advised one. And the pieces it took in a row (a chain of
         k): did its own moves after them undo them (lead back to where the chain began
-        within k moves)?"""
+        within k moves, or take back its last piece and take a piece there again)?"""
         comply = self._comply
         took = False  # the advised move, if advice was given
         if advised:
@@ -989,6 +995,13 @@ class GuideAdvisor(Advisor):
         comply[ON_LEAD] = 1.0 if on else 0.0
         undid = False
         if took and to != state:  # a piece taken
+            if comply[CHAIN_FROM] >= 0.0 and comply[OWN] == 1.0 and state == comply[PIECE_AT]:
+                # given where its first own move after the chain took back the chain's last
+                # piece: it was undoing the chain, which the piece interrupts
+                comply[UNDONE] += 1.0
+                comply[UNDONE_AT] = float(state)
+                comply[CHAIN_FROM] = -1.0
+            comply[PIECE_AT] = float(state)
             if comply[CHAIN_FROM] < 0.0 or comply[OWN] > 0.0:  # the first of a chain
                 comply[CHAIN_FROM] = float(state)
                 comply[CHAIN_LEN] = 1.0

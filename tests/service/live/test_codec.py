@@ -278,22 +278,25 @@ def test_a_guide_session_saved_before_compliance_was_learned_loads_with_the_prio
     assert len(old.observe_batch(*moves)) == 20
 
 
-@pytest.mark.parametrize("kept", [COMPLY_LEVELS + 3, COMPLY_LEVELS + 9, COMPLY_LEVELS + 11])
+@pytest.mark.parametrize(
+    "kept", [COMPLY_LEVELS + 3, COMPLY_LEVELS + 9, COMPLY_LEVELS + 11, COMPLY_LEVELS + 12]
+)
 def test_a_guide_session_saved_with_fewer_compliance_slots_loads(
     domain: DomainState, kept: int
 ) -> None:
     """A guide session whose compliance evidence was written by an earlier version, without
     the slots of undone advice (levels, chance, since, held only: ``COMPLY_LEVELS + 3``),
     without those of the way it is led (the last decision's advice, whether it walks it:
-    ``+ 9``) or without the advice budget's (``+ 11``), loads with them as a session starts
-    them and decides as the same session with them so does."""
+    ``+ 9``), without the advice budget's (``+ 11``) or without where the last piece was
+    taken (``+ 12``), loads with them as a session starts them and decides as the same
+    session with them so does."""
     reg = SessionRegistry(Limits(100), 3600.0, replay_steps=32)
     session, _ = reg.create(domain, SessionSettings.of("guide", 0.5, 40, params_for("guide")))
     reg.observe_batch(session, walk(domain, domain.domain.start, 30, np.random.default_rng(3)))
     state = advisor_state(session.advisor)
     comply = list(state["slots"]["_comply"])
     fresh = compliance_state()
-    assert len(comply) == len(fresh) == COMPLY_LEVELS + 12
+    assert len(comply) == len(fresh) == COMPLY_LEVELS + 13
     state["slots"]["_comply"] = [*comply[:kept]]
     old = restore_advisor(state, domain, "*")
     assert old._comply == [*comply[:kept], *fresh[kept:]]  # type: ignore[attr-defined]
