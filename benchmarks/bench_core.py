@@ -67,13 +67,18 @@ def bench_single(tables: AdviceTables, domain: Domain, repeats: int) -> tuple[fl
 
 def compiled_rate(
     tables: AdviceTables, domain: Domain, repeats: int, n: int = 10_000, steps: int = 600,
-    window: int = 300,
+    window: int = 300, walk: bool = False,
 ) -> float:  # fmt: skip
     """Decisions per CPU second of the compiled form (the service's ``StreamAdvisor``): ``n``
-    explorers, each advised on its ``steps`` moves (random states and actions) in one call."""
+    explorers, each advised on its ``steps`` moves (random states and actions) in one call.
+    With ``walk`` each explorer walks instead (random actions, each state the last one's
+    next, as explorers move): the tables are read where the last decision read them."""
     rng = np.random.default_rng(2)
     states = rng.integers(0, domain.n_states, (n, steps + 1))
     actions = rng.integers(0, domain.n_actions, (n, steps))
+    if walk:
+        for t in range(steps):
+            states[:, t + 1] = domain.next_state[states[:, t], actions[:, t]]
     nxt = domain.next_state[states[:, :-1], actions]
     before = np.ascontiguousarray(states[:, :-1])
 

@@ -8,7 +8,9 @@ as many free cells (the table gives both counts). On each, the paper's tables fr
 walking from every cell (``anywhere``, 10 per destination), then the measurements of
 ``bench_core.py``: the readable core's observe + decide for one explorer, and the compiled form
 the service runs (``StreamAdvisor.observe_batch``: 10,000 explorers x 600 random moves a
-call, window 300); and guide's compiled batch (``bench_guide.py``'s: 500-event batches of one
+call, window 300; each move from a random state, and again with each explorer walking, as
+explorers move: random states miss the caches, and six actions' tables miss them more); and
+guide's compiled batch (``bench_guide.py``'s: 500-event batches of one
 random walk, CPU time), the one-floor building with as many destinations as the hospital.
 The two domains are measured in turn within each repeat (this machine is shared and noisy);
 each figure is the median over ``--repeats``, and each ratio the median of the repeats'
@@ -73,8 +75,8 @@ def main() -> None:
         make = partial(StreamGuide, AdviceTables.paper(prior.theta()), GuideMap.of(d, goals),
                        params=GuideParams.of())  # fmt: skip
         guides[k] = (make, walk_batches(d, rng, 21))
-    got: dict[str, dict[str, list[float]]] = {k: {"single": [], "call": [], "batch": [],
-                                                  "guide": []} for k in domains}  # fmt: skip
+    rows = ("single", "call", "batch", "walks", "guide")
+    got: dict[str, dict[str, list[float]]] = {k: {m: [] for m in rows} for k in domains}
     for k, d in domains.items():  # compiled (or read from numba's cache) before timing
         compiled_rate(tables[k], d, 1, n=10, steps=10)
     for _ in range(args.repeats):
@@ -83,6 +85,7 @@ def main() -> None:
             got[k]["single"].append(run)
             got[k]["call"].append(call)
             got[k]["batch"].append(1e6 / compiled_rate(tables[k], d, 1))  # us a decision
+            got[k]["walks"].append(1e6 / compiled_rate(tables[k], d, 1, walk=True))
             make, batches = guides[k]
             got[k]["guide"].append(per_decision(d, batches, make, 1))
     med = {k: {m: statistics.median(v) for m, v in by.items()} for k, by in got.items()}
@@ -90,18 +93,19 @@ def main() -> None:
         m: statistics.median(
             b / f for b, f in zip(got["building"][m], got["one floor"][m], strict=True)
         )
-        for m in ("single", "call", "batch", "guide")
+        for m in rows
     }
     what = {
         "single": "readable core, observe + decide (mean per call)",
         "call": "readable core, observe + decide (median of 20k timed calls)",
         "batch": "compiled, 10,000 explorers x 600 moves a call (CPU time per decision)",
+        "walks": "the same, each explorer walking (each state the last one's next)",
         "guide": f"guide, compiled, 20 batches of 500 moves, {len(building.goals)} destinations",
     }
     lines = [
         f"| {what[m]} | {med['one floor'][m]:.3f} us | {med['building'][m]:.3f} us | "
         f"{ratio[m]:.2f} | <= {MOST} |"
-        for m in ("single", "call", "batch", "guide")
+        for m in rows
     ]
     table = (
         "| per decision | one floor | building | ratio | target |\n|---|---|---|---|---|\n"
