@@ -10,8 +10,8 @@ walking from every cell (``anywhere``, 10 per destination), then the measurement
 the service runs (``StreamAdvisor.observe_batch``: 10,000 explorers x 600 random moves a
 call, window 300; each move from a random state, and again with each explorer walking, as
 explorers move: random states miss the caches, and six actions' tables miss them more); and
-guide's compiled batch (``bench_guide.py``'s: 500-event batches of one
-random walk, CPU time), the one-floor building with as many destinations as the hospital.
+guide's compiled batch (``bench_guide.py``'s: 500-event batches of one random walk, CPU
+time), the one-floor building with as many destinations as the hospital.
 The two domains are measured in turn within each repeat (this machine is shared and noisy);
 each figure is the median over ``--repeats``, and each ratio the median of the repeats'
 ratios.

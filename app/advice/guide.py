@@ -180,6 +180,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from functools import partial
 from itertools import pairwise
 
 import numpy as np
@@ -190,7 +191,13 @@ from app.advice.params import StrategyParams
 from app.advice.priors import GoalPriors
 from app.arrays import ByteArray, FloatArray, IntArray
 from app.domain.building import Building, Domain, n_floors
-from app.domain.grid import N_ACTIONS, bfs_distances_each, compass_detours_each
+from app.domain.grid import (
+    N_ACTIONS,
+    Takes,
+    bfs_distances_each,
+    compass_detours_each,
+    compass_takes,
+)
 
 #: probability mass the open-moves lost model gives to bumping into walls
 LOST_BUMP = 0.02
@@ -314,39 +321,29 @@ def landmarks(next_state: IntArray, dist: IntArray, n: int, distances: Distances
     return np.ascontiguousarray(np.array(out, dtype=np.int64).reshape(shape))
 
 
+#: the order :meth:`GuideMap.compass_moves` lists a state's own moves in: the vertical move
+#: before the horizontal one (on a tie), the rides (``U``, ``D``) alone
+_COMPASS_ORDER = (0, 2, 1, 3, 4, 5)
+
+
 def compass_table(
-    next_state: IntArray, cells: IntArray, goals: tuple[int, ...], floor: IntArray | None,
-    stops: IntArray | None,
+    n_states: int, n_actions: int, goals: tuple[int, ...], takes: Takes
 ) -> ByteArray:  # fmt: skip
     """:meth:`GuideMap.compass_moves` of every state (rows) and destination (columns), each
     as one byte: the first move + 1 in its low four bits, the second + 1 in its high four (0:
     none), what the compiled decisions read instead of working the compass out at every
-    decision. ``cells`` (S, 2): row and column; ``floor`` and ``stops``: a building's
-    (:attr:`GuideMap.floor`, :attr:`GuideMap.stops`), None on one floor."""
-    n = next_state.shape[0]
-    states = np.arange(n)
-    out = np.zeros((n, len(goals)), dtype=np.uint8)
+    decision. ``takes``: the rule of one's own moves that the compass detours are searched
+    over (:func:`~app.domain.grid.compass_takes` on one floor, ``Building.compass_takes``)."""
+    states = np.arange(n_states, dtype=np.int64)
+    out = np.zeros((n_states, len(goals)), dtype=np.uint8)
     for g, goal in enumerate(goals):
-        aim = np.full(n, goal, dtype=np.int64)
-        ride = np.full(n, -1, dtype=np.int64)  # U (4) or D (5) at a stop, -1 elsewhere
-        if floor is not None and stops is not None:
-            away = floor != floor[goal]
-            down = (floor[goal] < floor).astype(np.int64)
-            aim = np.where(away, stops[states, down], aim)
-            ride = np.where(away & (aim == states), 4 + down, -1)
-        dr = cells[np.maximum(aim, 0), 0] - cells[:, 0]
-        dc = cells[np.maximum(aim, 0), 1] - cells[:, 1]
-        vert = np.where(dr < 0, 0, 2)
-        horiz = np.where(dc > 0, 1, 3)
-        v_ok = (dr != 0) & (next_state[states, vert] != states)
-        h_ok = (dc != 0) & (next_state[states, horiz] != states)
-        tie, wide = np.abs(dr) == np.abs(dc), np.abs(dr) > np.abs(dc)
-        v_first = np.where(v_ok, vert, np.where(h_ok, horiz, -1))
-        h_first = np.where(h_ok, horiz, np.where(v_ok, vert, -1))
-        first = np.where(tie | wide, v_first, h_first)
-        second = np.where(tie & v_ok & h_ok, horiz, -1)
-        first = np.where(ride >= 0, ride, np.where(aim < 0, -1, first))
-        second = np.where((ride >= 0) | (aim < 0), -1, second)
+        targets = np.full(n_states, goal, dtype=np.int64)
+        first = np.full(n_states, -1, dtype=np.int64)
+        second = np.full(n_states, -1, dtype=np.int64)
+        for a in (a for a in _COMPASS_ORDER if a < n_actions):
+            take = takes(targets, states, a)
+            second = np.where(take & (first >= 0), a, second)
+            first = np.where(take & (first < 0), a, first)
         out[:, g] = (first + 1) | ((second + 1) << 4)
     return out
 
@@ -415,6 +412,11 @@ class GuideMap:
         s = domain.n_states
         of_state = np.full(s, -1, dtype=np.int64)
         of_state[list(goals)] = np.arange(len(goals))
+        takes: Takes = (
+            domain.compass_takes
+            if isinstance(domain, Building)
+            else partial(compass_takes, domain.next_state, domain.cells)
+        )
         if searches is not None:
             nearest = domain.nearest_stops if isinstance(domain, Building) else None
             dist, detour, compass = searches(domain.next_state, domain.cells, goals, nearest)
@@ -424,12 +426,10 @@ class GuideMap:
                 raise ValueError("searches must give (states, destinations) compass bytes")
         elif isinstance(domain, Building):
             dist = bfs_distances_each(domain.next_state, goals)
-            detour = compass_detours_each(
-                domain.next_state, domain.cells, goals, takes=domain.compass_takes
-            )
+            detour = compass_detours_each(domain.next_state, domain.cells, goals, takes=takes)
         else:
             dist = domain.goal_distances
-            detour = compass_detours_each(domain.next_state, domain.cells, goals)
+            detour = compass_detours_each(domain.next_state, domain.cells, goals, takes=takes)
         # a building's floors and stops writeable, as a one-floor map's arrays are (numba
         # compiles read-only arrays anew)
         floor = stops = None
@@ -441,7 +441,7 @@ class GuideMap:
         next_state = np.ascontiguousarray(domain.next_state, dtype=np.int64)
         cells = np.ascontiguousarray(domain.cells[:, -2:], dtype=np.int64)  # row, column
         if searches is None:
-            compass = compass_table(next_state, cells, goals, floor, stops)
+            compass = compass_table(s, domain.n_actions, goals, takes)
         plain = cls(
             next_state,
             np.ascontiguousarray(domain.open_moves.sum(axis=1), dtype=np.int64),

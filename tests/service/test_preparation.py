@@ -16,6 +16,7 @@ import threading
 import time
 import weakref
 from collections.abc import Callable, Iterator
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -35,7 +36,7 @@ from app.domain import grid as grid_module
 from app.domain.building import Building
 from app.domain.floorplans import generate_floors
 from app.domain.generate import generate_building, generate_maze
-from app.domain.grid import GridDomain, bfs_distances_each, compass_detours_each
+from app.domain.grid import GridDomain, bfs_distances_each, compass_detours_each, compass_takes
 from app.service.data import domains as domains_module
 from app.service.data.domains import DomainCatalog, needed, preparation_bytes
 from app.service.data.store import Store
@@ -361,7 +362,8 @@ def test_the_compiled_searches_are_the_numpy_ones(rows: list[str], data: st.Data
     dist, detour, compass = domains_module.compiled_searches(grid.next_state, grid.cells, targets)
     assert np.array_equal(dist, bfs_distances_each(grid.next_state, targets))
     assert np.array_equal(detour, compass_detours_each(grid.next_state, grid.cells, targets))
-    want = guide_module.compass_table(grid.next_state, grid.cells, targets, None, None)
+    takes = partial(compass_takes, grid.next_state, grid.cells)
+    want = guide_module.compass_table(grid.n_states, 4, targets, takes)
     assert compass.dtype == want.dtype and np.array_equal(compass, want)
     compiled = GuideMap.of(grid, searches=domains_module.compiled_searches)
     plain = GuideMap.of(grid)
@@ -401,8 +403,7 @@ def test_the_compiled_searches_of_a_building_are_the_numpy_ones(
     assert np.array_equal(dist, bfs_distances_each(tower.next_state, targets))
     want = compass_detours_each(tower.next_state, tower.cells, targets, takes=tower.compass_takes)
     assert np.array_equal(detour, want)
-    floor, stops = tower.cells[:, 0], tower.nearest_stops
-    table = guide_module.compass_table(tower.next_state, tower.cells[:, 1:], targets, floor, stops)
+    table = guide_module.compass_table(tower.n_states, 6, targets, tower.compass_takes)
     assert np.array_equal(compass, table)
     compiled = GuideMap.of(
         tower, searches=domains_module.compiled_searches, distances=kernels.guide_distances
