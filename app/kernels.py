@@ -69,7 +69,7 @@ GuideOut = tuple[FloatArray, FloatArray, BoolArray, IntArray, FloatArray, FloatA
 #: (lam, p_lost, slack, spread, bump, the most destinations a tour is planned through)
 GuideParams = tuple[
     float, float, float, float, float, int, float, float, float, float, float, int, float, float,
-    float, int, int, int, int, int, int, float, float, float, float,
+    float, int, int, int, int, int, int, float, float, float, float, int,
 ]  # fmt: skip
 
 #: explorer kinds, in the order of app.agents.explorers.WALKERS (the paper's five first)
@@ -1291,6 +1291,7 @@ def guide_purposeful(
     led = not fresh and n > 0 and target >= 0
     if led and (on_lead or dist[target, began] - dist[target, now] == n):
         return False  # after advice, it went the way it is led
+    before = 0
     for test in range(3):  # the last PURPOSE_RUN, PURPOSE_LONG and all of its moves
         if test == 0:
             k, slack = min(k_run, n), k_slack
@@ -1298,13 +1299,124 @@ def guide_purposeful(
             k, slack = min(k_long, n), long_slack
         else:
             k, slack = n, max(long_slack, n // part)
+        if k <= before:  # the walk of the test before, given more slack
+            continue
+        before = k
         u = run[2 + (newest - k + size) % size]
         apart = guide_apart(cells, dist, marks, bound, u, now)
         # in a building, a quickest walk may take ``spread`` moves more a floor it rides
         rides = abs(floor[u] - floor[now]) if floor.shape[0] > 0 else 0
-        if not k - slack - rides * spread <= apart <= k:
+        low = k - slack - rides * spread
+        if apart > k:
             return False
+        if apart < low:  # where the bound falls short, the walk measured (not the whole walk)
+            if test == 2 or guide_came_back(run, k, k - low):
+                return False
+            if guide_within(gmap[0], cells, dist, marks, bound, u, now, low - 1, params[25]) != 0:
+                return False
     return True
+
+
+@njit(cache=True)
+def guide_came_back(run: IntArray, k: int, moves: int) -> bool:  # pragma: no cover - compiled
+    """``GuideAdvisor._walked_apart``'s first look: whether the last ``k`` moves of ``run``
+    (:func:`guide_run_push`'s ring) came back to a cell after more than ``moves`` moves."""
+    size = run.shape[0] - 2
+    oldest = run[1] - k + size
+    for j in range(moves + 1, k + 1):
+        c = run[2 + (oldest + j) % size]
+        for i in range(j - moves):
+            if run[2 + (oldest + i) % size] == c:
+                return True
+    return False
+
+
+@njit(cache=True)
+def guide_within(
+    next_state: IntArray, cells: IntArray, dist: IntArray, marks: IntArray, bound: bool,
+    u: int, v: int, most: int, budget: int,
+) -> int:  # pragma: no cover - compiled  # fmt: skip
+    """``GuideMap.within``: 1 if a walk of at most ``most`` moves leads from ``u`` to ``v``,
+    0 if none does, -1 if the search would queue more than ``budget`` cells; the same search
+    in the same order (buckets as linked lists, the cells taken in a hash set, open
+    addressing, at most half full; ``v``'s distances read once)."""
+    if u == v:
+        return 1 if most >= 0 else 0
+    first = guide_apart(cells, dist, marks, bound, u, v)
+    if first > most:
+        return 0
+    n_d, n_m = dist.shape[0], marks.shape[0]
+    at_v = np.empty(n_d + n_m, dtype=dist.dtype)
+    for g in range(n_d):
+        at_v[g] = dist[g, v]
+    for g in range(n_m):
+        at_v[n_d + g] = marks[g, v]
+    cap = 16
+    while cap < 2 * budget:
+        cap *= 2
+    mask = cap - 1
+    buf = np.empty(cap + 3 * budget + 2 * (most + 1), dtype=np.int64)  # one allocation
+    done = buf[:cap]
+    cell = buf[cap : cap + budget]
+    moves = buf[cap + budget : cap + 2 * budget]
+    after = buf[cap + 2 * budget : cap + 3 * budget]  # the next in its bucket, -1: none
+    head = buf[cap + 3 * budget : cap + 3 * budget + most + 1]
+    tail = buf[cap + 3 * budget + most + 1 :]
+    done[:] = -1
+    head[:] = -1
+    tail[:] = -1
+    cell[0], moves[0], after[0] = u, 0, -1
+    head[first] = tail[first] = 0
+    queued = 1
+    f = first
+    while f <= most:
+        i = head[f]
+        if i < 0:
+            f += 1
+            continue
+        head[f] = after[i]
+        if head[f] < 0:
+            tail[f] = -1
+        w, d = cell[i], moves[i]
+        h = (w * 2654435761) & mask
+        while done[h] != -1 and done[h] != w:
+            h = (h + 1) & mask
+        if done[h] == w:
+            continue
+        done[h] = w
+        for a in range(next_state.shape[1]):
+            t = next_state[w, a]
+            if t == w:
+                continue
+            h = (t * 2654435761) & mask
+            while done[h] != -1 and done[h] != t:
+                h = (h + 1) & mask
+            if done[h] == t:
+                continue
+            far = 0  # guide_apart(cells, dist, marks, bound, t, v), v's column read once
+            if bound:
+                far = int(abs(cells[t, 0] - cells[v, 0]) + abs(cells[t, 1] - cells[v, 1]))
+            for g in range(n_d + n_m):
+                dt = dist[g, t] if g < n_d else marks[g - n_d, t]
+                dv = at_v[g]
+                if dt >= 0 and dv >= 0 and abs(dt - dv) > far:
+                    far = int(abs(dt - dv))
+            ft = d + 1 + far
+            if ft > most:
+                continue
+            if t == v:
+                return 1
+            if queued >= budget:
+                return -1
+            b = ft if ft > f else f
+            cell[queued], moves[queued], after[queued] = t, d + 1, -1
+            if tail[b] < 0:
+                head[b] = queued
+            else:
+                after[tail[b]] = queued
+            tail[b] = queued
+            queued += 1
+    return 0
 
 
 @njit(cache=True)

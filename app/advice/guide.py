@@ -252,13 +252,13 @@ PARTLY = 0.75
 #: the chance that an explorer's own move is the advised one, kept within these bounds
 CHANCE_MIN, CHANCE_MAX = 0.01, 0.99
 #: an explorer whose last PURPOSE_RUN moves since the last piece of advice were a shortest
-#: path, as far as the map can tell (:meth:`GuideMap.apart`), walks with a purpose: it is not
-#: advised (lost explorers dither, bump and circle); before any advice fewer count, after a
-#: piece it is judged once it walked PURPOSE_RUN moves (one being led is led on)
+#: path (:meth:`GuideMap.apart`'s bound, the walk measured where it falls short) walks with a
+#: purpose: it is not advised (lost explorers dither, bump and circle); before any advice
+#: fewer count, after a piece it is judged once it walked PURPOSE_RUN moves (one being led is
+#: led on)
 PURPOSE_RUN = 24
-#: ... give or take PURPOSE_SLACK moves: the map's bound (:meth:`GuideMap.apart`) can fall
-#: short of a shortest path's length, and a lost explorer's run falls shorter (one step back
-#: costs two)
+#: ... give or take PURPOSE_SLACK moves: a visitor may step aside now and then, and a lost
+#: explorer's run falls shorter (one step back costs two)
 PURPOSE_SLACK = 2
 #: ... and its last PURPOSE_LONG moves (all, if fewer) one give or take PURPOSE_LONG_SLACK:
 #: a lost walker can go straight for a while and turn only at walls, but over longer it
@@ -270,6 +270,13 @@ PURPOSE_LONG_SLACK = 6
 #: a hundred cells a lost straight walker comes back only after many more than 48 moves
 PURPOSE_WALK = 256
 PURPOSE_WALK_PART = 4
+#: where the map's bound (:meth:`GuideMap.apart`) falls short over the last PURPOSE_RUN or
+#: PURPOSE_LONG moves, the walk is measured exactly (:meth:`GuideMap.within`), a search that
+#: queues at most PURPOSE_SEARCH cells (beyond, the bound's verdict stands: a walk not shown
+#: to be a shortest path). Measured on the suite's 10 one-floor maps: a shortest walk was
+#: shown so within 27 cells; a search that finds a shorter walk may need more (up to 195),
+#: but giving up decides as finding it does
+PURPOSE_SEARCH = 128
 #: a destination's doubt (``GuideAdvisor.doubt``): set aside after its first visit (a
 #: position read off, walked, is a visit), or brought back once every other one was out;
 #: 0: neither (alive, or ruled out)
@@ -596,6 +603,49 @@ class GuideMap:
                     far = abs(du - dv)
         return far
 
+    def within(self, u: int, v: int, most: int, budget: int) -> int:
+        """Whether a walk of at most ``most`` moves leads from ``u`` to ``v``: 1 if one does, 0
+        if none does, -1 if the search gave up (it would queue more than ``budget`` cells). A
+        search from ``u`` that keeps only the cells from which :meth:`apart` leaves ``v`` within
+        the moves left (exact: ``apart`` never overestimates), taking first the cells whose
+        moves so far plus ``apart`` are fewest (A* with a bucket a number, first in first out
+        within one; a cell is taken once); app/kernels.py's ``guide_within`` keeps the same
+        order."""
+        if u == v:
+            return 1 if most >= 0 else 0
+        first = self.apart(u, v)
+        if first > most:
+            return 0
+        buckets: list[list[tuple[int, int]]] = [[] for _ in range(most + 1)]
+        taken = [0] * (most + 1)
+        buckets[first].append((u, 0))
+        queued = 1
+        done: set[int] = set()
+        f = first
+        while f <= most:
+            if taken[f] == len(buckets[f]):
+                f += 1
+                continue
+            w, d = buckets[f][taken[f]]
+            taken[f] += 1
+            if w in done:
+                continue
+            done.add(w)
+            for a in range(self.n_actions):
+                t = int(self.next_state[w, a])
+                if t == w or t in done:
+                    continue
+                ft = d + 1 + self.apart(t, v)
+                if ft > most:
+                    continue
+                if t == v:
+                    return 1
+                if queued >= budget:
+                    return -1
+                buckets[max(ft, f)].append((t, d + 1))
+                queued += 1
+        return 0
+
     def floors_apart(self, u: int, v: int) -> int:
         """The floors between ``u`` and ``v`` (0 on one floor)."""
         return 0 if self.floor is None else abs(int(self.floor[u]) - int(self.floor[v]))
@@ -693,19 +743,19 @@ def kernel_params(
     window: int, p: GuideParams
 ) -> tuple[
     float, float, float, float, float, int, float, float, float, float, float, int, float, float,
-    float, int, int, int, int, int, int, float, float, float, float,
+    float, int, int, int, int, int, int, float, float, float, float, int,
 ]:  # fmt: skip
     """The parameters as app/kernels.py reads them: (lam, p_lost, slack, spread, bump,
     MAX_TOUR, COMPLY_FADE, IGNORED, SURE, RELEASE, BACKOFF, COMPLY_LEVELS, CHANCE_MIN,
     CHANCE_MAX, UNDO_RUN, PURPOSE_RUN, PURPOSE_SLACK, PURPOSE_LONG, PURPOSE_LONG_SLACK,
-    PURPOSE_WALK, PURPOSE_WALK_PART, ADVICE_RATE, ADVICE_BURST, ADVICE_POWER, PARTLY), with
-    lam = 1 - 1/W the evidence's fading."""
+    PURPOSE_WALK, PURPOSE_WALK_PART, ADVICE_RATE, ADVICE_BURST, ADVICE_POWER, PARTLY,
+    PURPOSE_SEARCH), with lam = 1 - 1/W the evidence's fading."""
     return (
         1.0 - 1.0 / window, float(p.p_lost), float(p.slack), float(p.spread), LOST_BUMP,
         MAX_TOUR, COMPLY_FADE, IGNORED, SURE, RELEASE, float(BACKOFF), COMPLY_LEVELS,
         CHANCE_MIN, CHANCE_MAX, float(UNDO_RUN), PURPOSE_RUN, PURPOSE_SLACK, PURPOSE_LONG,
         PURPOSE_LONG_SLACK, PURPOSE_WALK, PURPOSE_WALK_PART, ADVICE_RATE, ADVICE_BURST,
-        ADVICE_POWER, PARTLY,
+        ADVICE_POWER, PARTLY, PURPOSE_SEARCH,
     )  # fmt: skip
 
 
@@ -880,8 +930,9 @@ class GuideAdvisor(Advisor):
         :data:`PURPOSE_RUN` moves), its last :data:`PURPOSE_RUN` moves were a shortest path
         give or take :data:`PURPOSE_SLACK` moves, its last :data:`PURPOSE_LONG` give or take
         :data:`PURPOSE_LONG_SLACK`, and its last :data:`PURPOSE_WALK` give or take a
-        :data:`PURPOSE_WALK_PART`-th of their length, as far as the map can tell
-        (:meth:`GuideMap.apart`), with no move into a wall among its last
+        :data:`PURPOSE_WALK_PART`-th of their length, as far as the map's bound can tell
+        (:meth:`GuideMap.apart`; the last PURPOSE_RUN and PURPOSE_LONG moves measured where
+        it falls short, :meth:`_walked_apart`), with no move into a wall among its last
         :data:`PURPOSE_LONG` (no shortest path has one), and, after advice, neither all the
         way along the way to the target nor each move the advice of the decision before it
         (the way it is led: a visitor walking it is led on). It is then not advised."""
@@ -896,16 +947,35 @@ class GuideAdvisor(Advisor):
         if led and (self._comply[ON_LEAD] != 0.0 or g.dist[t, run[0]] - g.dist[t, run[-1]] == n):
             return False  # after advice, it went the way it is led
         tests = (
-            (min(PURPOSE_RUN, n), PURPOSE_SLACK),
-            (min(PURPOSE_LONG, n), PURPOSE_LONG_SLACK),
+            (PURPOSE_RUN, PURPOSE_SLACK),
+            (PURPOSE_LONG, PURPOSE_LONG_SLACK),
             (n, max(PURPOSE_LONG_SLACK, n // PURPOSE_WALK_PART)),
         )
-        for k, slack in tests:
+        before = 0
+        for i, (most, slack) in enumerate(tests):
+            k = min(most, n)
+            if k <= before:  # the walk of the test before, given more slack
+                continue
+            before = k
             u, v = run[-1 - k], run[-1]
             # in a building, a quickest walk may take ``ride_spread`` moves more a floor it rides
-            if not k - slack - g.floors_apart(u, v) * g.ride_spread <= g.apart(u, v) <= k:
+            low = k - slack - g.floors_apart(u, v) * g.ride_spread
+            apart = g.apart(u, v)
+            if apart > k or (apart < low and (i == 2 or not self._walked_apart(k, low))):
                 return False
         return True
+
+    def _walked_apart(self, k: int, low: int) -> bool:
+        """Whether the last ``k`` moves of the run lead at least ``low`` moves apart, measured
+        on the walk (a cell it came back to after more than ``k - low`` moves: a walk of
+        fewer moves leads there) and then exactly (:meth:`GuideMap.within`, at most
+        :data:`PURPOSE_SEARCH` cells; a search given up is no proof)."""
+        walk = self._run[-1 - k :]
+        first: dict[int, int] = {}
+        for j, c in enumerate(walk):
+            if j - first.setdefault(c, j) > k - low:
+                return False
+        return self.guide.within(walk[0], walk[-1], low - 1, PURPOSE_SEARCH) == 0
 
     @property
     def target(self) -> int:

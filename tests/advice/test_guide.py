@@ -39,6 +39,15 @@ def world(seed: int, building: bool) -> tuple[GridDomain, AdviceTables, GoalPrio
     return d, AdviceTables.paper(prior.theta()), goal_priors
 
 
+def any_domain(seed: int, kind: str, side: int) -> Domain:
+    """A maze or a one-floor building (:func:`world`'s), or a building of 2-3 floors of
+    ``side`` x ``side`` with 1-3 destinations (``kind``: maze, building, floors)."""
+    if kind == "floors":
+        rng = np.random.default_rng(seed)
+        return generate_floors(side, side, 2 + seed % 2, rng, n_goals=1 + seed % 3, room=(3, 5))
+    return world(seed, kind == "building")[0]
+
+
 @settings(max_examples=40, deadline=None)
 @given(
     st.integers(0, 10_000),
@@ -336,6 +345,44 @@ def test_a_visitor_bound_elsewhere_is_not_held_in_an_advise_undo_cycle(
     assert len(led.states) <= most * len(alone.states)
 
 
+@pytest.mark.parametrize("cell", [(47, 2), (53, 30), (62, 29)])
+def test_a_walker_on_a_shortest_path_the_bound_falls_short_of_is_left_alone(
+    cell: tuple[int, int],
+) -> None:
+    """Optimal walkers bound for cells that are not destinations, on a generated building,
+    along a way on which the map's bound (``GuideMap.apart``) falls more than PURPOSE_SLACK
+    moves short of PURPOSE_RUN moves walked (or PURPOSE_LONG_SLACK short of PURPOSE_LONG):
+    they were taken for lost there and advised 5-17
+    times on the way (10-31 moves more than alone). The walk measured exactly where the bound
+    falls short, neither the readable advisor nor the compiled one says a thing."""
+    d = generate_building_domain(64, 64, 693612370)
+    prior, goal_priors = train_goal_priors(d, np.random.default_rng(0), "start", 10, 1.0)
+    goal = d.state(*cell)
+    assert goal not in d.goals
+    sim = Simulator(d, AdviceTables.paper(prior.theta()), goal_priors)
+    alone = sim.fixed("optimal", goal, np.random.default_rng(0), advised=False)
+    led = sim.fixed("optimal", goal, np.random.default_rng(0), advised=True, strategy="guide")
+    assert alone.success and led.advice_count == 0
+    assert np.array_equal(led.states, alone.states)
+    gm = GuideMap.of(d, goal_priors)
+    walk = [*alone.states.tolist(), goal]
+    tests = (
+        (guide.PURPOSE_RUN, guide.PURPOSE_SLACK),
+        (guide.PURPOSE_LONG, guide.PURPOSE_LONG_SLACK),
+    )
+    short = [  # the last PURPOSE_RUN (PURPOSE_LONG) moves, all if fewer, after a move
+        j for j in range(1, len(walk)) for k, slack in tests
+        if gm.apart(walk[max(0, j - k)], walk[j]) < min(j, k) - slack
+    ]  # fmt: skip
+    assert short  # the bound alone would not see a shortest path there
+    adv = make_advisor("guide", AdviceTables.paper(prior.theta()), 0.5, 300, StrategyParams(),
+                       goal_priors, gm)  # fmt: skip
+    assert not adv.start(d.start).advise
+    for s, t in itertools.pairwise(walk):
+        a = next(a for a in range(4) if int(d.next_state[s, a]) == t)
+        assert not adv.observe(s, a, t).advise
+
+
 def guide_advisor(d: GridDomain, per_goal: int) -> tuple[GuideMap, Advisor]:
     """guide at kappa 0.1 on ``d``, its experts ``per_goal`` from the start (seed 0)."""
     prior, goal_priors = train_goal_priors(d, np.random.default_rng(0), "start", per_goal, 1.0)
@@ -453,6 +500,56 @@ def test_apart_never_exceeds_the_moves_between_two_cells(
                 assert gm.apart(v, u) == n
 
 
+@settings(max_examples=40, deadline=None)
+@given(
+    st.integers(0, 10_000), st.sampled_from(["maze", "building", "floors"]), st.integers(0, 10_000),
+    st.integers(1, 64),
+)  # fmt: skip
+def test_within_says_whether_a_walk_of_so_many_moves_leads_there(
+    seed: int, kind: str, pick: int, budget: int
+) -> None:
+    """``GuideMap.within(u, v, most, budget)``: 1 if a walk of at most ``most`` moves leads
+    from u to v and 0 if none does (the BFS distance), with a budget as large as the map; with
+    a small one, the same answer or -1 (given up); the compiled ``guide_within`` gives the
+    same answers, given up where it gives up."""
+    from app import kernels
+
+    d = any_domain(seed, kind, 16)
+    gm = GuideMap.of(d)
+    rng = np.random.default_rng(pick)
+    for v in rng.integers(0, d.n_states, 4).tolist():
+        dist = d.distances_to(v)
+        for u in rng.integers(0, d.n_states, 12).tolist():
+            for most in {-1, 0, int(dist[u]) - 1, int(dist[u]), int(dist[u]) + 2}:
+                want = 1 if 0 <= dist[u] <= most else 0
+                assert gm.within(u, v, most, d.n_states) == want, (u, v, most)
+                got = gm.within(u, v, most, budget)
+                assert got in (want, -1)
+                fast = kernels.guide_within(
+                    gm.next_state, gm.cells, gm.dist, gm.marks, gm.cells_bound, u, v, most, budget
+                )  # fmt: skip
+                assert fast == got
+
+
+@given(
+    st.lists(st.integers(0, 6), min_size=1, max_size=guide.PURPOSE_LONG + 1),
+    st.integers(0, 600), st.integers(0, 60),
+)  # fmt: skip
+def test_a_walk_that_came_back_is_found_in_the_ring(run: list[int], more: int, moves: int) -> None:
+    """The compiled ``guide_came_back`` over the ring of a run: whether the last k moves came
+    back to a cell after more than ``moves`` moves, as the readable look does over the list."""
+    from app import kernels
+
+    ring = guide.run_ring([])
+    for s in range(more):  # the ring turned some way
+        kernels.guide_run_push(ring, 100 + s)
+    for s in run:
+        kernels.guide_run_push(ring, s)
+    k = len(run) - 1
+    want = any(run[j] == run[i] for j in range(len(run)) for i in range(j) if j - i > moves)
+    assert kernels.guide_came_back(ring, k, moves) == want
+
+
 @settings(max_examples=30, deadline=None)
 @given(st.integers(0, 10_000), st.booleans(), st.integers(0, 12))
 def test_landmarks_are_the_farthest_cells_one_at_a_time(seed: int, building: bool, n: int) -> None:
@@ -489,11 +586,7 @@ def test_the_compass_table_is_the_compass_of_every_cell_and_destination(
     where it aims at a stop and rides there), as the kernel's ``guide_compass`` unpacks them."""
     from app import kernels
 
-    if kind == "floors":
-        rng = np.random.default_rng(seed)
-        d: Domain = generate_floors(20, 20, 2 + seed % 2, rng, n_goals=1 + seed % 3, room=(3, 5))
-    else:
-        d = world(seed, kind == "building")[0]
+    d = any_domain(seed, kind, 20)
     gm = GuideMap.of(d)
     table = gm.arrays[9]
     assert table.shape == (gm.n_states, gm.n_goals) and table.dtype == np.uint8
