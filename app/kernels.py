@@ -1309,7 +1309,7 @@ def guide_purposeful(
         low = k - slack - rides * spread
         if apart > k:
             return False
-        if apart < low:  # where the bound falls short, the walk measured (not the whole walk)
+        if apart < low:  # the bound falls short: the last k moves measured (all: the bound)
             if test == 2 or guide_came_back(run, k, k - low):
                 return False
             if guide_within(gmap[0], cells, dist, marks, bound, u, now, low - 1, params[25]) != 0:
