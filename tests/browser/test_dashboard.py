@@ -76,6 +76,22 @@ def test_dashboard_hides_the_viewer_link_while_the_viewer_is_down(
     expect(link).to_have_attribute("href", re.compile(rf":{service.viewer.port}/$"))
 
 
+def test_the_key_form_stays_put_while_the_health_line_fills_in(
+    service: Service, page: Page
+) -> None:
+    """The line of what the service relies on is a line high before ``/health`` answers: when
+    it fills in, the key form below it does not move (it did, and a click on "Show live
+    sessions" made at that moment landed elsewhere)."""
+    page.goto(service.base + "/")
+    strip = page.locator("#dependencies")
+    expect(strip.locator(".dependency").first).to_be_visible()
+    filled = page.locator("#key-form").bounding_box()
+    strip.evaluate("p => p.replaceChildren()")  # as the page is before /health answers
+    empty = page.locator("#key-form").bounding_box()
+    assert filled is not None and empty is not None
+    assert abs(filled["y"] - empty["y"]) < 0.5, (filled, empty)
+
+
 def test_dashboard_figures_have_a_legend_and_units(service: Service, page: Page) -> None:
     sid, _ = service.new_session("EEEWW")
     show_sessions(service, page, service.operator_key)
