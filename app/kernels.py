@@ -1331,6 +1331,17 @@ def guide_came_back(run: IntArray, k: int, moves: int) -> bool:  # pragma: no co
     return False
 
 
+@njit(cache=True, inline="always")
+def guide_slot(table: IntArray, key: int) -> int:  # pragma: no cover - compiled
+    """Where ``key`` is in ``table``, an open-addressing hash set of non-negative keys (-1:
+    empty; its size a power of two, never full), or the empty slot it would go to."""
+    mask = table.shape[0] - 1
+    h = (key * 2654435761) & mask
+    while table[h] != -1 and table[h] != key:
+        h = (h + 1) & mask
+    return int(h)
+
+
 @njit(cache=True)
 def guide_within(
     next_state: IntArray, cells: IntArray, dist: IntArray, marks: IntArray, bound: bool,
@@ -1339,22 +1350,15 @@ def guide_within(
     """``GuideMap.within``: 1 if a walk of at most ``most`` moves leads from ``u`` to ``v``,
     0 if none does, -1 if the search would queue more than ``budget`` cells; the same search
     in the same order (buckets as linked lists, the cells taken in a hash set, open
-    addressing, at most half full; ``v``'s distances read once)."""
+    addressing, at most half full)."""
     if u == v:
         return 1 if most >= 0 else 0
     first = guide_apart(cells, dist, marks, bound, u, v)
     if first > most:
         return 0
-    n_d, n_m = dist.shape[0], marks.shape[0]
-    at_v = np.empty(n_d + n_m, dtype=dist.dtype)
-    for g in range(n_d):
-        at_v[g] = dist[g, v]
-    for g in range(n_m):
-        at_v[n_d + g] = marks[g, v]
     cap = 16
     while cap < 2 * budget:
         cap *= 2
-    mask = cap - 1
     buf = np.empty(cap + 3 * budget + 2 * (most + 1), dtype=np.int64)  # one allocation
     done = buf[:cap]
     cell = buf[cap : cap + budget]
@@ -1378,30 +1382,15 @@ def guide_within(
         if head[f] < 0:
             tail[f] = -1
         w, d = cell[i], moves[i]
-        h = (w * 2654435761) & mask
-        while done[h] != -1 and done[h] != w:
-            h = (h + 1) & mask
+        h = guide_slot(done, w)
         if done[h] == w:
             continue
         done[h] = w
         for a in range(next_state.shape[1]):
             t = next_state[w, a]
-            if t == w:
+            if t == w or done[guide_slot(done, t)] == t:
                 continue
-            h = (t * 2654435761) & mask
-            while done[h] != -1 and done[h] != t:
-                h = (h + 1) & mask
-            if done[h] == t:
-                continue
-            far = 0  # guide_apart(cells, dist, marks, bound, t, v), v's column read once
-            if bound:
-                far = int(abs(cells[t, 0] - cells[v, 0]) + abs(cells[t, 1] - cells[v, 1]))
-            for g in range(n_d + n_m):
-                dt = dist[g, t] if g < n_d else marks[g - n_d, t]
-                dv = at_v[g]
-                if dt >= 0 and dv >= 0 and abs(dt - dv) > far:
-                    far = int(abs(dt - dv))
-            ft = d + 1 + far
+            ft = d + 1 + guide_apart(cells, dist, marks, bound, t, v)
             if ft > most:
                 continue
             if t == v:
