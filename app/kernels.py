@@ -69,7 +69,7 @@ GuideOut = tuple[FloatArray, FloatArray, BoolArray, IntArray, FloatArray, FloatA
 #: (lam, p_lost, slack, spread, bump, the most destinations a tour is planned through)
 GuideParams = tuple[
     float, float, float, float, float, int, float, float, float, float, float, int, float, float,
-    float, int, int, int, int, int, int, float, float, float, float, int,
+    float, int, int, int, int, int, int, float, float, float, float, int, float, float,
 ]  # fmt: skip
 
 #: explorer kinds, in the order of app.agents.explorers.WALKERS (the paper's five first)
@@ -995,11 +995,18 @@ def guide_drift(gmap: GuideArrays, t: int, s: int, k: int) -> float:  # pragma: 
 
 @njit(cache=True)
 def guide_first_of_tour(
-    dist: IntArray, goals: IntArray, alive: BoolArray, any_alive: bool, s: int, max_tour: int
+    dist: IntArray,
+    goals: IntArray,
+    alive: BoolArray,
+    any_alive: bool,
+    s: int,
+    max_tour: int,
+    latency: bool,
 ) -> int:  # pragma: no cover - compiled
     """``GuideMap.first_of_tour``: the first destination of the shortest walk from ``s``
-    through every destination not ruled out (all of them when ``any_alive`` is false) that
-    ``s`` reaches; exact for up to ``max_tour`` of them, the nearest beyond; -1 if none."""
+    (with ``latency``, of the walk with the least sum of arrivals) through every destination
+    not ruled out (all of them when ``any_alive`` is false) that ``s`` reaches; exact for up to
+    ``max_tour`` of them, the nearest beyond; -1 if none."""
     todo = np.empty(goals.shape[0], dtype=np.int64)
     n = 0
     for g in range(goals.shape[0]):
@@ -1017,7 +1024,9 @@ def guide_first_of_tour(
     full = (1 << n) - 1
     inf = 1 << 60
     rest = np.full((full + 1, n), inf, dtype=np.int64)
+    count = np.zeros(full + 1, dtype=np.int64)  # destinations in each mask
     for mask in range(1, full + 1):
+        count[mask] = count[mask >> 1] + (mask & 1)
         for j in range(n):
             if not mask & (1 << j):
                 continue
@@ -1029,14 +1038,15 @@ def guide_first_of_tour(
             best = inf
             for k in range(n):
                 if others & (1 << k):
-                    c = dist[todo[k], here] + rest[others, k]
+                    c = (count[others] if latency else 1) * dist[todo[k], here]
+                    c += rest[others, k]
                     if c < best:
                         best = c
             rest[mask, j] = best
     first = -1
     first_cost = inf
     for j in range(n):
-        c = dist[todo[j], s] + rest[full, j]
+        c = (n if latency else 1) * dist[todo[j], s] + rest[full, j]
         if c < first_cost:
             first = int(todo[j])
             first_cost = c
@@ -1108,7 +1118,9 @@ def guide_decide(
     pcs = scratch[at : at + n_goals * n_actions].reshape((n_goals, n_actions))
     guide_route_rows(gmap, goals, alive, any_alive, s, pcs, n_actions)
     if target < 0 or not (alive[target] or not any_alive):
-        target = guide_first_of_tour(dist, goals, alive, any_alive, s, max_tour)
+        target = guide_first_of_tour(
+            dist, goals, alive, any_alive, s, max_tour, post[0] + post[1] >= params[26]
+        )
     pi_t = scratch[at + n_goals * n_actions :]
     if target >= 0:  # r_T: one shortest move (the heaviest; the heading on a tie)
         pick = -1
@@ -1149,9 +1161,12 @@ def guide_decide(
         chance[a] = m
         if th > 0.0:
             kl += th * (math.log(th) - math.log(m))
+    loses = post[0] + post[1] >= params[26]  # no drift of its own (DRIFTLESS)
+    gains = False
     if target >= 0:  # the value: weighted by what a lost explorer's move costs here
         d = guide_drift(gmap, target, s, n_actions)  # over the open moves; L4's over every action
         kl = kl * (1.0 + (lost - post[0]) * d + post[0] * (d * gmap[1][s] / n_actions))
+        gains = d > 0.0  # its own move loses ground here
     kl = kl if kl > 0.0 else 0.0
     if n_actions != 4:  # in four actions' units, as the paper's rule (``kl_scale``)
         kl = kl * (math.log(4.0) / math.log(float(n_actions)))
@@ -1181,7 +1196,11 @@ def guide_decide(
         ruled += post[4 + 3 * g + 2]
     free = ruled >= 0.5  # its detours are not held to the budget (paid for afterwards)
     if saved >= 1.0 and not free:
-        kl = kl / (params[22] / saved) ** params[23]
+        if loses and saved < params[22]:  # no drift: where its move loses ground, at no price
+            if not (gains and saved >= 1.0 + params[27]):
+                kl = 0.0
+        else:
+            kl = kl / (params[22] / saved) ** params[23]
     allowed = allowed and (saved >= 1.0 or free)
     return kl, 1.0 - lost, target, allowed
 

@@ -270,12 +270,14 @@ def test_guide_leads_lost_visitors_upstairs_and_leaves_the_quickest_alone() -> N
             guided += run.success
             assert 100 * run.advice_count <= 45 * run.steps
         assert guided >= 18 and guided >= alone + 10, (explorer, alone, guided)
-    advisor = make_advisor("guide", sim.tables, 0.5, 300, None, goal_priors, sim.guide)
-    rec = run_episode(b, make_explorer("random-avoid", b), advisor, upstairs[0],
-                      np.random.default_rng(0), advised=True, max_steps=2000)  # fmt: skip
-    assert rec.success
-    rides = [d for d in rec.decisions if d.advise and d.advice is not None
-             and int(np.argmax(d.advice)) == U]  # fmt: skip
+    rides = []  # where a lost walker's own move at a stop does not lose ground on average,
+    for seed in range(4):  # it is left to ride by itself: a few episodes show the advice
+        advisor = make_advisor("guide", sim.tables, 0.5, 300, None, goal_priors, sim.guide)
+        rec = run_episode(b, make_explorer("random-avoid", b), advisor, upstairs[0],
+                          np.random.default_rng(seed), advised=True, max_steps=2000)  # fmt: skip
+        assert rec.success
+        rides += [d for d in rec.decisions if d.advise and d.advice is not None
+                  and int(np.argmax(d.advice)) == U]  # fmt: skip
     assert rides and all(b.step(d.state, U) != d.state for d in rides)  # up, at a stop
     for goal in upstairs:
         run = sim.fixed("optimal", goal, np.random.default_rng(1), advised=True, strategy="guide")

@@ -121,12 +121,14 @@ def test_policies_lead_along_shortest_paths_and_as_the_crow_flies() -> None:
 
 
 @settings(max_examples=30, deadline=None)
-@given(st.integers(0, 10_000), st.integers(1, 7), st.integers(0, 3))
-def test_the_tour_starts_where_the_shortest_walk_through_the_destinations_does(
-    seed: int, n_goals: int, n_out: int
+@given(st.integers(0, 10_000), st.integers(1, 7), st.integers(0, 3), st.booleans())
+def test_the_tour_starts_where_the_best_walk_through_the_destinations_does(
+    seed: int, n_goals: int, n_out: int, latency: bool
 ) -> None:
-    """The first destination of the tour, against every order of them (ties: the order of
-    the destinations); beyond MAX_TOUR, the nearest."""
+    """The first destination of the tour, against every order of them: with ``latency``, the
+    order that minimises the sum (so the mean) of the arrivals at the destinations, each as
+    likely to be the explorer's; else the shortest walk through them (ties: the order of the
+    destinations); beyond MAX_TOUR, the nearest."""
     d = generate_building_domain(24, 24, seed, n_goals=n_goals)
     gm = GuideMap.of(d)
     rng = np.random.default_rng(seed)
@@ -135,20 +137,23 @@ def test_the_tour_starts_where_the_shortest_walk_through_the_destinations_does(
     s = int(rng.integers(d.n_states))
     todo = [i for i in range(n_goals) if alive[i]]
 
-    def length(order: tuple[int, ...]) -> int:
-        walk = int(gm.dist[order[0], s])
+    def cost(order: tuple[int, ...]) -> int:
+        walk = total = int(gm.dist[order[0], s])
         for a, b in itertools.pairwise(order):
             walk += int(gm.dist[b, gm.goals[a]])
-        return walk
+            total += walk
+        return total if latency else walk
 
-    best = min(itertools.permutations(todo), key=length)
-    first = gm.first_of_tour(s, alive)
-    assert length(best) == min(length(o) for o in itertools.permutations(todo) if o[0] == first)
-    assert first == min(o[0] for o in itertools.permutations(todo) if length(o) == length(best))
+    best = min(itertools.permutations(todo), key=cost)
+    first = gm.first_of_tour(s, alive, latency)
+    assert cost(best) == min(cost(o) for o in itertools.permutations(todo) if o[0] == first)
+    assert first == min(o[0] for o in itertools.permutations(todo) if cost(o) == cost(best))
     small = guide.MAX_TOUR
     try:
         guide.MAX_TOUR = 0
-        assert gm.first_of_tour(s, alive) == min(todo, key=lambda i: (int(gm.dist[i, s]), i))
+        assert gm.first_of_tour(s, alive, latency) == min(
+            todo, key=lambda i: (int(gm.dist[i, s]), i)
+        )
     finally:
         guide.MAX_TOUR = small
 
@@ -203,6 +208,39 @@ def test_lost_explorers_arrive_and_competent_ones_are_left_alone(size: int) -> N
     assert sum(results["random"]) >= 18 and sum(results["random-avoid"]) >= 18
     assert np.mean(rates["random"]) < 25 and np.mean(rates["random-avoid"]) < 25
     assert extra <= 4
+
+
+def test_a_walker_without_drift_is_led_where_its_own_move_loses_ground() -> None:
+    """A random walker, taken for one whose own moves have no drift (P(L4) + P(LO) at least
+    DRIFTLESS), is given a piece while the budget is below full only where a random open move
+    takes it farther from the target on average (drift > 0), keeping ADVICE_KEEP pieces in
+    hand; and it gets such pieces (the readable advisor; the compiled one makes the same
+    decisions, tests/advice/test_guide.py's equality tests)."""
+    d = generate_building_domain(48, 48, 48)
+    prior, goal_priors = train_goal_priors(d, np.random.default_rng(0), "start", 10, 1.0)
+    sim = Simulator(d, AdviceTables.paper(prior.theta()), goal_priors)
+    pieces: list[tuple[float, float]] = []  # (drift, saved) of each piece given below full
+
+    class Spy(guide.GuideAdvisor):
+        __slots__ = ()
+
+        def decide(self, state: int) -> Decision:
+            post = self.model_posterior()
+            saved = min(guide.ADVICE_BURST, self._comply[guide.SAVED] + guide.ADVICE_RATE)
+            out = super().decide(state)
+            if out.advise and post[0] + post[1] >= guide.DRIFTLESS and saved < guide.ADVICE_BURST:
+                pieces.append((self.guide.drift(self.target, state), saved))
+            return out
+
+    for k in range(3):
+        advisor = make_advisor("guide", sim.tables, 0.5, 300, None, goal_priors, sim.guide)
+        assert isinstance(advisor, guide.GuideAdvisor)
+        advisor.__class__ = Spy
+        rec = run_episode(d, make_explorer("random", d), advisor, d.goals[k],
+                          np.random.default_rng(k), advised=True, max_steps=1500)  # fmt: skip
+        assert rec.success
+    assert len(pieces) >= 50
+    assert all(drift > 0 and saved >= 1.0 + guide.ADVICE_KEEP for drift, saved in pieces)
 
 
 @settings(max_examples=20, deadline=None)
