@@ -1,0 +1,159 @@
+"""What a lead that knows the walker is lost gets at guide's budget: a reference for guide.
+
+A diagnosis, not a speed measurement. On the visitors experiment's maps and tasks (the same
+options), a walker without drift of its own (``random``: any of the actions; ``random-avoid``:
+any open move) is led by a simulated lead that knows it is lost (no belief to build) and knows
+the map: towards the nearest destination not yet passed (the nearest again once it is passed),
+with guide's budget (a quarter of a piece a move, at most 8 saved, one at the start). Two
+ways of spending it:
+
+* ``first come``: a piece whenever one is saved;
+* ``where it loses ground``: a piece where the walker's own move takes it farther from the
+  target on average (delta > 0, over its actions), anywhere only with the budget full.
+
+Beside them guide itself (compiled, the experiment's own runs of these tasks). The leads'
+walkers draw their own moves (``rng_for(seed, "lead-reference", map, walker, task)``), so
+they are compared with guide over the tasks, not task by task. Neither lead is a bound on
+what an advisor could do (a lead could order the destinations better, or spend its pieces
+better still); they show how far the spending alone goes.
+
+    .venv/bin/python benchmarks/lead_reference.py --buildings 0 --hospitals 3x64 \\
+        --hospitals 4x64 --hospitals 5x64 --tasks 100
+    .venv/bin/python benchmarks/lead_reference.py --buildings 0 --mazes maps/Paris_0_256.txt
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from app.advice.guide import ADVICE_BURST, ADVICE_RATE
+from app.experiments import visitors
+from app.experiments.common import rng_for
+from app.experiments.suite import map_suite
+from benchmarks._report import arguments
+
+LEADS = ("first come", "where it loses ground")
+
+
+def lead(
+    next_state: np.ndarray, dist: np.ndarray, drift: np.ndarray, goals: list[int], start: int,
+    goal: int, walker: str, how: str, steps: int, rng: np.random.Generator,
+) -> tuple[bool, int, int]:  # fmt: skip
+    """One task: (arrived, moves, pieces)."""
+    n_actions = next_state.shape[1]
+    at_goal = {c: i for i, c in enumerate(goals)}
+    alive = np.ones(len(goals), dtype=bool)
+    s, target, saved, pieces = start, -1, 1.0, 0
+    for t in range(steps):
+        if s == goal:
+            return True, t, pieces
+        if s in at_goal:
+            alive[at_goal[s]] = False
+        if target < 0 or not alive[target]:
+            d = np.where(alive & (dist[:, s] >= 0), dist[:, s], np.iinfo(np.int64).max)
+            target = int(np.argmin(d))
+        saved = min(ADVICE_BURST, saved + ADVICE_RATE)
+        give = saved >= 1.0 and (
+            how == "first come" or drift[target, s] > 0 or saved >= ADVICE_BURST
+        )  # fmt: skip
+        if give:
+            saved -= 1.0
+            pieces += 1
+            here = dist[target, s]
+            a = next(b for b in range(n_actions) if dist[target, next_state[s, b]] == here - 1)
+        elif walker == "random":
+            a = int(rng.integers(n_actions))
+        else:
+            moves = [b for b in range(n_actions) if next_state[s, b] != s]
+            a = moves[int(rng.integers(len(moves)))] if moves else int(rng.integers(n_actions))
+        s = int(next_state[s, a])
+    return s == goal, steps, pieces
+
+
+def drifts(next_state: np.ndarray, dist: np.ndarray, walker: str) -> np.ndarray:
+    """(G, S): the mean change of the distance to each destination of one of the walker's own
+    moves (every action, a bump 0; or the open moves)."""
+    here = dist
+    change = np.zeros(dist.shape, dtype=np.float64)
+    count = np.zeros(dist.shape[1], dtype=np.float64)
+    for a in range(next_state.shape[1]):
+        moved = next_state[:, a] != np.arange(next_state.shape[0])
+        if walker == "random":
+            change += dist[:, next_state[:, a]] - here
+            count += 1
+        else:
+            change += np.where(moved, dist[:, next_state[:, a]] - here, 0)
+            count += moved
+    return change / np.maximum(count, 1)
+
+
+def main() -> None:
+    ap = arguments(__doc__)
+    ap.add_argument("--buildings", type=int, nargs="*", default=[0], help="as the experiment's")
+    ap.add_argument("--hospitals", action="append", default=[], help="FLOORSxSIDE")
+    ap.add_argument("--hospital-goals", type=int, default=8)
+    ap.add_argument("--imdf", action="store_true")
+    ap.add_argument("--mazes", action="append", default=[], type=Path, help="a map file")
+    ap.add_argument("--walker", action="append", default=[], help="random or random-avoid")
+    ap.add_argument("--tasks", type=int, default=100)
+    ap.add_argument("--steps", type=int, default=5000)
+    a = ap.parse_args()
+    walkers = a.walker or ["random", "random-avoid"]
+    if any(w not in ("random", "random-avoid") for w in walkers):
+        ap.error("--walker: random or random-avoid")
+    exp = visitors.Args(
+        buildings=tuple(a.buildings) or (0,), hospitals=tuple(a.hospitals),
+        hospital_goals=a.hospital_goals, imdf=a.imdf, mazes=tuple(a.mazes), tasks=a.tasks,
+        steps=a.steps, visitors=tuple(walkers), progress=False, workers=1,
+    )  # fmt: skip
+    exp.check()
+    guide_config = next(c for c in visitors.configs(exp) if c.advised)
+    print(f"| map | walker | {' | '.join(LEADS)} | guide |")
+    print("|---|---|" + "---|" * (len(LEADS) + 1))
+    for spec in map_suite(exp.suite()):
+        world = visitors.place(exp, spec).world
+        d = world.domain
+        dist = np.stack([d.distances_to(g) for g in d.goals]).astype(np.int64)
+        for walker in walkers:
+            drift = drifts(d.next_state, dist, walker)
+            cells = []
+            for how in LEADS:
+                runs = [
+                    lead(d.next_state, dist, drift, list(d.goals), d.start, goal, walker, how,
+                         a.steps, rng_for(exp.seed, "lead-reference", spec.index, walker, i))
+                    for i, goal in enumerate(tqdm(world.goals, desc=f"{spec.name} {how}",
+                                                  leave=False))
+                ]  # fmt: skip
+                cells.append(run_cell(runs))
+            runs = []
+            for i, goal in enumerate(world.goals):
+                r = world.sim.fixed(
+                    walker, goal, rng_for(exp.seed, "buildings", spec.index, walker, i),
+                    advised=True, strategy=guide_config.strategy, kappa=guide_config.kappa,
+                    window=exp.window, params=guide_config.params, max_steps=a.steps,
+                    record_p=False,
+                )  # fmt: skip
+                runs.append((r.success, r.steps, r.advice_count))
+            cells.append(run_cell(runs))
+            print(f"| {spec.name} | {walker} | {' | '.join(cells)} |", flush=True)
+
+
+def run_cell(runs: list[tuple[bool, int, int]]) -> str:
+    """Success (mean moves, a task that did not arrive counting the limit; pieces per 100)."""
+    ok = np.array([r[0] for r in runs], dtype=np.float64)
+    moves = np.array([r[1] for r in runs], dtype=np.float64)
+    pieces = np.array([r[2] for r in runs], dtype=np.float64)
+    return (
+        f"{100 * ok.mean():.0f}% ({moves.mean():,.0f} moves, "
+        f"{100 * pieces.sum() / max(1.0, moves.sum()):.1f} / 100)"
+    )
+
+
+if __name__ == "__main__":
+    main()
