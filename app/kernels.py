@@ -1161,12 +1161,12 @@ def guide_decide(
         chance[a] = m
         if th > 0.0:
             kl += th * (math.log(th) - math.log(m))
-    loses = post[0] + post[1] >= params[26]  # no drift of its own (DRIFTLESS)
-    gains = False
+    driftless = post[0] + post[1] >= params[26]  # no drift of its own (DRIFTLESS)
+    loses_ground = False
     if target >= 0:  # the value: weighted by what a lost explorer's move costs here
         d = guide_drift(gmap, target, s, n_actions)  # over the open moves; L4's over every action
         kl = kl * (1.0 + (lost - post[0]) * d + post[0] * (d * gmap[1][s] / n_actions))
-        gains = d > 0.0  # its own move loses ground here
+        loses_ground = d > 0.0  # its own move, on average
     kl = kl if kl > 0.0 else 0.0
     if n_actions != 4:  # in four actions' units, as the paper's rule (``kl_scale``)
         kl = kl * (math.log(4.0) / math.log(float(n_actions)))
@@ -1196,8 +1196,8 @@ def guide_decide(
         ruled += post[4 + 3 * g + 2]
     free = ruled >= 0.5  # its detours are not held to the budget (paid for afterwards)
     if saved >= 1.0 and not free:
-        if loses and saved < params[22]:  # no drift: where its move loses ground, at no price
-            if not (gains and saved >= 1.0 + params[27]):
+        if driftless and saved < params[22]:  # no drift: where its move loses ground, at no price
+            if not (loses_ground and saved >= 1.0 + params[27]):
                 kl = 0.0
         else:
             kl = kl / (params[22] / saved) ** params[23]
