@@ -212,11 +212,26 @@ def _running(pid: int) -> bool:
     return True
 
 
+class _SizedFiles(mp.MultiProcessCollector):
+    """prometheus-client's collector of every process's files, without the files a process
+    has created but not yet sized: a metric's file is created empty and then sized, and
+    reading it in between raised (``struct.error``), so /metrics answered 500 while a new
+    worker started (prometheus/client_python issue 1199). An empty file holds no value yet."""
+
+    def collect(self) -> Any:
+        files = []
+        for f in Path(self._path).glob("*.db"):
+            with contextlib.suppress(FileNotFoundError):  # a dead worker's live gauge, gone
+                if f.stat().st_size >= 8:  # the 4-byte used count, and room for it
+                    files.append(str(f))
+        return self.merge(files, accumulate=True)  # type: ignore[no-untyped-call]
+
+
 def exposition() -> bytes:
     """The metrics in Prometheus' text format (every worker's, in multiprocess mode)."""
     if "PROMETHEUS_MULTIPROC_DIR" in os.environ:
         registry = CollectorRegistry()
-        mp.MultiProcessCollector(registry)  # type: ignore[no-untyped-call]
+        _SizedFiles(registry)  # type: ignore[no-untyped-call]
         return generate_latest(registry)
     return generate_latest(REGISTRY)
 

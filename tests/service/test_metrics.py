@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 import httpx
+import pytest
 from fastapi import FastAPI
 from fastapi.testclient import TestClient
 from prometheus_client import REGISTRY
@@ -340,9 +341,39 @@ def test_metrics_add_up_the_workers_in_prometheus_multiprocess_mode(tmp_path: Pa
     assert samples[("advisor_live_sessions", (("domain", "default"),))] == 1
 
 
+def test_metrics_read_past_a_file_a_starting_worker_has_not_sized_yet(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A worker's metric file is created empty and then sized; /metrics read in between (a
+    worker starting in a killed one's place) raised and answered 500. The empty file holds
+    no value yet and is passed over; the other workers' values are there."""
+    import os
+    import subprocess
+    import sys
+
+    env = os.environ | {"PROMETHEUS_MULTIPROC_DIR": str(tmp_path)}
+    work = (
+        "from app.service.metrics import METRICS\nMETRICS.request('GET', '/health', 200, 0.002)\n"
+    )
+    subprocess.run([sys.executable, "-c", work], env=env, check=True, timeout=120)
+    for name in ("counter_999999.db", "gauge_liveall_999998.db", "histogram_999999.db"):
+        (tmp_path / name).touch()  # created, not yet sized
+    monkeypatch.setenv("PROMETHEUS_MULTIPROC_DIR", str(tmp_path))
+    from app.service.metrics import exposition
+
+    samples = {
+        (s.name, tuple(sorted(s.labels.items()))): s.value
+        for f in text_string_to_metric_families(exposition().decode())
+        for s in f.samples
+    }
+    health = (("method", "GET"), ("route", "/health"), ("status", "200"))
+    assert samples[("advisor_http_requests_total", health)] == 1
+
+
 def live_sessions(url: str) -> float:
-    text = httpx.get(f"{url}/metrics", timeout=10).text
-    for family in text_string_to_metric_families(text):
+    r = httpx.get(f"{url}/metrics", timeout=10)
+    assert r.status_code == 200, r.text
+    for family in text_string_to_metric_families(r.text):
         for s in family.samples:
             if s.name == "advisor_live_sessions" and s.labels == {"domain": "default"}:
                 return s.value
