@@ -1117,10 +1117,9 @@ def guide_decide(
     at = n_models + 2 * n_goals * n_actions
     pcs = scratch[at : at + n_goals * n_actions].reshape((n_goals, n_actions))
     guide_route_rows(gmap, goals, alive, any_alive, s, pcs, n_actions)
+    driftless = post[0] + post[1] >= params[26]  # no drift of its own (DRIFTLESS)
     if target < 0 or not (alive[target] or not any_alive):
-        target = guide_first_of_tour(
-            dist, goals, alive, any_alive, s, max_tour, post[0] + post[1] >= params[26]
-        )
+        target = guide_first_of_tour(dist, goals, alive, any_alive, s, max_tour, driftless)
     pi_t = scratch[at + n_goals * n_actions :]
     if target >= 0:  # r_T: one shortest move (the heaviest; the heading on a tie)
         pick = -1
@@ -1161,7 +1160,6 @@ def guide_decide(
         chance[a] = m
         if th > 0.0:
             kl += th * (math.log(th) - math.log(m))
-    driftless = post[0] + post[1] >= params[26]  # no drift of its own (DRIFTLESS)
     loses_ground = False
     if target >= 0:  # the value: weighted by what a lost explorer's move costs here
         d = guide_drift(gmap, target, s, n_actions)  # over the open moves; L4's over every action

@@ -33,6 +33,7 @@ from tqdm import tqdm
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from app.advice.guide import ADVICE_BURST, ADVICE_RATE
+from app.domain.grid import bfs_distances_each
 from app.experiments import visitors
 from app.experiments.common import rng_for
 from app.experiments.suite import map_suite
@@ -79,16 +80,15 @@ def lead(
 def drifts(next_state: np.ndarray, dist: np.ndarray, walker: str) -> np.ndarray:
     """(G, S): the mean change of the distance to each destination of one of the walker's own
     moves (every action, a bump 0; or the open moves)."""
-    here = dist
     change = np.zeros(dist.shape, dtype=np.float64)
     count = np.zeros(dist.shape[1], dtype=np.float64)
     for a in range(next_state.shape[1]):
         moved = next_state[:, a] != np.arange(next_state.shape[0])
         if walker == "random":
-            change += dist[:, next_state[:, a]] - here
+            change += dist[:, next_state[:, a]] - dist
             count += 1
         else:
-            change += np.where(moved, dist[:, next_state[:, a]] - here, 0)
+            change += np.where(moved, dist[:, next_state[:, a]] - dist, 0)
             count += moved
     return change / np.maximum(count, 1)
 
@@ -119,7 +119,7 @@ def main() -> None:
     for spec in map_suite(exp.suite()):
         world = visitors.place(exp, spec).world
         d = world.domain
-        dist = np.stack([d.distances_to(g) for g in d.goals]).astype(np.int64)
+        dist = bfs_distances_each(d.next_state, d.goals)
         for walker in walkers:
             drift = drifts(d.next_state, dist, walker)
             cells = []

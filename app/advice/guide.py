@@ -1220,8 +1220,9 @@ class GuideAdvisor(Advisor):
         # the target: the first destination of the best walk through those not ruled out
         # (the least sum of arrivals for a walker without drift), planned again once it is
         # ruled out
+        driftless = post[0] + post[1] >= DRIFTLESS  # a lost walker with no drift of its own
         if self._target < 0 or not alive[self._target]:
-            self._target = g.first_of_tour(state, alive, post[0] + post[1] >= DRIFTLESS)
+            self._target = g.first_of_tour(state, alive, driftless)
         pi_t = g.open_policy(state)
         target_pi = pis[self._target] if self._target >= 0 else None
         n = g.n_actions
@@ -1262,7 +1263,6 @@ class GuideAdvisor(Advisor):
             chance[a] = m
             if th > 0.0:
                 kl += th * (math.log(th) - math.log(m))
-        driftless = post[0] + post[1] >= DRIFTLESS  # no drift of its own
         loses_ground = False
         if self._target >= 0:  # the value: weighted by what a lost explorer's move costs here
             d = g.drift(self._target, state)  # over the open moves; L4's over every action

@@ -222,7 +222,7 @@ class _SizedFiles(mp.MultiProcessCollector):
         files = []
         for f in Path(self._path).glob("*.db"):
             with contextlib.suppress(FileNotFoundError):  # a dead worker's live gauge, gone
-                if f.stat().st_size >= 8:  # the 4-byte used count, and room for it
+                if f.stat().st_size >= 8:  # sized: its 8-byte header at least
                     files.append(str(f))
         return self.merge(files, accumulate=True)  # type: ignore[no-untyped-call]
 
