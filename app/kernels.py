@@ -69,7 +69,7 @@ GuideOut = tuple[FloatArray, FloatArray, BoolArray, IntArray, FloatArray, FloatA
 #: (lam, p_lost, slack, spread, bump, the most destinations a tour is planned through)
 GuideParams = tuple[
     float, float, float, float, float, int, float, float, float, float, float, int, float, float,
-    float, int, int, int, int, int, int, float, float, float, float, int, float, float,
+    float, int, int, int, int, int, int, float, float, float, float, int, float, float, float,
 ]  # fmt: skip
 
 #: explorer kinds, in the order of app.agents.explorers.WALKERS (the paper's five first)
@@ -1067,7 +1067,9 @@ def guide_decide(
     ``comply`` as :func:`guide_observe_compliance` keeps it; ``run`` (:func:`guide_run_push`)
     the states decided for since the last piece of advice, ``s`` added here; ``fresh``: no
     advice yet this session. A caller that advises restarts ``run`` and spends a piece
-    (:func:`guide_advised`). The value returned is divided by the advice budget's price."""
+    (:func:`guide_advised`). The value returned is divided by the advice budget's price (for a
+    walker without drift or one that keeps a heading, below a full budget, held to where its
+    own move loses ground instead: ``GuideAdvisor.decide``)."""
     p_lost, slack, spread, bump, max_tour = params[1], params[2], params[3], params[4], params[5]
     backoff = params[10]
     dist = gmap[3]
@@ -1118,6 +1120,7 @@ def guide_decide(
     pcs = scratch[at : at + n_goals * n_actions].reshape((n_goals, n_actions))
     guide_route_rows(gmap, goals, alive, any_alive, s, pcs, n_actions)
     driftless = post[0] + post[1] >= params[26]  # no drift of its own (DRIFTLESS)
+    headed = not driftless and post[la_k] + post[ls_k] >= params[28]  # keeps a heading (HEADED)
     if target < 0 or not (alive[target] or not any_alive):
         target = guide_first_of_tour(dist, goals, alive, any_alive, s, max_tour, driftless)
     pi_t = scratch[at + n_goals * n_actions :]
@@ -1165,6 +1168,18 @@ def guide_decide(
         d = guide_drift(gmap, target, s, n_actions)  # over the open moves; L4's over every action
         kl = kl * (1.0 + (lost - post[0]) * d + post[0] * (d * gmap[1][s] / n_actions))
         loses_ground = d > 0.0  # its own move, on average
+        if headed:  # its own move from its heading, as LA and LS would make it
+            here = dist[target, s]
+            if here > 0:
+                ea, es = 0.0, 0.0
+                for a in range(n_actions):
+                    c = dist[target, gmap[0][s, a]] - here
+                    ea += guide_ahead(gmap[0], gmap[1], s, heading, a, 0.0, n_actions) * c
+                    es += guide_straight(gmap[0], gmap[1], s, heading, a, 0.0, n_actions) * c
+                own = (post[la_k] * ea + post[ls_k] * es) / (post[la_k] + post[ls_k])
+                loses_ground = own > 0.0
+            else:
+                loses_ground = False
     kl = kl if kl > 0.0 else 0.0
     if n_actions != 4:  # in four actions' units, as the paper's rule (``kl_scale``)
         kl = kl * (math.log(4.0) / math.log(float(n_actions)))
@@ -1194,7 +1209,7 @@ def guide_decide(
         ruled += post[4 + 3 * g + 2]
     free = ruled >= 0.5  # its detours are not held to the budget (paid for afterwards)
     if saved >= 1.0 and not free:
-        if driftless and saved < params[22]:  # no drift: where its move loses ground, at no price
+        if (driftless or headed) and saved < params[22]:  # where its move loses ground, no price
             if not (loses_ground and saved >= 1.0 + params[27]):
                 kl = 0.0
         else:

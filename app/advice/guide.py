@@ -115,7 +115,12 @@ in the order of the least sum of arrivals). With P(lost | H) the sum over L4, LO
   over a map's cells is 0 where every move can be walked back), at no price and keeping
   ``ADVICE_KEEP`` piece in hand; elsewhere only with the budget full. The price alone told
   delta 0 from delta 1/6 too weakly (KL x (1 + delta) varies more with KL): random walkers got
-  a third of their pieces where their own moves did not lose ground.
+  a third of their pieces where their own moves did not lose ground. One taken for a lost
+  walker that keeps a heading (P(LA | H) + P(LS | H) at least ``HEADED``, and not for one
+  without drift) is given its pieces so too, with its own move's mean change taken from its
+  heading, as LA and LS make it (weighted by their shares): in a corridor that leads away from
+  T its own move loses a step at every cell though delta_T there is 0 (one way on, one back),
+  and with the price it was led back only once the budget was nearly full.
 
 How far this explorer takes advice is learned per session. After each piece, whether its
 move was the advised one is weighed against the chance of that move anyway (``m``, P(A | s, H)
@@ -260,6 +265,10 @@ ADVICE_POWER = 2.0
 #: P(L4 | H) + P(LO | H) from which an explorer is taken for one whose own moves have no
 #: drift: led in the order of the least mean arrival, its pieces where its own move loses ground
 DRIFTLESS = 0.5
+#: P(LA | H) + P(LS | H) from which an explorer is taken for a lost walker that keeps a
+#: heading (never back but in a dead end; straight on): its pieces where its own move, from its
+#: heading, loses ground on average, as a walker's without drift
+HEADED = 0.5
 #: pieces such an explorer's budget keeps in hand below full (so at most a quarter as many
 #: pieces as moves over a task, the first included)
 ADVICE_KEEP = 1.0
@@ -764,19 +773,19 @@ def kernel_params(
     window: int, p: GuideParams
 ) -> tuple[
     float, float, float, float, float, int, float, float, float, float, float, int, float, float,
-    float, int, int, int, int, int, int, float, float, float, float, int, float, float,
+    float, int, int, int, int, int, int, float, float, float, float, int, float, float, float,
 ]:  # fmt: skip
     """The parameters as app/kernels.py reads them: (lam, p_lost, slack, spread, bump,
     MAX_TOUR, COMPLY_FADE, IGNORED, SURE, RELEASE, BACKOFF, COMPLY_LEVELS, CHANCE_MIN,
     CHANCE_MAX, UNDO_RUN, PURPOSE_RUN, PURPOSE_SLACK, PURPOSE_LONG, PURPOSE_LONG_SLACK,
     PURPOSE_WALK, PURPOSE_WALK_PART, ADVICE_RATE, ADVICE_BURST, ADVICE_POWER, PARTLY,
-    PURPOSE_SEARCH, DRIFTLESS, ADVICE_KEEP), with lam = 1 - 1/W the evidence's fading."""
+    PURPOSE_SEARCH, DRIFTLESS, ADVICE_KEEP, HEADED), with lam = 1 - 1/W the evidence's fading."""
     return (
         1.0 - 1.0 / window, float(p.p_lost), float(p.slack), float(p.spread), LOST_BUMP,
         MAX_TOUR, COMPLY_FADE, IGNORED, SURE, RELEASE, float(BACKOFF), COMPLY_LEVELS,
         CHANCE_MIN, CHANCE_MAX, float(UNDO_RUN), PURPOSE_RUN, PURPOSE_SLACK, PURPOSE_LONG,
         PURPOSE_LONG_SLACK, PURPOSE_WALK, PURPOSE_WALK_PART, ADVICE_RATE, ADVICE_BURST,
-        ADVICE_POWER, PARTLY, PURPOSE_SEARCH, DRIFTLESS, ADVICE_KEEP,
+        ADVICE_POWER, PARTLY, PURPOSE_SEARCH, DRIFTLESS, ADVICE_KEEP, HEADED,
     )  # fmt: skip
 
 
@@ -1162,6 +1171,19 @@ class GuideAdvisor(Advisor):
             return [1.0 if a == h else 0.0 for a in range(g.n_actions)]
         return self._ahead(s)
 
+    def _heading_drift(self, s: int, post: list[float]) -> float:
+        """The mean change of the distance to the target of the explorer's own move at ``s``
+        as LA and LS (weighted by their shares of ``post``) would make it from its heading."""
+        g, t = self.guide, self._target
+        here = int(g.dist[t, s])
+        if here <= 0:
+            return 0.0
+        change = [int(g.dist[t, int(g.next_state[s, a])]) - here for a in range(g.n_actions)]
+        la, ls = self._ahead(s), self._straight(s)
+        ea = sum(p * c for p, c in zip(la, change, strict=True))
+        es = sum(p * c for p, c in zip(ls, change, strict=True))
+        return (post[-2] * ea + post[-1] * es) / (post[-2] + post[-1])
+
     @staticmethod
     def _bumped(o: list[float]) -> list[float]:
         """A lost model's rule ``o`` with LOST_BUMP spread over every action."""
@@ -1221,6 +1243,7 @@ class GuideAdvisor(Advisor):
         # (the least sum of arrivals for a walker without drift), planned again once it is
         # ruled out
         driftless = post[0] + post[1] >= DRIFTLESS  # a lost walker with no drift of its own
+        headed = not driftless and post[-2] + post[-1] >= HEADED  # one that keeps a heading
         if self._target < 0 or not alive[self._target]:
             self._target = g.first_of_tour(state, alive, driftless)
         pi_t = g.open_policy(state)
@@ -1268,6 +1291,8 @@ class GuideAdvisor(Advisor):
             d = g.drift(self._target, state)  # over the open moves; L4's over every action
             kl = kl * (1.0 + (lost - post[0]) * d + post[0] * (d * int(g.n_open[state]) / n))
             loses_ground = d > 0.0  # its own move, on average
+            if headed:  # its own move from its heading, as LA and LS would make it
+                loses_ground = self._heading_drift(state, post) > 0.0
         kl = kl if kl > 0.0 else 0.0
         if n != 4:  # in four actions' units, as the paper's rule's (AdviceTables.kl_scale)
             kl = kl * kl_scale(n)
@@ -1296,7 +1321,7 @@ class GuideAdvisor(Advisor):
             ruled += post[N_LOST + 3 * i + 2]
         free = ruled >= 0.5  # its detours are not held to the budget (paid for afterwards)
         if saved >= 1.0 and not free:
-            if driftless and saved < ADVICE_BURST:  # where its move loses ground, no price
+            if (driftless or headed) and saved < ADVICE_BURST:  # where it loses ground, no price
                 if not (loses_ground and saved >= 1.0 + ADVICE_KEEP):
                     kl = 0.0
             else:

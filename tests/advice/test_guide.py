@@ -5,6 +5,7 @@ leaves competent ones alone."""
 from __future__ import annotations
 
 import itertools
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -210,16 +211,17 @@ def test_lost_explorers_arrive_and_competent_ones_are_left_alone(size: int) -> N
     assert extra <= 4
 
 
-def test_a_walker_without_drift_is_led_where_its_own_move_loses_ground() -> None:
-    """A random walker, taken for one whose own moves have no drift (P(L4) + P(LO) at least
-    DRIFTLESS), is given a piece while the budget is below full only where a random open move
-    takes it farther from the target on average (drift > 0), keeping ADVICE_KEEP pieces in
-    hand; and it gets such pieces (the readable advisor; the compiled one makes the same
-    decisions, tests/advice/test_guide.py's equality tests)."""
+#: what a spied decision records: (the advisor after deciding, the state, P(k | H) before)
+Spied = Callable[[guide.GuideAdvisor, int, list[float]], tuple[float, ...]]
+
+
+def pieces_below_full(walker: str, record: Spied) -> list[tuple[float, ...]]:
+    """Three episodes of ``walker`` on a generated 48 x 48 building, watched by the readable
+    guide; ``record`` of every piece it gives while the budget is below full."""
     d = generate_building_domain(48, 48, 48)
     prior, goal_priors = train_goal_priors(d, np.random.default_rng(0), "start", 10, 1.0)
     sim = Simulator(d, AdviceTables.paper(prior.theta()), goal_priors)
-    pieces: list[tuple[float, float]] = []  # (drift, saved) of each piece given below full
+    pieces: list[tuple[float, ...]] = []
 
     class Spy(guide.GuideAdvisor):
         __slots__ = ()
@@ -228,19 +230,56 @@ def test_a_walker_without_drift_is_led_where_its_own_move_loses_ground() -> None
             post = self.model_posterior()
             saved = min(guide.ADVICE_BURST, self._comply[guide.SAVED] + guide.ADVICE_RATE)
             out = super().decide(state)
-            if out.advise and post[0] + post[1] >= guide.DRIFTLESS and saved < guide.ADVICE_BURST:
-                pieces.append((self.guide.drift(self.target, state), saved))
+            if out.advise and saved < guide.ADVICE_BURST:
+                pieces.append((saved, *record(self, state, post)))
             return out
 
     for k in range(3):
         advisor = make_advisor("guide", sim.tables, 0.5, 300, None, goal_priors, sim.guide)
         assert isinstance(advisor, guide.GuideAdvisor)
         advisor.__class__ = Spy
-        rec = run_episode(d, make_explorer("random", d), advisor, d.goals[k],
+        rec = run_episode(d, make_explorer(walker, d), advisor, d.goals[k],
                           np.random.default_rng(k), advised=True, max_steps=1500)  # fmt: skip
         assert rec.success
+    return pieces
+
+
+def test_a_walker_without_drift_is_led_where_its_own_move_loses_ground() -> None:
+    """A random walker, taken for one whose own moves have no drift (P(L4) + P(LO) at least
+    DRIFTLESS), is given a piece while the budget is below full only where a random open move
+    takes it farther from the target on average (drift > 0), keeping ADVICE_KEEP pieces in
+    hand; and it gets such pieces (the readable advisor; the compiled one makes the same
+    decisions, tests/advice/test_guide.py's equality tests)."""
+
+    def drift(advisor: guide.GuideAdvisor, state: int, post: list[float]) -> tuple[float, ...]:
+        driftless = post[0] + post[1] >= guide.DRIFTLESS
+        return (float(driftless), advisor.guide.drift(advisor.target, state))
+
+    pieces = [p for p in pieces_below_full("random", drift) if p[1]]  # (saved, 1, drift)
     assert len(pieces) >= 50
-    assert all(drift > 0 and saved >= 1.0 + guide.ADVICE_KEEP for drift, saved in pieces)
+    assert all(drift > 0 and saved >= 1.0 + guide.ADVICE_KEEP for saved, _, drift in pieces)
+
+
+def test_a_walker_that_keeps_a_heading_is_led_where_its_move_from_it_loses_ground() -> None:
+    """A corridor walker (never back but in a dead end), taken for a lost walker that keeps a
+    heading (P(LA) + P(LS) at least HEADED), is given a piece while the budget is below full
+    only where its own move from its heading takes it farther from the target on average,
+    keeping ADVICE_KEEP pieces in hand: in a corridor that leads away from the target, where
+    the drift over the open moves (one on, one back) is 0 (the readable advisor; the compiled
+    one makes the same decisions, tests/agents/test_simulate.py's equality tests)."""
+
+    def own(advisor: guide.GuideAdvisor, state: int, post: list[float]) -> tuple[float, ...]:
+        headed = post[0] + post[1] < guide.DRIFTLESS and post[-2] + post[-1] >= guide.HEADED
+        return (
+            float(headed),
+            advisor._heading_drift(state, post),
+            advisor.guide.drift(advisor.target, state),
+        )
+
+    pieces = [p for p in pieces_below_full("corridor", own) if p[1]]  # (saved, 1, own, open)
+    assert len(pieces) >= 20
+    assert all(own > 0 and saved >= 1.0 + guide.ADVICE_KEEP for saved, _, own, _ in pieces)
+    assert any(open_drift <= 0 for *_, open_drift in pieces)  # in a corridor away from the target
 
 
 @settings(max_examples=20, deadline=None)
