@@ -1,25 +1,29 @@
 """What a lead that knows the walker is lost gets at guide's budget: a reference for guide.
 
 A diagnosis, not a speed measurement. On the visitors experiment's maps and tasks (the same
-options), a walker without drift of its own (``random``: any of the actions; ``random-avoid``:
-any open move) is led by a simulated lead that knows it is lost (no belief to build) and knows
-the map: towards the nearest destination not yet passed (the nearest again once it is passed),
-with guide's budget (a quarter of a piece a move, at most 8 saved, one at the start). Two
-ways of spending it:
+options), a walker (``random``: any of the actions; ``random-avoid``: any open move;
+``corridor``: any open move but back, as the corridor walker, its heading known to the lead)
+is led by a simulated lead that knows it is lost (no belief to build) and knows the map:
+towards the nearest destination not yet passed (the nearest again once it is passed), or with
+``--order floor`` along the order of the floor (the least mean arrival from the start, exact
+up to 12 destinations, else the visitors' searched order), with guide's budget (a quarter of
+a piece a move, at most 8 saved, one at the start). Two ways of spending it:
 
 * ``first come``: a piece whenever one is saved;
 * ``where it loses ground``: a piece where the walker's own move takes it farther from the
-  target on average (delta > 0, over its actions), anywhere only with the budget full.
+  target on average (delta > 0, over its own moves: for the corridor walker those from its
+  heading), anywhere only with the budget full.
 
 Beside them guide itself (compiled, the experiment's own runs of these tasks). The leads'
 walkers draw their own moves (``rng_for(seed, "lead-reference", map, walker, task)``), so
 they are compared with guide over the tasks, not task by task. Neither lead is a bound on
-what an advisor could do (a lead could order the destinations better, or spend its pieces
-better still); they show how far the spending alone goes.
+what an advisor could do (a lead could spend its pieces better still); they show how far
+the spending and the order go.
 
     .venv/bin/python benchmarks/lead_reference.py --buildings 0 --hospitals 3x64 \\
         --hospitals 4x64 --hospitals 5x64 --tasks 100
-    .venv/bin/python benchmarks/lead_reference.py --buildings 0 --mazes maps/Paris_0_256.txt
+    .venv/bin/python benchmarks/lead_reference.py --buildings 0 --mazes maps/Paris_0_256.txt \\
+        --walker corridor --order floor --tasks 200
 """
 
 from __future__ import annotations
@@ -33,6 +37,7 @@ from tqdm import tqdm
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from app.advice.guide import ADVICE_BURST, ADVICE_RATE
+from app.domain.building import Domain
 from app.domain.grid import bfs_distances_each
 from app.experiments import visitors
 from app.experiments.common import rng_for
@@ -42,37 +47,59 @@ from benchmarks._report import arguments
 LEADS = ("first come", "where it loses ground")
 
 
+def own_moves(open_moves: np.ndarray, s: int, walker: str, heading: int) -> np.ndarray:
+    """The actions the walker picks its own move from, uniformly (a bump included for
+    ``random``); the corridor walker's as :class:`app.agents.explorers.CorridorExplorer`."""
+    if walker == "random":
+        return np.arange(open_moves.shape[1])
+    moves = open_moves[s].copy()
+    if walker == "corridor":
+        back = (heading + 2) % 4
+        moves[back] = False
+        if not moves.any():
+            return np.array([back if open_moves[s, back] else heading])
+    return np.flatnonzero(moves) if moves.any() else np.arange(open_moves.shape[1])
+
+
 def lead(
-    next_state: np.ndarray, dist: np.ndarray, drift: np.ndarray, goals: list[int], start: int,
-    goal: int, walker: str, how: str, steps: int, rng: np.random.Generator,
+    d: Domain, dist: np.ndarray, drift: np.ndarray, goal: int, walker: str, how: str,
+    order: list[int] | None, steps: int, rng: np.random.Generator,
 ) -> tuple[bool, int, int]:  # fmt: skip
-    """One task: (arrived, moves, pieces)."""
+    """One task: (arrived, moves, pieces). ``order``: the destinations' order (by index), or
+    None for the nearest not passed."""
+    next_state, goals = d.next_state, list(d.goals)
     n_actions = next_state.shape[1]
     at_goal = {c: i for i, c in enumerate(goals)}
     alive = np.ones(len(goals), dtype=bool)
-    s, target, saved, pieces = start, -1, 1.0, 0
+    s, target, saved, pieces = d.start, -1, 1.0, 0
+    heading = int(rng.random() * 4) if walker == "corridor" else -1  # as at reset
     for t in range(steps):
         if s == goal:
             return True, t, pieces
         if s in at_goal:
             alive[at_goal[s]] = False
         if target < 0 or not alive[target]:
-            d = np.where(alive & (dist[:, s] >= 0), dist[:, s], np.iinfo(np.int64).max)
-            target = int(np.argmin(d))
+            if order is not None and alive.any():
+                target = next(j for j in order if alive[j])
+            else:
+                far = np.iinfo(np.int64).max
+                target = int(np.argmin(np.where(alive & (dist[:, s] >= 0), dist[:, s], far)))
         saved = min(ADVICE_BURST, saved + ADVICE_RATE)
-        give = saved >= 1.0 and (
-            how == "first come" or drift[target, s] > 0 or saved >= ADVICE_BURST
-        )  # fmt: skip
+        own = own_moves(d.open_moves, s, walker, heading)
+        here = dist[target, s]
+        if walker == "corridor":
+            loses = here > 0 and float(np.mean(dist[target, next_state[s, own]] - here)) > 0
+        else:
+            loses = drift[target, s] > 0
+        give = saved >= 1.0 and (how == "first come" or loses or saved >= ADVICE_BURST)
         if give:
             saved -= 1.0
             pieces += 1
-            here = dist[target, s]
             a = next(b for b in range(n_actions) if dist[target, next_state[s, b]] == here - 1)
-        elif walker == "random":
-            a = int(rng.integers(n_actions))
         else:
-            moves = [b for b in range(n_actions) if next_state[s, b] != s]
-            a = moves[int(rng.integers(len(moves)))] if moves else int(rng.integers(n_actions))
+            a = int(own[int(rng.integers(len(own)))])
+        if next_state[s, a] != s and a < 4:  # a ride keeps the heading
+            heading = a
         s = int(next_state[s, a])
     return s == goal, steps, pieces
 
@@ -100,13 +127,16 @@ def main() -> None:
     ap.add_argument("--hospital-goals", type=int, default=8)
     ap.add_argument("--imdf", action="store_true")
     ap.add_argument("--mazes", action="append", default=[], type=Path, help="a map file")
-    ap.add_argument("--walker", action="append", default=[], help="random or random-avoid")
+    ap.add_argument("--walker", action="append", default=[],
+                    help="random, random-avoid or corridor")  # fmt: skip
+    ap.add_argument("--order", choices=("nearest", "floor"), default="nearest",
+                    help="the leads' order: nearest first, or the floor's")  # fmt: skip
     ap.add_argument("--tasks", type=int, default=100)
     ap.add_argument("--steps", type=int, default=5000)
     a = ap.parse_args()
     walkers = a.walker or ["random", "random-avoid"]
-    if any(w not in ("random", "random-avoid") for w in walkers):
-        ap.error("--walker: random or random-avoid")
+    if any(w not in ("random", "random-avoid", "corridor") for w in walkers):
+        ap.error("--walker: random, random-avoid or corridor")
     exp = visitors.Args(
         buildings=tuple(a.buildings) or (0,), hospitals=tuple(a.hospitals),
         hospital_goals=a.hospital_goals, imdf=a.imdf, mazes=tuple(a.mazes), tasks=a.tasks,
@@ -120,13 +150,18 @@ def main() -> None:
         world = visitors.place(exp, spec).world
         d = world.domain
         dist = bfs_distances_each(d.next_state, d.goals)
+        order = None
+        if a.order == "floor":
+            legs = visitors.latency_legs(d)
+            found = visitors.min_latency_order(legs) or visitors.searched_latency_order(legs)
+            order = found[0] if found else None
         for walker in walkers:
             drift = drifts(d.next_state, dist, walker)
             cells = []
             for how in LEADS:
                 runs = [
-                    lead(d.next_state, dist, drift, list(d.goals), d.start, goal, walker, how,
-                         a.steps, rng_for(exp.seed, "lead-reference", spec.index, walker, i))
+                    lead(d, dist, drift, goal, walker, how, order, a.steps,
+                         rng_for(exp.seed, "lead-reference", spec.index, walker, i))
                     for i, goal in enumerate(tqdm(world.goals, desc=f"{spec.name} {how}",
                                                   leave=False))
                 ]  # fmt: skip
