@@ -993,6 +993,25 @@ def guide_drift(gmap: GuideArrays, t: int, s: int, k: int) -> float:  # pragma: 
     return change / n if n > 0 else 0.0
 
 
+@njit(cache=True, inline="always")
+def guide_heading_drift(
+    gmap: GuideArrays, t: int, s: int, heading: int, w_la: float, w_ls: float, k: int
+) -> float:  # pragma: no cover - compiled
+    """``GuideAdvisor._heading_drift``: the mean change of the BFS distance to destination
+    ``t`` of the explorer's own move at ``s`` as LA and LS (weights ``w_la``, ``w_ls``) make
+    it from ``heading`` (0 at ``t`` or where it cannot be reached)."""
+    next_state, n_open, dist = gmap[0], gmap[1], gmap[3]
+    here = dist[t, s]
+    if here <= 0:
+        return 0.0
+    ea, es = 0.0, 0.0
+    for a in range(k):
+        c = dist[t, next_state[s, a]] - here
+        ea += guide_ahead(next_state, n_open, s, heading, a, 0.0, k) * c
+        es += guide_straight(next_state, n_open, s, heading, a, 0.0, k) * c
+    return (w_la * ea + w_ls * es) / (w_la + w_ls)
+
+
 @njit(cache=True)
 def guide_first_of_tour(
     dist: IntArray,
@@ -1169,17 +1188,8 @@ def guide_decide(
         kl = kl * (1.0 + (lost - post[0]) * d + post[0] * (d * gmap[1][s] / n_actions))
         loses_ground = d > 0.0  # its own move, on average
         if headed:  # its own move from its heading, as LA and LS would make it
-            here = dist[target, s]
-            if here > 0:
-                ea, es = 0.0, 0.0
-                for a in range(n_actions):
-                    c = dist[target, gmap[0][s, a]] - here
-                    ea += guide_ahead(gmap[0], gmap[1], s, heading, a, 0.0, n_actions) * c
-                    es += guide_straight(gmap[0], gmap[1], s, heading, a, 0.0, n_actions) * c
-                own = (post[la_k] * ea + post[ls_k] * es) / (post[la_k] + post[ls_k])
-                loses_ground = own > 0.0
-            else:
-                loses_ground = False
+            own = guide_heading_drift(gmap, target, s, heading, post[la_k], post[ls_k], n_actions)
+            loses_ground = own > 0.0
     kl = kl if kl > 0.0 else 0.0
     if n_actions != 4:  # in four actions' units, as the paper's rule (``kl_scale``)
         kl = kl * (math.log(4.0) / math.log(float(n_actions)))
