@@ -631,7 +631,8 @@ class GuideMap:
 
     def within(self, u: int, v: int, most: int, budget: int) -> int:
         """Whether a walk of at most ``most`` moves leads from ``u`` to ``v``: 1 if one does, 0
-        if none does, -1 if the search gave up (it would queue more than ``budget`` cells). A
+        if none does, -1 if the search gave up (it would queue more than ``budget`` cells, a
+        cell once for each way it is reached: up to A x the map's cells, plus one). A
         search from ``u`` that keeps only the cells from which :meth:`apart` leaves ``v`` within
         the moves left (exact: ``apart`` never overestimates), taking first the cells whose
         moves so far plus ``apart`` are fewest (A* with a bucket a number, first in first out

@@ -586,20 +586,23 @@ def test_within_says_whether_a_walk_of_so_many_moves_leads_there(
     seed: int, kind: str, pick: int, budget: int
 ) -> None:
     """``GuideMap.within(u, v, most, budget)``: 1 if a walk of at most ``most`` moves leads
-    from u to v and 0 if none does (the BFS distance), with a budget as large as the map; with
-    a small one, the same answer or -1 (given up); the compiled ``guide_within`` gives the
-    same answers, given up where it gives up."""
+    from u to v and 0 if none does (the BFS distance), with a budget as large as the search can
+    queue (a cell once for each way it is reached: A x the map's cells, plus one; the map's
+    cells alone are not enough, a 63-cell maze queued more); with a small one, the same answer
+    or -1 (given up); the compiled ``guide_within`` gives the same answers, given up where it
+    gives up."""
     from app import kernels
 
     d = any_domain(seed, kind, 16)
     gm = GuideMap.of(d)
+    whole = d.n_states * d.n_actions + 1  # every way into every cell, and the first
     rng = np.random.default_rng(pick)
     for v in rng.integers(0, d.n_states, 4).tolist():
         dist = d.distances_to(v)
         for u in rng.integers(0, d.n_states, 12).tolist():
             for most in {-1, 0, int(dist[u]) - 1, int(dist[u]), int(dist[u]) + 2}:
                 want = 1 if 0 <= dist[u] <= most else 0
-                assert gm.within(u, v, most, d.n_states) == want, (u, v, most)
+                assert gm.within(u, v, most, whole) == want, (u, v, most)
                 got = gm.within(u, v, most, budget)
                 assert got in (want, -1)
                 fast = kernels.guide_within(
