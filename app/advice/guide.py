@@ -278,7 +278,7 @@ LEAD_PRICE = 8.0
 #: LEAD_SWEEPS; a map holds them while destinations x states is at most MAX_LEAD_CELLS
 #: (16 bytes each)
 LEAD_TOL = 0.1
-LEAD_SWEEPS = 10_000
+LEAD_SWEEPS = 2_000
 MAX_LEAD_CELLS = 2_500_000
 #: pieces such an explorer's budget keeps in hand below full (so at most a quarter as many
 #: pieces as moves over a task, the first included)
