@@ -1268,7 +1268,9 @@ def guide_decide(
         d = guide_drift(gmap, target, s, n_actions)  # over the open moves; L4's over every action
         kl = kl * (1.0 + (lost - post[0]) * d + post[0] * (d * gmap[1][s] / n_actions))
         loses_ground = d > 0.0  # its own move, on average
-        if headed and gmap[12].shape[0] > 0 and heading >= 0 and pick >= 0:
+        # over its way where it takes what it is given (the values' leads are taken)
+        whole = guide_compliance_below(comply[: params[11]], params[24]) < 0.5
+        if headed and whole and gmap[12].shape[0] > 0 and heading >= 0 and pick >= 0:
             w_la, w_ls = post[la_k], post[ls_k]
             gain = guide_lead_gain(gmap, target, s, heading, pick, w_la, w_ls, n_actions)
             loses_ground = gain > params[29]  # LEAD_PRICE
