@@ -1054,6 +1054,18 @@ def guide_lead_values(
     k = next_state.shape[1]
     out = np.zeros((n_goals, n_states, 4), dtype=np.float32)
     v = np.zeros((n_states, 4))
+    # each state's moves that move, in the order of the actions (a ride's heading is the
+    # walker's, a compass move's its own: read once a cell, not once a heading)
+    nb = np.zeros((n_states, k), dtype=np.int64)
+    act = np.zeros((n_states, k), dtype=np.int64)
+    cnt = np.zeros(n_states, dtype=np.int64)
+    for c in range(n_states):
+        for a in range(k):
+            if next_state[c, a] != c:
+                nb[c, cnt[c]] = next_state[c, a]
+                act[c, cnt[c]] = a
+                cnt[c] += 1
+    w = np.zeros(k)
     for g in range(n_goals):
         dt = dist[g]
         order = np.argsort(dt, kind="mergesort")
@@ -1064,22 +1076,24 @@ def guide_lead_values(
             change = 0.0
             for c in order:
                 here = dt[c]
-                if here <= 0 or n_open[c] == 0:
+                m = cnt[c]
+                if here <= 0 or m == 0:
                     continue
+                for j in range(m):
+                    if act[c, j] < 4:
+                        w[j] = v[nb[c, j], act[c, j]]
                 for h in range(4):
                     back = (h + 2) % 4
-                    ahead = n_open[c] > 1 and next_state[c, back] != c
+                    ahead = m > 1 and next_state[c, back] != c
                     own, n, led = 0.0, 0, np.inf
-                    for a in range(k):
-                        u = next_state[c, a]
-                        if u == c:
-                            continue
-                        hu = a if a < 4 else h
-                        if dt[u] == here - 1 and v[u, hu] < led:
-                            led = v[u, hu]
+                    for j in range(m):
+                        a, u = act[c, j], nb[c, j]
+                        x = w[j] if a < 4 else v[u, h]
+                        if dt[u] == here - 1 and x < led:
+                            led = x
                         if ahead and a == back:
                             continue
-                        own += v[u, hu]
+                        own += x
                         n += 1
                     best = 1.0 + own / n
                     if 1.0 + price + led < best:

@@ -30,6 +30,8 @@ the spending and the order go.
         --hospitals 4x64 --hospitals 5x64 --tasks 100
     .venv/bin/python benchmarks/lead_reference.py --buildings 0 --mazes maps/Paris_0_256.txt \\
         --walker corridor --order floor --tasks 200
+    .venv/bin/python benchmarks/lead_reference.py --buildings 0 --hospitals 3x64 \\
+        --hospitals 4x64 --hospitals 5x64 --walker corridor --tasks 100 --optimal
 """
 
 from __future__ import annotations

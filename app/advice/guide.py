@@ -122,13 +122,14 @@ in the order of the least sum of arrivals). With P(lost | H) the sum over L4, LO
   T its own move loses a step at every cell though delta_T there is 0 (one way on, one back),
   and with the price it was led back only once the budget was nearly full. Where the map has
   lead values (:func:`lead_values`: the mean moves to T of a walker that never turns back, led
-  at ``LEAD_PRICE`` moves a piece), "loses ground" is reckoned over its way, not its next
-  move: a piece below a full budget goes where the mean value after its own move, from its
+  at ``LEAD_PRICE`` moves a piece) and the explorer is taken to take what it is given
+  (P(compliance < PARTLY) below 1/2: the values' leads are taken), "loses ground" is reckoned
+  over its way, not its next move: a piece below a full budget goes where the mean value after its own move, from its
   heading, exceeds the value after r_T by more than LEAD_PRICE. A corridor walker keeps the
   way it is given: a piece that turns it into the right corridor saves the corridor, one in
   an open room about a move (on the 5-floor 64 x 64 hospital a lead that gave its pieces
   where the next move lost ground got corridor walkers there in 88% of tasks, one that spent
-  the same budget exactly, leg by leg, in 97%: docs/RESULTS.md).
+  the same budget exactly, leg by leg, in 96%: docs/RESULTS.md).
 
 How far this explorer takes advice is learned per session. After each piece, whether its
 move was the advised one is weighed against the chance of that move anyway (``m``, P(A | s, H)
