@@ -124,8 +124,9 @@ in the order of the least sum of arrivals). With P(lost | H) the sum over L4, LO
   lead values (:func:`lead_values`: the mean moves to T of a walker that never turns back, led
   at ``LEAD_PRICE`` moves a piece) and the explorer is taken to take what it is given
   (P(compliance < PARTLY) below 1/2: the values' leads are taken), "loses ground" is reckoned
-  over its way, not its next move: a piece below a full budget goes where the mean value after its own move, from its
-  heading, exceeds the value after r_T by more than LEAD_PRICE. A corridor walker keeps the
+  over its way, not its next move: a piece below a full budget goes where the mean value
+  after its own move, from its heading, exceeds the value after r_T by more than
+  LEAD_PRICE. A corridor walker keeps the
   way it is given: a piece that turns it into the right corridor saves the corridor, one in
   an open room about a move (on the 5-floor 64 x 64 hospital a lead that gave its pieces
   where the next move lost ground got corridor walkers there in 88% of tasks, one that spent
