@@ -3,15 +3,7 @@ what an entry is (:mod:`app.strategies.entry`) and the forms a service runs
 (:mod:`app.strategies.stream`)."""
 
 from app.strategies.entry import AdvisorSettings, DomainData, Level, Need, Strategy
-from app.strategies.table import (
-    STRATEGIES,
-    compiled_leads,
-    get,
-    make_advisor,
-    names,
-    register,
-    unregister,
-)
+from app.strategies.table import STRATEGIES, get, make_advisor, names, register, unregister
 
 __all__ = [
     "STRATEGIES",
@@ -20,7 +12,6 @@ __all__ = [
     "Level",
     "Need",
     "Strategy",
-    "compiled_leads",
     "get",
     "make_advisor",
     "names",
