@@ -11,6 +11,7 @@ import numpy.typing as npt
 
 IntArray = npt.NDArray[np.int64]
 FloatArray = npt.NDArray[np.float64]
+Float32Array = npt.NDArray[np.float32]  # values kept by the million (a guide map's leads)
 BoolArray = npt.NDArray[np.bool_]
 KeyArray = npt.NDArray[np.int32]  # pair keys s * 4 + a, or cells, as int32
 ByteArray = npt.NDArray[np.uint8]  # bytes of text, or flags

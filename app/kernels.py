@@ -38,7 +38,7 @@ import math
 import numpy as np
 from numba import njit
 
-from app.arrays import BoolArray, ByteArray, FloatArray, IntArray, KeyArray
+from app.arrays import BoolArray, ByteArray, Float32Array, FloatArray, IntArray, KeyArray
 
 Tables = tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]
 GoalTables = tuple[IntArray, float, FloatArray, FloatArray, FloatArray]
@@ -48,7 +48,8 @@ GoalTables = tuple[IntArray, float, FloatArray, FloatArray, FloatArray]
 #: landmark (L, S); in a building of several floors each state's floor (S,), (0,) on one floor;
 #: the compass moves of every state and destination (S, G: ``compass_table``); whether the row
 #: plus column difference bounds a walk's moves; the moves more a quickest walk may take a floor
-#: it rides, 0 on one floor): ``GuideMap.arrays``
+#: it rides, 0 on one floor; the lead values (G, S, 4) float32, (0, 0, 4) without them):
+#: ``GuideMap.arrays``
 GuideArrays = tuple[
     IntArray,
     IntArray,
@@ -62,6 +63,7 @@ GuideArrays = tuple[
     ByteArray,
     bool,
     int,
+    Float32Array,
 ]
 #: what a guide batch fills (:func:`guide_stream`): kl, p_normal, advise, count, benefit,
 #: advice (n, A)
@@ -70,6 +72,7 @@ GuideOut = tuple[FloatArray, FloatArray, BoolArray, IntArray, FloatArray, FloatA
 GuideParams = tuple[
     float, float, float, float, float, int, float, float, float, float, float, int, float, float,
     float, int, int, int, int, int, int, float, float, float, float, int, float, float, float,
+    float,
 ]  # fmt: skip
 
 #: explorer kinds, in the order of app.agents.explorers.WALKERS (the paper's five first)
@@ -646,7 +649,7 @@ def guide_fill_rows(
     """Fill ``rows`` (2 G, A) with every destination's pi_g(. | s) (``GuideMap.policy``),
     then its c_g(. | s) (``GuideMap.compass``). One loop, the arrays read in it (a compiled
     call per destination that takes arrays costs more than the arithmetic)."""
-    next_state, n_open, _, dist, _, counts, _, _, _, table, _, _ = gmap
+    next_state, n_open, _, dist, _, counts, _, _, _, table, _, _, _ = gmap
     n_goals = goals.shape[0]
     n = n_open[s]
     mask = guide_open_moves(next_state, s, k)
@@ -684,7 +687,7 @@ def guide_route_rows(
     ruled out (every one when none is left): the open moves after which the fewest moves it
     would not make by itself remain, its own moves first (at g, or where g cannot be
     reached, the open moves)."""
-    next_state, n_open, _, _, _, _, detour, _, _, table, _, _ = gmap
+    next_state, n_open, _, _, _, _, detour, _, _, table, _, _, _ = gmap
     n = n_open[s]
     mask = guide_open_moves(next_state, s, k)
     for g in range(goals.shape[0]):
@@ -1012,6 +1015,98 @@ def guide_heading_drift(
     return (w_la * ea + w_ls * es) / (w_la + w_ls)
 
 
+@njit(cache=True, inline="always")
+def guide_lead_gain(
+    gmap: GuideArrays, t: int, s: int, heading: int, advice: int, w_la: float, w_ls: float,
+    k: int,
+) -> float:  # pragma: no cover - compiled  # fmt: skip
+    """``GuideAdvisor._lead_gain``: the moves a piece leading by ``advice`` saves at ``s``
+    (the lead values of destination ``t``): the mean over LA's and LS's own move from
+    ``heading`` (weights ``w_la``, ``w_ls``) of the value where it leads, less the advice's."""
+    next_state, n_open, lead = gmap[0], gmap[1], gmap[12]
+    if gmap[3][t, s] <= 0:
+        return 0.0
+    ea, es = 0.0, 0.0
+    for a in range(k):
+        u = next_state[s, a]
+        after = float(lead[t, u, a if u != s and a < 4 else heading])
+        pa = guide_ahead(next_state, n_open, s, heading, a, 0.0, k)
+        if pa > 0.0:
+            ea += pa * after
+        ps = guide_straight(next_state, n_open, s, heading, a, 0.0, k)
+        if ps > 0.0:
+            es += ps * after
+    u = next_state[s, advice]
+    led = float(lead[t, u, advice if u != s and advice < 4 else heading])
+    return (w_la * ea + w_ls * es) / (w_la + w_ls) - led
+
+
+@njit(cache=True, nogil=True)
+def guide_lead_values(
+    next_state: IntArray, n_open: IntArray, dist: IntArray, price: float, tol: float,
+    most: int,
+) -> Float32Array:  # pragma: no cover - compiled  # fmt: skip
+    """``app.advice.guide.lead_values``, the same sweeps: (G, S, 4) float32, for each
+    destination, state and heading the mean moves to it of a walker that never turns back but
+    in a dead end (LA's rule), led at a cost of ``price`` moves a piece wherever a piece is
+    worth that."""
+    n_goals, n_states = dist.shape
+    k = next_state.shape[1]
+    out = np.zeros((n_goals, n_states, 4), dtype=np.float32)
+    v = np.zeros((n_states, 4))
+    # each state's moves that move, in the order of the actions (a ride's heading is the
+    # walker's, a compass move's its own: read once a cell, not once a heading)
+    nb = np.zeros((n_states, k), dtype=np.int64)
+    act = np.zeros((n_states, k), dtype=np.int64)
+    cnt = np.zeros(n_states, dtype=np.int64)
+    for c in range(n_states):
+        for a in range(k):
+            if next_state[c, a] != c:
+                nb[c, cnt[c]] = next_state[c, a]
+                act[c, cnt[c]] = a
+                cnt[c] += 1
+    w = np.zeros(k)
+    for g in range(n_goals):
+        dt = dist[g]
+        order = np.argsort(dt, kind="mergesort")
+        for c in range(n_states):  # from above: led at every move
+            for h in range(4):
+                v[c, h] = (1.0 + price) * dt[c] if dt[c] > 0 else 0.0
+        for _ in range(most):
+            change = 0.0
+            for c in order:
+                here = dt[c]
+                m = cnt[c]
+                if here <= 0 or m == 0:
+                    continue
+                for j in range(m):
+                    if act[c, j] < 4:
+                        w[j] = v[nb[c, j], act[c, j]]
+                for h in range(4):
+                    back = (h + 2) % 4
+                    ahead = m > 1 and next_state[c, back] != c
+                    own, n, led = 0.0, 0, np.inf
+                    for j in range(m):
+                        a, u = act[c, j], nb[c, j]
+                        x = w[j] if a < 4 else v[u, h]
+                        if dt[u] == here - 1 and x < led:
+                            led = x
+                        if ahead and a == back:
+                            continue
+                        own += x
+                        n += 1
+                    best = 1.0 + own / n
+                    if 1.0 + price + led < best:
+                        best = 1.0 + price + led
+                    if abs(best - v[c, h]) > change:
+                        change = abs(best - v[c, h])
+                    v[c, h] = best
+            if change < tol:
+                break
+        out[g] = v.astype(np.float32)
+    return out
+
+
 @njit(cache=True)
 def guide_first_of_tour(
     dist: IntArray,
@@ -1143,8 +1238,8 @@ def guide_decide(
     if target < 0 or not (alive[target] or not any_alive):
         target = guide_first_of_tour(dist, goals, alive, any_alive, s, max_tour, driftless)
     pi_t = scratch[at + n_goals * n_actions :]
+    pick = -1
     if target >= 0:  # r_T: one shortest move (the heaviest; the heading on a tie)
-        pick = -1
         for a in range(n_actions):
             if (
                 pick < 0
@@ -1187,7 +1282,13 @@ def guide_decide(
         d = guide_drift(gmap, target, s, n_actions)  # over the open moves; L4's over every action
         kl = kl * (1.0 + (lost - post[0]) * d + post[0] * (d * gmap[1][s] / n_actions))
         loses_ground = d > 0.0  # its own move, on average
-        if headed:  # its own move from its heading, as LA and LS would make it
+        # over its way where it takes what it is given (the values' leads are taken)
+        whole = guide_compliance_below(comply[: params[11]], params[24]) < 0.5
+        if headed and whole and gmap[12].shape[0] > 0 and heading >= 0 and pick >= 0:
+            w_la, w_ls = post[la_k], post[ls_k]
+            gain = guide_lead_gain(gmap, target, s, heading, pick, w_la, w_ls, n_actions)
+            loses_ground = gain > params[29]  # LEAD_PRICE
+        elif headed:  # its own move from its heading, as LA and LS would make it
             own = guide_heading_drift(gmap, target, s, heading, post[la_k], post[ls_k], n_actions)
             loses_ground = own > 0.0
     kl = kl if kl > 0.0 else 0.0

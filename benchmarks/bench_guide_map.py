@@ -3,7 +3,8 @@
 What a PUT of a map of several floors builds in its worker thread for ``guide``
 (:meth:`app.advice.guide.GuideMap.of`): the BFS distances from every destination, the compass
 detours to each (the building's compass: the nearest stop towards the destination's floor,
-and the ride there) and the landmarks' distances. Measured two ways on a generated hospital
+and the ride there) and the landmarks' distances; and then, timed apart, its lead values
+(compiled, as the simulator and the service make them). Measured two ways on a generated hospital
 (``maze generate --kind building --floors F --purpose hospital``): the numpy searches the
 experiments use and the compiled ones the service
 uses (``kernels.guide_distances`` and ``guide_detours``, compiled ``nogil``, so the
@@ -31,6 +32,7 @@ from app.advice.guide import GuideMap
 from app.domain.building import Building
 from app.domain.floorplans import generate_floors
 from app.service.data.domains import compiled_searches
+from app.strategies import compiled_leads
 from benchmarks._report import arguments, command_line, machine, write_section
 
 
@@ -63,7 +65,14 @@ def main() -> None:
             start = time.perf_counter()
             make(building)
             got[way].append(time.perf_counter() - start)
+    leads: list[float] = []  # the lead values, compiled (already compiled: the check above)
+    compiled_leads(fast.next_state, fast.n_open, fast.dist)
+    for _ in range(args.repeats):
+        start = time.perf_counter()
+        compiled_leads(fast.next_state, fast.n_open, fast.dist)
+        leads.append(time.perf_counter() - start)
     med = {k: statistics.median(v) for k, v in got.items()}
+    lead = statistics.median(leads)
     body = (
         "## A building's guide map: the numpy searches and the compiled ones\n\n"
         f"Command: `{command_line()}` (the median of {args.repeats} runs of each way, in turn)\n\n"
@@ -78,7 +87,10 @@ def main() -> None:
         f"| compiled, without the GIL (the service's PUT) | {med['compiled']:.3f} s "
         f"({min(got['compiled']):.3f}-{max(got['compiled']):.3f}) |\n\n"
         f"The compiled searches take {med['compiled'] / med['numpy']:.2f} times the numpy "
-        "searches' time.\n"
+        "searches' time.\n\n"
+        "Besides the searches, both build the map's lead values (`GuideMap.lead`, compiled "
+        f"`kernels.guide_lead_values`, {len(building.goals)} x {building.n_states:,} x 4): "
+        f"{lead:.1f} s ({min(leads):.1f}-{max(leads):.1f}).\n"
     )
     print(body)
     if args.write:

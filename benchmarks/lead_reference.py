@@ -12,7 +12,13 @@ a piece a move, at most 8 saved, one at the start). Two ways of spending it:
 * ``first come``: a piece whenever one is saved;
 * ``where it loses ground``: a piece where the walker's own move takes it farther from the
   target on average (delta > 0, over its own moves: for the corridor walker those from its
-  heading), anywhere only with the budget full.
+  heading), anywhere only with the budget full;
+* ``spent optimally`` (corridor walkers, with ``--optimal``): for each leg (the target as
+  above) the spending that minimises the mean moves to the target, exactly: a dynamic
+  programme over cell, heading and pieces saved (in quarters, 0 to 8 pieces), solved by
+  Gauss-Seidel sweeps in the order of the distance to the target (until no value changes by
+  0.01 moves). What a lead that knows the target and the heading can get from the budget on
+  each leg (not across legs: the order is the lead's).
 
 Beside them guide itself (compiled, the experiment's own runs of these tasks). The leads'
 walkers draw their own moves (``rng_for(seed, "lead-reference", map, walker, task)``), so
@@ -24,14 +30,18 @@ the spending and the order go.
         --hospitals 4x64 --hospitals 5x64 --tasks 100
     .venv/bin/python benchmarks/lead_reference.py --buildings 0 --mazes maps/Paris_0_256.txt \\
         --walker corridor --order floor --tasks 200
+    .venv/bin/python benchmarks/lead_reference.py --buildings 0 --hospitals 3x64 \\
+        --hospitals 4x64 --hospitals 5x64 --walker corridor --tasks 100 --optimal
 """
 
 from __future__ import annotations
 
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
+from numba import njit
 from tqdm import tqdm
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -45,6 +55,65 @@ from app.experiments.suite import map_suite
 from benchmarks._report import arguments
 
 LEADS = ("first come", "where it loses ground")
+OPTIMAL = "spent optimally"
+QUARTERS = 32  # the budget in quarter pieces: at most ADVICE_BURST (8) pieces saved
+
+
+def corridor_moves(next_state: np.ndarray, open_moves: np.ndarray) -> tuple[np.ndarray, ...]:
+    """(S x 4, A) successors (state x 4 + heading) of the corridor walker's own moves from
+    each state and heading, and how many: ``own_moves``' moves, a ride keeping the heading."""
+    n_states, n_actions = next_state.shape
+    nxt = np.zeros((n_states * 4, n_actions), dtype=np.int64)
+    cnt = np.zeros(n_states * 4, dtype=np.int64)
+    for c in range(n_states):
+        for h in range(4):
+            moves = own_moves(open_moves, c, "corridor", h)
+            for k, a in enumerate(moves):
+                u = int(next_state[c, a])
+                nxt[c * 4 + h, k] = u * 4 + (int(a) if u != c and a < 4 else h)
+            cnt[c * 4 + h] = len(moves)
+    return nxt, cnt
+
+
+def led_moves(next_state: np.ndarray, dt: np.ndarray) -> np.ndarray:
+    """(S x 4,) the successor of the lead's piece (the first shortest move) from each state
+    and heading; the state itself at the target or where it cannot be reached."""
+    n_states, n_actions = next_state.shape
+    out = np.arange(n_states * 4, dtype=np.int64)
+    for c in range(n_states):
+        if dt[c] > 0:
+            a = next(b for b in range(n_actions) if dt[next_state[c, b]] == dt[c] - 1)
+            u = int(next_state[c, a])
+            for h in range(4):
+                out[c * 4 + h] = u * 4 + (a if a < 4 else h)
+    return out
+
+
+@njit(cache=True)
+def optimal_spending(order, nxt, cnt, led, target, rate, burst, tol, most):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """(S x 4, burst + 1): the least mean moves to ``target`` from each state, heading and
+    budget (quarters saved before the move's ``rate`` is added)."""
+    v = np.zeros((nxt.shape[0], burst + 1))
+    for _ in range(most):
+        change = 0.0
+        for c in order:
+            if c == target:
+                continue
+            for h in range(4):
+                i = c * 4 + h
+                for q in range(burst + 1):
+                    q1 = min(burst, q + rate)
+                    own = 0.0
+                    for k in range(cnt[i]):
+                        own += v[nxt[i, k], q1]
+                    best = 1.0 + own / cnt[i]
+                    if q1 >= 4 and 1.0 + v[led[i], q1 - 4] < best:
+                        best = 1.0 + v[led[i], q1 - 4]
+                    change = max(change, abs(best - v[i, q]))
+                    v[i, q] = best
+        if change < tol:
+            break
+    return v
 
 
 def own_moves(open_moves: np.ndarray, s: int, walker: str, heading: int) -> np.ndarray:
@@ -64,9 +133,11 @@ def own_moves(open_moves: np.ndarray, s: int, walker: str, heading: int) -> np.n
 def lead(
     d: Domain, dist: np.ndarray, drift: np.ndarray, goal: int, walker: str, how: str,
     order: list[int] | None, steps: int, rng: np.random.Generator,
+    spending: Callable[[int], tuple[np.ndarray, ...]] | None = None,
 ) -> tuple[bool, int, int]:  # fmt: skip
     """One task: (arrived, moves, pieces). ``order``: the destinations' order (by index), or
-    None for the nearest not passed."""
+    None for the nearest not passed; ``spending``: for ``spent optimally``, a target's
+    programme (values, own successors, their count, the lead's successors)."""
     next_state, goals = d.next_state, list(d.goals)
     n_actions = next_state.shape[1]
     at_goal = {c: i for i, c in enumerate(goals)}
@@ -87,6 +158,18 @@ def lead(
         saved = min(ADVICE_BURST, saved + ADVICE_RATE)
         own = own_moves(d.open_moves, s, walker, heading)
         here = dist[target, s]
+        if how == OPTIMAL:  # the exact programme's choice, the budget in quarters
+            assert spending is not None
+            v, nxt, cnt, led = spending(target)
+            i, q = s * 4 + heading, round(4 * saved)
+            own_value = float(np.mean(v[nxt[i, : cnt[i]], q]))
+            give = q >= 4 and float(v[led[i], q - 4]) < own_value
+            if give:
+                saved, pieces = saved - 1.0, pieces + 1
+                s, heading = divmod(int(led[i]), 4)
+            else:
+                s, heading = divmod(int(nxt[i, int(rng.integers(cnt[i]))]), 4)
+            continue
         if walker == "corridor":
             loses = here > 0 and float(np.mean(dist[target, next_state[s, own]] - here)) > 0
         else:
@@ -131,6 +214,8 @@ def main() -> None:
                     help="random, random-avoid or corridor")  # fmt: skip
     ap.add_argument("--order", choices=("nearest", "floor"), default="nearest",
                     help="the leads' order: nearest first, or the floor's")  # fmt: skip
+    ap.add_argument("--optimal", action="store_true",
+                    help="corridor walkers: the budget spent optimally too (slow)")  # fmt: skip
     ap.add_argument("--tasks", type=int, default=100)
     ap.add_argument("--steps", type=int, default=5000)
     a = ap.parse_args()
@@ -144,8 +229,9 @@ def main() -> None:
     )  # fmt: skip
     exp.check()
     guide_config = next(c for c in visitors.configs(exp) if c.advised)
-    print(f"| map | walker | {' | '.join(LEADS)} | guide |")
-    print("|---|---|" + "---|" * (len(LEADS) + 1))
+    heads = (*LEADS, OPTIMAL) if a.optimal else LEADS
+    print(f"| map | walker | {' | '.join(heads)} | guide |")
+    print("|---|---|" + "---|" * (len(heads) + 1))
     for spec in map_suite(exp.suite()):
         world = visitors.place(exp, spec).world
         d = world.domain
@@ -158,14 +244,17 @@ def main() -> None:
         for walker in walkers:
             drift = drifts(d.next_state, dist, walker)
             cells = []
-            for how in LEADS:
+            spend = spending(d, dist) if walker == "corridor" else None
+            for how in (*LEADS, OPTIMAL) if a.optimal and spend is not None else LEADS:
                 runs = [
                     lead(d, dist, drift, goal, walker, how, order, a.steps,
-                         rng_for(exp.seed, "lead-reference", spec.index, walker, i))
+                         rng_for(exp.seed, "lead-reference", spec.index, walker, i), spend)
                     for i, goal in enumerate(tqdm(world.goals, desc=f"{spec.name} {how}",
                                                   leave=False))
                 ]  # fmt: skip
                 cells.append(run_cell(runs))
+            if a.optimal and spend is None:
+                cells.append("-")
             runs = []
             for i, goal in enumerate(world.goals):
                 r = world.sim.fixed(
@@ -177,6 +266,24 @@ def main() -> None:
                 runs.append((r.success, r.steps, r.advice_count))
             cells.append(run_cell(runs))
             print(f"| {spec.name} | {walker} | {' | '.join(cells)} |", flush=True)
+
+
+def spending(d: Domain, dist: np.ndarray) -> Callable[[int], tuple[np.ndarray, ...]]:
+    """Each target's optimal spending (:func:`optimal_spending`), made when first asked."""
+    nxt, cnt = corridor_moves(d.next_state, d.open_moves)
+    made: dict[int, tuple[np.ndarray, ...]] = {}
+
+    def of(target: int) -> tuple[np.ndarray, ...]:
+        if target not in made:
+            dt = dist[target]
+            order = np.argsort(np.where(dt >= 0, dt, np.iinfo(np.int64).max), kind="stable")
+            led = led_moves(d.next_state, dt)
+            v = optimal_spending(order[dt[order] >= 0], nxt, cnt, led, int(d.goals[target]),
+                                 round(4 * ADVICE_RATE), QUARTERS, 0.01, 100_000)  # fmt: skip
+            made[target] = (v, nxt, cnt, led)
+        return made[target]
+
+    return of
 
 
 def run_cell(runs: list[tuple[bool, int, int]]) -> str:

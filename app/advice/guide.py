@@ -120,7 +120,17 @@ in the order of the least sum of arrivals). With P(lost | H) the sum over L4, LO
   without drift) is given its pieces so too, with its own move's mean change taken from its
   heading, as LA and LS make it (weighted by their shares): in a corridor that leads away from
   T its own move loses a step at every cell though delta_T there is 0 (one way on, one back),
-  and with the price it was led back only once the budget was nearly full.
+  and with the price it was led back only once the budget was nearly full. Where the map has
+  lead values (:func:`lead_values`: the mean moves to T of a walker that never turns back, led
+  at ``LEAD_PRICE`` moves a piece) and the explorer is taken to take what it is given
+  (P(compliance < PARTLY) below 1/2: the values' leads are taken), "loses ground" is reckoned
+  over its way, not its next move: a piece below a full budget goes where the mean value
+  after its own move, from its heading, exceeds the value after r_T by more than
+  LEAD_PRICE. A corridor walker keeps the
+  way it is given: a piece that turns it into the right corridor saves the corridor, one in
+  an open room about a move (on the 5-floor 64 x 64 hospital a lead that gave its pieces
+  where the next move lost ground got corridor walkers there in 88% of tasks, one that spent
+  the same budget exactly, leg by leg, in 96%: docs/RESULTS.md).
 
 How far this explorer takes advice is learned per session. After each piece, whether its
 move was the advised one is weighed against the chance of that move anyway (``m``, P(A | s, H)
@@ -195,7 +205,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from functools import partial
 from itertools import pairwise
 
@@ -205,7 +215,7 @@ from app.advice.advisor import DEFAULT_KAPPA, DEFAULT_WINDOW, Advisor, Decision
 from app.advice.models import AdviceTables, kl_scale
 from app.advice.params import StrategyParams
 from app.advice.priors import GoalPriors
-from app.arrays import ByteArray, FloatArray, IntArray
+from app.arrays import ByteArray, Float32Array, FloatArray, IntArray
 from app.domain.building import Building, Domain, n_floors
 from app.domain.grid import (
     N_ACTIONS,
@@ -269,6 +279,17 @@ DRIFTLESS = 0.5
 #: heading (never back but in a dead end; straight on): its pieces where its own move, from its
 #: heading, loses ground on average, as a walker's without drift
 HEADED = 0.5
+#: for such an explorer, where the map has them (:attr:`GuideMap.lead`): a piece below a full
+#: budget where it saves more than LEAD_PRICE moves, as :func:`lead_values` reckons a walk
+#: that keeps a heading led at that price a piece (its own moves on the way counted, not only
+#: the next one: a piece that turns it into the right corridor saves the corridor)
+LEAD_PRICE = 8.0
+#: :func:`lead_values`' sweeps end once no value changes by LEAD_TOL moves, or after
+#: LEAD_SWEEPS; a map holds them while destinations x states is at most MAX_LEAD_CELLS
+#: (16 bytes each)
+LEAD_TOL = 0.1
+LEAD_SWEEPS = 2_000
+MAX_LEAD_CELLS = 2_500_000
 #: pieces such an explorer's budget keeps in hand below full (so at most a quarter as many
 #: pieces as moves over a task, the first included)
 ADVICE_KEEP = 1.0
@@ -317,6 +338,58 @@ Searches = Callable[
 ]
 #: (next_state (S, 4), targets) -> the BFS distance from every state to each target (k, S)
 Distances = Callable[[IntArray, IntArray], IntArray]
+#: (next_state (S, A), open moves per state (S,), distances (G, S)) -> :func:`lead_values`
+Leads = Callable[[IntArray, IntArray, IntArray], Float32Array]
+
+
+def lead_values(next_state: IntArray, n_open: IntArray, dist: IntArray) -> Float32Array:
+    """(G, S, 4) float32: for each destination, state and heading, the mean moves to the
+    destination of a walker that never turns back but in a dead end (LA's rule: uniform over
+    the open moves but back, back only where nothing else is open; a ride keeps the heading),
+    led by a shortest move wherever that is worth a piece at ``LEAD_PRICE`` moves::
+
+        V(s, h) = min(1 + mean over its own moves a of V(s_a, h_a),
+                      1 + LEAD_PRICE + min over shortest moves a of V(s_a, h_a))
+
+    0 at the destination and where it cannot be reached. Gauss-Seidel sweeps over the states
+    in the order of their distance to it, from the walk led at every move, (1 + LEAD_PRICE) x
+    the distance, down, until no value changes by ``LEAD_TOL`` or after ``LEAD_SWEEPS``
+    sweeps. Plain Python (slow): ``kernels.guide_lead_values`` makes the same sweeps."""
+    n_goals, n_states = dist.shape
+    k = next_state.shape[1]
+    out = np.zeros((n_goals, n_states, 4), dtype=np.float32)
+    for g in range(n_goals):
+        dt = [int(x) for x in dist[g]]
+        order = [int(c) for c in np.argsort(dist[g], kind="mergesort")]
+        v = [[(1.0 + LEAD_PRICE) * dt[c] if dt[c] > 0 else 0.0] * 4 for c in range(n_states)]
+        for _ in range(LEAD_SWEEPS):
+            change = 0.0
+            for c in order:
+                here = dt[c]
+                if here <= 0 or int(n_open[c]) == 0:
+                    continue
+                for h in range(4):
+                    back = (h + 2) % 4
+                    ahead = int(n_open[c]) > 1 and int(next_state[c, back]) != c
+                    own, n, led = 0.0, 0, math.inf
+                    for a in range(k):
+                        u = int(next_state[c, a])
+                        if u == c:
+                            continue
+                        hu = a if a < 4 else h
+                        if dt[u] == here - 1 and v[u][hu] < led:
+                            led = v[u][hu]
+                        if ahead and a == back:
+                            continue
+                        own += v[u][hu]
+                        n += 1
+                    best = min(1.0 + own / n, 1.0 + LEAD_PRICE + led)
+                    change = max(change, abs(best - v[c][h]))
+                    v[c][h] = best
+            if change < LEAD_TOL:
+                break
+        out[g] = np.array(v, dtype=np.float32)
+    return out
 
 
 def ride_spread(building: Building) -> int:
@@ -381,6 +454,8 @@ def compass_table(
     return out
 
 
+#: a guide map without lead values (:attr:`GuideMap.lead`)
+_NO_LEADS = np.zeros((0, 0, 4), dtype=np.float32)
 #: a one-floor map's floors, as app/kernels.py reads them (none)
 _NO_FLOOR = np.zeros(0, dtype=np.int64)
 
@@ -417,11 +492,16 @@ class GuideMap:
     #: (0 on one floor): a quickest walk may take up to that many moves more than the fewest
     #: for each floor it rides (:attr:`GuideAdvisor.purposeful`)
     ride_spread: int = 0
+    #: (G, S, 4) :func:`lead_values` (float32), or (0, 0, 4) where the map was made without
+    #: them (``leads``) or is too large for them (MAX_LEAD_CELLS): then a walker that keeps a
+    #: heading is given its pieces where its next move loses ground
+    lead: Float32Array = field(default_factory=lambda: _NO_LEADS)
 
     @classmethod
     def of(
         cls, domain: Domain, goal_priors: GoalPriors | None = None,
         searches: Searches | None = None, distances: Distances | None = None,
+        leads: Leads | None = None,
     ) -> GuideMap:  # fmt: skip
         """``domain``'s guide map (:class:`GuideError` first if it cannot have one), with the
         experts' counts of ``goal_priors``. ``searches(next_state, cells, goals, stops)``:
@@ -432,7 +512,9 @@ class GuideMap:
         :func:`bfs_distances_each` and the building's compass) and :func:`compass_table`.
         ``distances``:
         the searches of the landmarks (:func:`landmarks`), by default
-        :func:`~app.domain.grid.bfs_distances_each`."""
+        :func:`~app.domain.grid.bfs_distances_each`. ``leads``: :func:`lead_values` or the
+        same sweeps compiled (``kernels.guide_lead_values``), made while destinations x states
+        is at most MAX_LEAD_CELLS; without it the map has none (:attr:`lead`)."""
         goals = tuple(int(g) for g in domain.goals)
         if not goals:
             raise GuideError("guide advice needs the map's destinations: this map has no goal")
@@ -493,6 +575,11 @@ class GuideMap:
             keep,
             spread,
         )
+        if leads is not None and len(goals) * s <= MAX_LEAD_CELLS:
+            lead = leads(plain.next_state, plain.n_open, plain.dist)
+            if lead.shape != (len(goals), s, 4) or lead.dtype != np.float32:
+                raise ValueError("leads must give (destinations, states, 4) float32 values")
+            plain = replace(plain, lead=lead)
         return plain if goal_priors is None else plain.replace_counts(goal_priors)
 
     @property
@@ -512,13 +599,14 @@ class GuideMap:
         self,
     ) -> tuple[
         IntArray, IntArray, IntArray, IntArray, IntArray, FloatArray, IntArray, IntArray,
-        IntArray, ByteArray, bool, int,
+        IntArray, ByteArray, bool, int, Float32Array,
     ]:  # fmt: skip
         """As app/kernels.py reads it (``GuideArrays``)."""
         floor = _NO_FLOOR if self.floor is None else self.floor
         return (
             self.next_state, self.n_open, self.cells, self.dist, self.goal_of_state, self.counts,
             self.detour, self.marks, floor, self.compass_of, self.cells_bound, self.ride_spread,
+            self.lead,
         )  # fmt: skip
 
     @property
@@ -775,18 +863,20 @@ def kernel_params(
 ) -> tuple[
     float, float, float, float, float, int, float, float, float, float, float, int, float, float,
     float, int, int, int, int, int, int, float, float, float, float, int, float, float, float,
+    float,
 ]:  # fmt: skip
     """The parameters as app/kernels.py reads them: (lam, p_lost, slack, spread, bump,
     MAX_TOUR, COMPLY_FADE, IGNORED, SURE, RELEASE, BACKOFF, COMPLY_LEVELS, CHANCE_MIN,
     CHANCE_MAX, UNDO_RUN, PURPOSE_RUN, PURPOSE_SLACK, PURPOSE_LONG, PURPOSE_LONG_SLACK,
     PURPOSE_WALK, PURPOSE_WALK_PART, ADVICE_RATE, ADVICE_BURST, ADVICE_POWER, PARTLY,
-    PURPOSE_SEARCH, DRIFTLESS, ADVICE_KEEP, HEADED), with lam = 1 - 1/W the evidence's fading."""
+    PURPOSE_SEARCH, DRIFTLESS, ADVICE_KEEP, HEADED, LEAD_PRICE), with lam = 1 - 1/W the
+    evidence's fading."""
     return (
         1.0 - 1.0 / window, float(p.p_lost), float(p.slack), float(p.spread), LOST_BUMP,
         MAX_TOUR, COMPLY_FADE, IGNORED, SURE, RELEASE, float(BACKOFF), COMPLY_LEVELS,
         CHANCE_MIN, CHANCE_MAX, float(UNDO_RUN), PURPOSE_RUN, PURPOSE_SLACK, PURPOSE_LONG,
         PURPOSE_LONG_SLACK, PURPOSE_WALK, PURPOSE_WALK_PART, ADVICE_RATE, ADVICE_BURST,
-        ADVICE_POWER, PARTLY, PURPOSE_SEARCH, DRIFTLESS, ADVICE_KEEP, HEADED,
+        ADVICE_POWER, PARTLY, PURPOSE_SEARCH, DRIFTLESS, ADVICE_KEEP, HEADED, LEAD_PRICE,
     )  # fmt: skip
 
 
@@ -1185,6 +1275,26 @@ class GuideAdvisor(Advisor):
         es = sum(p * c for p, c in zip(ls, change, strict=True))
         return (post[-2] * ea + post[-1] * es) / (post[-2] + post[-1])
 
+    def _lead_gain(self, s: int, post: list[float], advice: int) -> float:
+        """The moves a piece leading by ``advice`` saves at ``s`` as the map's lead values
+        reckon them (:attr:`GuideMap.lead`, the target's): the mean over the explorer's own
+        move, as LA and LS (weighted by their shares of ``post``) make it from its heading, of
+        the value where that move leads, less the value where the advice leads."""
+        g, t, h = self.guide, self._target, self._heading
+        if int(g.dist[t, s]) <= 0:
+            return 0.0
+        lead = g.lead[t]
+
+        def after(a: int) -> float:
+            u = int(g.next_state[s, a])
+            return float(lead[u, a if u != s and a < N_ACTIONS else h])
+
+        la, ls = self._ahead(s), self._straight(s)
+        ea = sum(p * after(a) for a, p in enumerate(la) if p > 0.0)
+        es = sum(p * after(a) for a, p in enumerate(ls) if p > 0.0)
+        own = (post[-2] * ea + post[-1] * es) / (post[-2] + post[-1])
+        return own - after(advice)
+
     @staticmethod
     def _bumped(o: list[float]) -> list[float]:
         """A lost model's rule ``o`` with LOST_BUMP spread over every action."""
@@ -1250,8 +1360,8 @@ class GuideAdvisor(Advisor):
         pi_t = g.open_policy(state)
         target_pi = pis[self._target] if self._target >= 0 else None
         n = g.n_actions
+        pick = -1
         if target_pi is not None:  # r_T: one shortest move (the heaviest; the heading on a tie)
-            pick = -1
             for a in range(n):
                 if (
                     pick < 0
@@ -1292,7 +1402,12 @@ class GuideAdvisor(Advisor):
             d = g.drift(self._target, state)  # over the open moves; L4's over every action
             kl = kl * (1.0 + (lost - post[0]) * d + post[0] * (d * int(g.n_open[state]) / n))
             loses_ground = d > 0.0  # its own move, on average
-            if headed:  # its own move from its heading, as LA and LS would make it
+            # over its way where it takes what it is given (the values' leads are taken)
+            whole = compliance_below(self._comply[:COMPLY_LEVELS], PARTLY) < 0.5
+            if headed and whole and g.lead.shape[0] > 0 and self._heading >= 0 and pick >= 0:
+                # its own way from its heading, as LA and LS would make it, against the lead's
+                loses_ground = self._lead_gain(state, post, pick) > LEAD_PRICE
+            elif headed:  # its own move from its heading, as LA and LS would make it
                 loses_ground = self._heading_drift(state, post) > 0.0
         kl = kl if kl > 0.0 else 0.0
         if n != 4:  # in four actions' units, as the paper's rule's (AdviceTables.kl_scale)

@@ -31,7 +31,7 @@ from app.agents.qlearning import TIE_RULES
 from app.arrays import BoolArray, FloatArray, IntArray
 from app.domain.building import Building, Domain
 from app.domain.paths import optimal_actions
-from app.strategies import AdvisorSettings, DomainData, Need, Strategy
+from app.strategies import AdvisorSettings, DomainData, Need, Strategy, compiled_leads
 
 #: the kernels' codes for the explorers and the strategies, by name
 EXPLORER_CODES = {
@@ -47,6 +47,7 @@ _NO_GUIDE: kernels.GuideArrays = (
     np.zeros((0, 0), dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, 0)),
     np.zeros((0, 0), dtype=np.int64), np.zeros((0, 0), dtype=np.int64),
     np.zeros(0, dtype=np.int64), np.zeros((0, 0), dtype=np.uint8), True, 0,
+    np.zeros((0, 0, 4), dtype=np.float32),
 )  # fmt: skip
 _NO_GOALS = np.zeros(0, dtype=np.int64)
 _NO_OPTIMAL = np.zeros((0, 4), dtype=np.bool_)  # read by the optimal explorer only
@@ -152,7 +153,7 @@ class Simulator:
         self.goals = goal_tables(domain, goal_priors)
         self._no_guide: GuideError | None = None  # why the map cannot be guided
         try:
-            self.guide: GuideMap | None = GuideMap.of(domain, goal_priors)
+            self.guide: GuideMap | None = GuideMap.of(domain, goal_priors, leads=compiled_leads)
         except GuideError as exc:
             self.guide, self._no_guide = None, exc
         self.data = DomainData(tables, goal_priors, self.guide)

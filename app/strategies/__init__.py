@@ -3,7 +3,15 @@ what an entry is (:mod:`app.strategies.entry`) and the forms a service runs
 (:mod:`app.strategies.stream`)."""
 
 from app.strategies.entry import AdvisorSettings, DomainData, Level, Need, Strategy
-from app.strategies.table import STRATEGIES, get, make_advisor, names, register, unregister
+from app.strategies.table import (
+    STRATEGIES,
+    compiled_leads,
+    get,
+    make_advisor,
+    names,
+    register,
+    unregister,
+)
 
 __all__ = [
     "STRATEGIES",
@@ -12,6 +20,7 @@ __all__ = [
     "Level",
     "Need",
     "Strategy",
+    "compiled_leads",
     "get",
     "make_advisor",
     "names",

@@ -19,7 +19,14 @@ import math
 from app import kernels
 from app.advice.advisor import DEFAULT_KAPPA, DEFAULT_WINDOW, Advisor
 from app.advice.goals import GoalAwareAdvisor
-from app.advice.guide import GuideAdvisor, GuideMap, GuideParams
+from app.advice.guide import (
+    LEAD_PRICE,
+    LEAD_SWEEPS,
+    LEAD_TOL,
+    GuideAdvisor,
+    GuideMap,
+    GuideParams,
+)
 from app.advice.models import AdviceTables
 from app.advice.params import StrategyParams
 from app.advice.priors import GoalPriors
@@ -31,6 +38,7 @@ from app.advice.rules import (
     RandomAdvisor,
     RuleAdvisor,
 )
+from app.arrays import Float32Array, IntArray
 from app.strategies.beliefs import guide_beliefs, guide_target
 from app.strategies.entry import AdvisorSettings, DomainData, Level, Need, Strategy
 from app.strategies.stream import StreamAdvisor, StreamGoalAware, StreamGuide, keyed
@@ -68,6 +76,12 @@ def get(name: str) -> Strategy:
     if entry is None:
         raise ValueError(f"unknown strategy {name!r}: use one of {', '.join(STRATEGIES)}")
     return entry
+
+
+def compiled_leads(next_state: IntArray, n_open: IntArray, dist: IntArray) -> Float32Array:
+    """A guide map's lead values (``GuideMap.of``'s ``leads``), compiled without the GIL:
+    the sweeps of :func:`app.advice.guide.lead_values`."""
+    return kernels.guide_lead_values(next_state, n_open, dist, LEAD_PRICE, LEAD_TOL, LEAD_SWEEPS)
 
 
 def make_advisor(

@@ -27,8 +27,8 @@ from app.agents.simulate import FixedRun, QParams, Simulator
 from app.domain.building import Domain
 from app.domain.floorplans import generate_floors
 from app.domain.generate import generate_building_domain, generate_domain
-from app.domain.grid import GridDomain, compass_moves
-from app.strategies import make_advisor
+from app.domain.grid import GridDomain, bfs_distances_each, compass_moves
+from app.strategies import compiled_leads, make_advisor
 
 
 def world(seed: int, building: bool) -> tuple[GridDomain, AdviceTables, GoalPriors]:
@@ -69,13 +69,12 @@ def test_compiled_guide_episode_is_the_core_s(
     d, tables, goal_priors = world(seed, building)
     params = StrategyParams(p_lost=p_lost, slack=slack, spread=spread)
     goal = d.goals[seed % len(d.goals)]
-    fast = Simulator(d, tables, goal_priors).fixed(
+    sim = Simulator(d, tables, goal_priors)  # its guide map's lead values read by both
+    fast = sim.fixed(
         explorer, goal, np.random.default_rng(seed), advised=advised, strategy="guide",
         kappa=kappa, window=window, params=params, max_steps=600,
     )  # fmt: skip
-    advisor = make_advisor(
-        "guide", tables, kappa, window, params, goal_priors, GuideMap.of(d, goal_priors)
-    )
+    advisor = make_advisor("guide", tables, kappa, window, params, goal_priors, sim.guide)
     ref = run_episode(
         d, make_explorer(explorer, d), advisor, goal, np.random.default_rng(seed),
         advised=advised, max_steps=600,
@@ -260,26 +259,76 @@ def test_a_walker_without_drift_is_led_where_its_own_move_loses_ground() -> None
     assert all(drift > 0 and saved >= 1.0 + guide.ADVICE_KEEP for saved, _, drift in pieces)
 
 
-def test_a_walker_that_keeps_a_heading_is_led_where_its_move_from_it_loses_ground() -> None:
+def test_a_walker_that_keeps_a_heading_is_led_where_a_piece_saves_more_than_its_price() -> None:
     """A corridor walker (never back but in a dead end), taken for a lost walker that keeps a
     heading (P(LA) + P(LS) at least HEADED), is given a piece while the budget is below full
-    only where its own move from its heading takes it farther from the target on average,
-    keeping ADVICE_KEEP pieces in hand: in a corridor that leads away from the target, where
-    the drift over the open moves (one on, one back) is 0 (the readable advisor; the compiled
-    one makes the same decisions, tests/agents/test_simulate.py's equality tests)."""
+    only where the map's lead values say the piece saves more than LEAD_PRICE moves, keeping
+    ADVICE_KEEP pieces in hand; and some of those pieces go where its next move alone does
+    not lose ground on average, the way it would take from there does (the readable advisor
+    on the simulator's guide map; the compiled one makes the same decisions,
+    tests/agents/test_simulate.py's equality tests)."""
 
     def own(advisor: guide.GuideAdvisor, state: int, post: list[float]) -> tuple[float, ...]:
         headed = post[0] + post[1] < guide.DRIFTLESS and post[-2] + post[-1] >= guide.HEADED
+        g, t = advisor.guide, advisor.target
+        pi = g.policy(t, state)  # r_T: the heaviest shortest move, the heading on a tie
+        pick = max(range(g.n_actions), key=lambda a: (pi[a], a == advisor._heading, -a))
         return (
-            float(headed),
+            float(headed and advisor._heading >= 0),
+            advisor._lead_gain(state, post, pick),
             advisor._heading_drift(state, post),
-            advisor.guide.drift(advisor.target, state),
         )
 
-    pieces = [p for p in pieces_below_full("corridor", own) if p[1]]  # (saved, 1, own, open)
+    pieces = [p for p in pieces_below_full("corridor", own) if p[1]]  # (saved, 1, gain, drift)
     assert len(pieces) >= 20
-    assert all(own > 0 and saved >= 1.0 + guide.ADVICE_KEEP for saved, _, own, _ in pieces)
-    assert any(open_drift <= 0 for *_, open_drift in pieces)  # in a corridor away from the target
+    assert all(
+        gain > guide.LEAD_PRICE and saved >= 1.0 + guide.ADVICE_KEEP for saved, _, gain, _ in pieces
+    )
+    assert any(drift <= 0 for *_, drift in pieces)  # its next move alone loses nothing
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 10_000), st.sampled_from(["maze", "floors"]))
+def test_lead_values_are_the_led_walk_s_and_the_compiled_sweeps_make_them(
+    seed: int, kind: str
+) -> None:
+    """``lead_values`` against what they are: 0 at the destination, no fewer moves than the
+    shortest path and no more than being led at every move at LEAD_PRICE a piece, and the
+    equation they solve holding within the sweeps' tolerance; the compiled sweeps (the
+    simulator's and the service's) make the same float32 values, bit for bit."""
+    rng = np.random.default_rng(seed)
+    if kind == "floors":
+        d: Domain = generate_floors(16, 16, 2, rng, n_goals=1 + seed % 2, room=(3, 5))
+    else:
+        d = generate_domain(5 + seed % 5, 6, seed, braid=0.3, n_goals=1 + seed % 3)
+    ns = np.ascontiguousarray(d.next_state, dtype=np.int64)
+    n_open = np.ascontiguousarray(d.open_moves.sum(axis=1), dtype=np.int64)
+    dist = np.ascontiguousarray(bfs_distances_each(d.next_state, d.goals), dtype=np.int64)
+    plain = guide.lead_values(ns, n_open, dist)
+    assert plain.dtype == np.float32 and plain.shape == (len(d.goals), d.n_states, 4)
+    assert np.array_equal(compiled_leads(ns, n_open, dist), plain)
+    v = plain.astype(np.float64)
+    for g, cell in enumerate(d.goals):
+        assert (v[g, cell] == 0).all()
+        for s in range(d.n_states):
+            here = int(dist[g, s])
+            if here <= 0:
+                continue
+            assert (v[g, s] >= here - 1e-3).all()
+            assert (v[g, s] <= (1 + guide.LEAD_PRICE) * here + 1e-3).all()
+            for h in range(4):
+                moves = [a for a in range(d.n_actions) if ns[s, a] != s]
+                back = (h + 2) % 4
+                turns = len(moves) > 1 and back in moves  # back only where nothing else is open
+                ahead = [a for a in moves if a != back] if turns else moves
+                after = [v[g, ns[s, a], a if a < 4 else h] for a in range(d.n_actions)]
+                own = 1 + sum(after[a] for a in ahead) / len(ahead)
+                led = (
+                    1
+                    + guide.LEAD_PRICE
+                    + min(after[a] for a in moves if dist[g, ns[s, a]] == here - 1)
+                )
+                assert abs(v[g, s, h] - min(own, led)) <= 2 * guide.LEAD_TOL
 
 
 @settings(max_examples=20, deadline=None)
@@ -296,15 +345,14 @@ def test_compiled_guide_q_learning_is_the_core_s(
     d, tables, goal_priors = world(seed, seed % 2 == 0)
     goal = d.goals[seed % len(d.goals)]
     params = StrategyParams(p_lost=0.3, slack=0.4, spread=0.2)
-    fast = Simulator(d, tables, goal_priors).learning(
+    sim = Simulator(d, tables, goal_priors)
+    fast = sim.learning(
         goal, np.random.default_rng(seed), advised=advised, episodes=15, max_steps=80,
         keep_history=keep_history, kappa=kappa, window=40, strategy="guide",
         strategy_params=params, params=QParams(alpha=0.3, gamma=0.9, epsilon=0.2, ties=ties),
     )  # fmt: skip
     learner = QLearningExplorer(d, 0.3, 0.9, 0.2, ties)  # type: ignore[arg-type]
-    advisor = make_advisor(
-        "guide", tables, kappa, 40, params, goal_priors, GuideMap.of(d, goal_priors)
-    )
+    advisor = make_advisor("guide", tables, kappa, 40, params, goal_priors, sim.guide)
     ref = run_learning(
         d, learner, advisor, goal, np.random.default_rng(seed), episodes=15, advised=advised,
         max_steps=80, keep_history=keep_history,

@@ -13,7 +13,6 @@ from hypothesis import strategies as st
 
 from app import kernels, strategies
 from app.advice.advisor import Advisor
-from app.advice.guide import GuideMap
 from app.advice.models import AdviceTables
 from app.advice.params import StrategyParams
 from app.advice.priors import GoalPriors
@@ -94,12 +93,13 @@ def test_compiled_episode_follows_the_reference_loop(
         spread=float(rng.choice([0.0, 0.1, 0.6])),
     )
     goal = d.goals[seed % len(d.goals)]
-    fast = Simulator(d, tables, goal_priors).fixed(
+    sim = Simulator(d, tables, goal_priors)  # its guide map (lead values) read by both
+    fast = sim.fixed(
         explorer, goal, np.random.default_rng(seed), advised=advised, strategy=strategy,
         kappa=kappa, window=window, params=params,
         max_steps=1200,  # past the exact re-sum (1,024 pairs) when the task is not solved
     )  # fmt: skip
-    guide = GuideMap.of(d, goal_priors)
+    guide = sim.guide
     advisor = make_advisor(strategy, tables, kappa, window, params, goal_priors, guide)
     ref = run_episode(
         d, make_explorer(explorer, d), advisor, goal, np.random.default_rng(seed),
@@ -154,14 +154,13 @@ def test_compiled_visitor_follows_the_reference_loop(
     cells = [c for c in range(d.n_states) if c != d.start]
     goal = cells[seed % len(cells)] if anywhere else d.goals[seed % len(d.goals)]
     kappa, window = float(rng.choice([0.0, 0.3, 0.7])), int(rng.integers(3, 40))
-    fast = Simulator(d, tables, goal_priors).fixed(
+    sim = Simulator(d, tables, goal_priors)  # its guide map (lead values) read by both
+    fast = sim.fixed(
         walker, goal, np.random.default_rng(seed), advised=advised, strategy=strategy,
         kappa=kappa, window=window, params=params, max_steps=600, compliance=compliance,
         noise=noise, sight=sight, seen_rng=np.random.default_rng(seed + 7),
     )  # fmt: skip
-    advisor = make_advisor(
-        strategy, tables, kappa, window, params, goal_priors, GuideMap.of(d, goal_priors)
-    )
+    advisor = make_advisor(strategy, tables, kappa, window, params, goal_priors, sim.guide)
     ref = run_episode(
         d, make_explorer(walker, d), advisor, goal, np.random.default_rng(seed),
         advised=advised, max_steps=600, compliance=compliance, noise=noise, sight=sight,

@@ -42,11 +42,11 @@ def test_ingestion_goes_on_while_a_guide_map_is_built(
 
     def slow_of(
         domain: GridDomain, goal_priors: object = None, searches: Any = None,
-        distances: Any = None,
+        distances: Any = None, leads: Any = None,
     ) -> GuideMap:  # fmt: skip
         building.set()
         assert release.wait(60), "the test never released the build"
-        return plain_of(domain, searches=searches, distances=distances)
+        return plain_of(domain, searches=searches, distances=distances, leads=leads)
 
     monkeypatch.setattr(GuideMap, "of", staticmethod(slow_of))
     built: list[GuideMap] = []

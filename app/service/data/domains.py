@@ -34,7 +34,7 @@ from app.arrays import ByteArray, IntArray
 from app.domain.building import Domain, load_map, n_floors
 from app.domain.grid import Frame, GridDomain, MapError, NamedCell, name_goals
 from app.service.data.store import POOLED, DomainRecord, Store, TableCounts, Trajectory
-from app.strategies import DomainData, Need
+from app.strategies import DomainData, Need, compiled_leads
 
 log = logging.getLogger("app.service")
 
@@ -139,16 +139,32 @@ def preparation_bytes(
     the goal of each state (S); a guide map's distances and detours (G x S int64 each) and
     compass moves (G x S bytes), its landmarks' distances (``marks_for`` x S int64), its open
     moves (S int64, S x A booleans) and the destination of each state (S), on a map of several
-    floors each state's floor and nearest stops (3 S int64); its counts are the goal priors'
+    floors each state's floor and nearest stops (3 S int64), and its lead values (G x S x 4
+    float32) while G x S is at most ``SERVICE_LEAD_CELLS``; its counts are the goal priors'
     own."""
     gs, s, a = n_goals * n_states, n_states, n_actions
     floors = 24 * s if a != 4 else 0
     marks = marks_for(n_states, n_floors)
     sizes = {
         Need.GOAL_PRIORS: 16 * a * gs + (8 * a + 8) * s,
-        Need.GUIDE_MAP: 17 * gs + (16 + a + 8 * marks) * s + floors,
+        Need.GUIDE_MAP: (17 + (16 if gs <= SERVICE_LEAD_CELLS else 0)) * gs
+        + (16 + a + 8 * marks) * s
+        + floors,
     }
     return sum(sizes[n] for n in set(needs))
+
+
+#: the most destinations x cells a domain's guide map gets lead values for in the service
+#: (``GuideMap.lead``, seconds of sweeps for a few tens of thousands; a larger map's first
+#: guide session would wait tens of seconds, the 256 x 256 building's about 20): beyond, its
+#: walkers that keep a heading are led where their next move loses ground, as before the
+#: lead values (docs/PERFORMANCE.md, "guide's lead values")
+SERVICE_LEAD_CELLS = 50_000
+
+
+def service_leads(domain: Domain) -> bool:
+    """Whether the service makes ``domain``'s lead values (:data:`SERVICE_LEAD_CELLS`)."""
+    return len(domain.goals) * domain.n_states <= SERVICE_LEAD_CELLS
 
 
 def compiled_searches(
@@ -295,7 +311,10 @@ class DomainCatalog:
                 None
                 if state.guide_map is not None
                 else GuideMap.of(
-                    state.domain, searches=compiled_searches, distances=kernels.guide_distances
+                    state.domain,
+                    searches=compiled_searches,
+                    distances=kernels.guide_distances,
+                    leads=compiled_leads if service_leads(state.domain) else None,
                 )
             )
             with state.lock:  # the counts as they are now (ingestion may have added)

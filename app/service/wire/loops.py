@@ -20,7 +20,7 @@ from app.domain.grid import ACTIONS, GridDomain
 from app.service.data.domains import compiled_searches
 from app.service.wire.encode import batch_binary, batch_json
 from app.service.wire.events import read_moves
-from app.strategies import DomainData
+from app.strategies import DomainData, compiled_leads
 
 #: a building of two floors and a lift, for :func:`warm_building`: what a building's events run
 #: (six actions, guide's batch compiled for six) is loaded before any request needs it
@@ -65,7 +65,8 @@ def _warm(grid: Domain) -> None:
 
     data = DomainData(
         tables, goals(),
-        GuideMap.of(grid, goals(), searches=compiled_searches, distances=kernels.guide_distances),
+        GuideMap.of(grid, goals(), searches=compiled_searches, distances=kernels.guide_distances,
+                   leads=compiled_leads),
     )  # fmt: skip
     for entry in strategies.STRATEGIES.values():
         # the per-goal window too where a strategy keeps one (goal_aware's beta > 0)
