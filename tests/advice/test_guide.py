@@ -261,30 +261,36 @@ def test_a_walker_without_drift_is_led_where_its_own_move_loses_ground() -> None
 
 def test_a_walker_that_keeps_a_heading_is_led_where_a_piece_saves_more_than_its_price() -> None:
     """A corridor walker (never back but in a dead end), taken for a lost walker that keeps a
-    heading (P(LA) + P(LS) at least HEADED), is given a piece while the budget is below full
-    only where the map's lead values say the piece saves more than LEAD_PRICE moves, keeping
-    ADVICE_KEEP pieces in hand; and some of those pieces go where its next move alone does
-    not lose ground on average, the way it would take from there does (the readable advisor
-    on the simulator's guide map; the compiled one makes the same decisions,
+    heading (P(LA) + P(LS) at least HEADED) and for one that takes what it is given
+    (P(compliance < PARTLY) below 1/2), is given a piece while the budget is below full only
+    where the map's lead values say the piece saves more than LEAD_PRICE moves, keeping
+    ADVICE_KEEP pieces in hand; and some of those pieces go where its next move alone does not
+    lose ground on average, the way it would take from there does. Taken for one that does
+    not take what it is given, only where its next move from its heading loses ground (the
+    readable advisor on the simulator's guide map; the compiled one makes the same decisions,
     tests/agents/test_simulate.py's equality tests)."""
 
     def own(advisor: guide.GuideAdvisor, state: int, post: list[float]) -> tuple[float, ...]:
         headed = post[0] + post[1] < guide.DRIFTLESS and post[-2] + post[-1] >= guide.HEADED
+        comply = advisor._comply[: guide.COMPLY_LEVELS]
+        whole = guide.compliance_below(comply, guide.PARTLY) < 0.5
         g, t = advisor.guide, advisor.target
         pi = g.policy(t, state)  # r_T: the heaviest shortest move, the heading on a tie
         pick = max(range(g.n_actions), key=lambda a: (pi[a], a == advisor._heading, -a))
         return (
             float(headed and advisor._heading >= 0),
+            float(whole),
             advisor._lead_gain(state, post, pick),
             advisor._heading_drift(state, post),
         )
 
-    pieces = [p for p in pieces_below_full("corridor", own) if p[1]]  # (saved, 1, gain, drift)
-    assert len(pieces) >= 20
-    assert all(
-        gain > guide.LEAD_PRICE and saved >= 1.0 + guide.ADVICE_KEEP for saved, _, gain, _ in pieces
-    )
-    assert any(drift <= 0 for *_, drift in pieces)  # its next move alone loses nothing
+    pieces = [p for p in pieces_below_full("corridor", own) if p[1]]  # (saved, 1, whole, ...)
+    led = [(saved, gain, drift) for saved, _, whole, gain, drift in pieces if whole]
+    assert len(led) >= 20
+    keep = 1.0 + guide.ADVICE_KEEP
+    assert all(gain > guide.LEAD_PRICE and saved >= keep for saved, gain, _ in led)
+    assert any(drift <= 0 for *_, drift in led)  # its next move alone loses nothing
+    assert all(drift > 0 and saved >= keep for saved, _, whole, _, drift in pieces if not whole)
 
 
 @settings(max_examples=25, deadline=None)

@@ -28,6 +28,7 @@ from app.advice.models import AdviceTables
 from app.advice.params import StrategyParams
 from app.advice.priors import ActionPrior, GoalPriors
 from app.domain.grid import ACTIONS, GridDomain
+from app.service.data.domains import service_leads
 from app.service.data.store import Store
 from app.service.wire.encode import decision_dict
 from app.strategies import make_advisor
@@ -88,7 +89,8 @@ def references(db: Path, grid: GridDomain) -> tuple[AdviceTables, GoalPriors]:
 
 def core_for(strategy: str, tables: AdviceTables, goals: GoalPriors, grid: GridDomain) -> Advisor:
     params = StrategyParams(rate=0.3, seed=7) if strategy == "random" else StrategyParams()
-    return make_advisor(strategy, tables, 0.4, 50, params, goals, GuideMap.of(grid, goals))
+    return make_advisor(strategy, tables, 0.4, 50, params, goals,
+                        GuideMap.of(grid, goals, leads=service_leads(grid)))  # fmt: skip
 
 
 class Explorer:

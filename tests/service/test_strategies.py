@@ -32,6 +32,7 @@ from app.domain.building import Building, Domain
 from app.domain.floorplans import generate_floors
 from app.domain.grid import ACTIONS
 from app.domain.paths import expert_trajectory
+from app.service.data.domains import service_leads
 from app.service.main import create_app
 from app.service.state import ServiceState
 from app.strategies import make_advisor, names
@@ -158,7 +159,7 @@ def test_strategy_sessions_decide_as_the_core(
     goal_priors = core_goal_priors(service, domain)
     core = make_advisor(
         strategy, core_tables(service, domain), kappa, window, StrategyParams(**params),
-        goal_priors, GuideMap.of(grid, goal_priors),
+        goal_priors, GuideMap.of(grid, goal_priors, leads=service_leads(grid)),
     )  # fmt: skip
     expect = partial(expected_json, service=service, name=domain)
     assert created["decision"] == led(expect(core.start(start)), core, grid)

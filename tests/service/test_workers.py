@@ -27,6 +27,7 @@ from app import strategies
 from app.advice.guide import GuideMap
 from app.advice.params import StrategyParams
 from app.domain.grid import ACTIONS
+from app.service.data.domains import service_leads
 from app.service.main import create_app
 from app.service.state import ServiceState
 from app.strategies import make_advisor, names
@@ -114,7 +115,7 @@ def test_events_hopping_between_workers_decide_as_the_core(
     goal_priors = core_goal_priors(service, domain)
     core = make_advisor(
         strategy, core_tables(service, domain), kappa, window, params, goal_priors,
-        GuideMap.of(grid, goal_priors),
+        GuideMap.of(grid, goal_priors, leads=service_leads(grid)),
     )  # fmt: skip
     expect = partial(expected_json, service=service, name=domain)
     assert created["decision"] == led(expect(core.start(start)), core, grid)

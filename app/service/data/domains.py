@@ -27,7 +27,7 @@ from datetime import datetime
 import numpy as np
 
 from app import kernels, strategies
-from app.advice.guide import GuideMap, marks_for
+from app.advice.guide import GuideMap, Leads, marks_for
 from app.advice.models import AdviceTables
 from app.advice.priors import ActionPrior, GoalPriors
 from app.arrays import ByteArray, IntArray
@@ -162,9 +162,10 @@ def preparation_bytes(
 SERVICE_LEAD_CELLS = 50_000
 
 
-def service_leads(domain: Domain) -> bool:
-    """Whether the service makes ``domain``'s lead values (:data:`SERVICE_LEAD_CELLS`)."""
-    return len(domain.goals) * domain.n_states <= SERVICE_LEAD_CELLS
+def service_leads(domain: Domain) -> Leads | None:
+    """How the service makes ``domain``'s lead values (``GuideMap.of``'s ``leads``): compiled
+    while destinations x cells is at most :data:`SERVICE_LEAD_CELLS`, else None (none)."""
+    return compiled_leads if len(domain.goals) * domain.n_states <= SERVICE_LEAD_CELLS else None
 
 
 def compiled_searches(
@@ -314,7 +315,7 @@ class DomainCatalog:
                     state.domain,
                     searches=compiled_searches,
                     distances=kernels.guide_distances,
-                    leads=compiled_leads if service_leads(state.domain) else None,
+                    leads=service_leads(state.domain),
                 )
             )
             with state.lock:  # the counts as they are now (ingestion may have added)
