@@ -1054,48 +1054,66 @@ def guide_lead_values(
     k = next_state.shape[1]
     out = np.zeros((n_goals, n_states, 4), dtype=np.float32)
     v = np.zeros((n_states, 4))
-    # each state's moves that move, in the order of the actions (a ride's heading is the
-    # walker's, a compass move's its own: read once a cell, not once a heading)
-    nb = np.zeros((n_states, k), dtype=np.int64)
-    act = np.zeros((n_states, k), dtype=np.int64)
-    cnt = np.zeros(n_states, dtype=np.int64)
-    for c in range(n_states):
-        for a in range(k):
-            if next_state[c, a] != c:
-                nb[c, cnt[c]] = next_state[c, a]
-                act[c, cnt[c]] = a
-                cnt[c] += 1
+    # a state's moves that move, in the order of the actions, read once a state, not once a
+    # heading: where each leads, whether it is a shortest move, and (a compass move keeps its
+    # own heading; a ride, the walker's) its value; each heading's move not taken (back)
+    nb = np.zeros(k, dtype=np.int64)
+    act = np.zeros(k, dtype=np.int64)
+    near = np.zeros(k, dtype=np.bool_)
     w = np.zeros(k)
+    skip = np.zeros(4, dtype=np.int64)
+    own = np.zeros(4)
+    n = np.zeros(4, dtype=np.int64)
     for g in range(n_goals):
         dt = dist[g]
         order = np.argsort(dt, kind="mergesort")
+        first = 0  # the destination and the states it cannot be reached from come first
+        while first < n_states and dt[order[first]] <= 0:
+            first += 1
         for c in range(n_states):  # from above: led at every move
             for h in range(4):
                 v[c, h] = (1.0 + price) * dt[c] if dt[c] > 0 else 0.0
         for _ in range(most):
             change = 0.0
-            for c in order:
+            for i in range(first, n_states):
+                c = order[i]
                 here = dt[c]
-                m = cnt[c]
-                if here <= 0 or m == 0:
+                if n_open[c] == 0:
                     continue
-                for j in range(m):
-                    if act[c, j] < 4:
-                        w[j] = v[nb[c, j], act[c, j]]
-                for h in range(4):
+                m, rides = 0, False
+                for a in range(k):
+                    u = next_state[c, a]
+                    if u != c:
+                        nb[m], act[m], near[m] = u, a, dt[u] == here - 1
+                        if a < 4:
+                            w[m] = v[u, a]
+                        rides = rides or a >= 4
+                        m += 1
+                for h in range(4):  # never back, but in a dead end
                     back = (h + 2) % 4
-                    ahead = m > 1 and next_state[c, back] != c
-                    own, n, led = 0.0, 0, np.inf
-                    for j in range(m):
-                        a, u = act[c, j], nb[c, j]
-                        x = w[j] if a < 4 else v[u, h]
-                        if dt[u] == here - 1 and x < led:
-                            led = x
-                        if ahead and a == back:
-                            continue
-                        own += x
-                        n += 1
-                    best = 1.0 + own / n
+                    skip[h] = back if n_open[c] > 1 and next_state[c, back] != c else -1
+                    own[h], n[h] = 0.0, 0
+                led = np.inf
+                for j in range(m):  # each heading's sum in the order of the actions
+                    if rides:
+                        break
+                    if near[j] and w[j] < led:
+                        led = w[j]
+                    for h in range(4):
+                        if act[j] != skip[h]:
+                            own[h] += w[j]
+                            n[h] += 1
+                for h in range(4):
+                    if rides:  # a ride's value is the walker's heading's
+                        led = np.inf
+                        for j in range(m):
+                            x = w[j] if act[j] < 4 else v[nb[j], h]
+                            if near[j] and x < led:
+                                led = x
+                            if act[j] != skip[h]:
+                                own[h] += x
+                                n[h] += 1
+                    best = 1.0 + own[h] / n[h]
                     if 1.0 + price + led < best:
                         best = 1.0 + price + led
                     if abs(best - v[c, h]) > change:
