@@ -37,6 +37,13 @@ def page_origin(text: str) -> str:
     return origin
 
 
+#: guide's lead values are made for a served map of at most this many destinations x cells
+#: by default (``ADVISOR_LEAD_CELLS``; ``GuideMap.lead``): a second or so of preparation; a
+#: 256 x 256 building's (8 destinations) take tens of seconds, which its first guide session
+#: waits for (docs/PERFORMANCE.md, "guide's lead values")
+SERVICE_LEAD_CELLS = 50_000
+
+
 class Settings(BaseSettings):
     """How the advice service runs. Defaults suit one machine; override with ``ADVISOR_*``."""
 
@@ -194,6 +201,14 @@ class Settings(BaseSettings):
         description="Bytes what the strategies need of one domain may keep: its goal priors "
         "(64 bytes a goal and free cell) and guide map (16), built when the domain is PUT. A "
         "map that would need more is refused (PUT: 422).",
+    )  # fmt: skip
+    lead_cells: int = Field(
+        SERVICE_LEAD_CELLS, ge=0,
+        description="guide's lead values (where a piece saves a walker that keeps a heading "
+        "more than its price; 16 bytes a goal and free cell) are made when a map is PUT if "
+        "it has at most this many goals x free cells (never beyond 2.5 million), seconds of "
+        "one core for each 100,000 (docs/PERFORMANCE.md); a larger map's walkers that keep a "
+        "heading are led where their next move loses ground.",
     )  # fmt: skip
     max_goal_window: int = Field(
         1_048_576, ge=1,

@@ -49,7 +49,10 @@ def open_state(settings: Settings) -> tuple[ServiceState, list[str]]:
     client_keys = quota_keys(settings, admin_key, operator_key)  # before anything is opened
     store = Store(settings.db_url, timeout=settings.database_timeout)
     store.create_schema()
-    catalog = DomainCatalog(store, settings.max_map_cells, settings.max_domain_memory, ready=warm)
+    catalog = DomainCatalog(
+        store, settings.max_map_cells, settings.max_domain_memory, ready=warm,
+        lead_cells=settings.lead_cells,
+    )  # fmt: skip
     catalog.load()
     limits = Limits(
         settings.max_sessions,

@@ -322,6 +322,41 @@ def test_the_memory_estimate_covers_what_is_built(
     assert built >= 0.9 * estimate
 
 
+@pytest.mark.parametrize("lead_cells", [0, 3 * 243 - 1, 3 * 243, 10**9])
+def test_lead_cells_decides_which_maps_get_lead_values(tmp_path: Path, lead_cells: int) -> None:
+    """``ADVISOR_LEAD_CELLS``: a map of at most that many destinations x free cells gets
+    guide's lead values when prepared (the compiled sweeps, the simulator's values), a larger
+    one none; the memory estimate counts them only when they are made."""
+    store = Store(f"sqlite:///{tmp_path / 'a.db'}")
+    store.create_schema()
+    catalog = DomainCatalog(store, 250_000, lead_cells=lead_cells)
+    state, _, _ = catalog.put("maze", MAZE_GRID, 1.0)
+    gmap = catalog.guide_map(state)
+    store.close()
+    gs = len(MAZE_GRID.goals) * MAZE_GRID.n_states
+    assert gs == 3 * 243  # the bounds above sit on either side of it
+    if gs <= lead_cells:
+        expected = compiled_leads(gmap.next_state, gmap.n_open, gmap.dist)
+        assert np.array_equal(gmap.lead, expected)
+    else:
+        assert gmap.lead.shape == (0, 0, 4)
+    estimate = preparation_bytes(3, MAZE_GRID.n_states, [Need.GUIDE_MAP], lead_cells=lead_cells)
+    without = preparation_bytes(3, MAZE_GRID.n_states, [Need.GUIDE_MAP], lead_cells=0)
+    assert estimate - without == (16 * gs if gs <= lead_cells else 0)
+
+
+def test_the_service_makes_lead_values_up_to_its_setting(tmp_path: Path) -> None:
+    """The service's catalog takes ``ADVISOR_LEAD_CELLS``: with 0, a map PUT is guided
+    without lead values."""
+    with TestClient(create_app(make_settings(tmp_path / "data", lead_cells=0))) as c:
+        service: ServiceState = c.app.state.service  # type: ignore[attr-defined]
+        admin = {"X-API-Key": service.admin_key}
+        assert c.put("/domains/maze", json={"map": MAZE}, headers=admin).status_code == 201
+        gmap = service.catalog.get("maze").guide_map
+        assert service.catalog.lead_cells == 0
+        assert gmap is not None and gmap.lead.shape == (0, 0, 4)
+
+
 def test_the_memory_estimate_of_a_building_s_guide_map_counts_its_landmarks() -> None:
     """A building's guide map holds MARKS landmarks a floor (``marks_for``): the estimate
     counts them, and the floors and nearest stops."""

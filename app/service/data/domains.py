@@ -27,12 +27,13 @@ from datetime import datetime
 import numpy as np
 
 from app import kernels, strategies
-from app.advice.guide import GuideMap, Leads, marks_for
+from app.advice.guide import MAX_LEAD_CELLS, GuideMap, Leads, marks_for
 from app.advice.models import AdviceTables
 from app.advice.priors import ActionPrior, GoalPriors
 from app.arrays import ByteArray, IntArray
 from app.domain.building import Domain, load_map, n_floors
 from app.domain.grid import Frame, GridDomain, MapError, NamedCell, name_goals
+from app.service.config import SERVICE_LEAD_CELLS
 from app.service.data.store import POOLED, DomainRecord, Store, TableCounts, Trajectory
 from app.strategies import DomainData, Need, compiled_leads
 
@@ -131,8 +132,9 @@ def needed() -> frozenset[Need]:
 
 
 def preparation_bytes(
-    n_goals: int, n_states: int, needs: Iterable[Need], n_actions: int = 4, n_floors: int = 1
-) -> int:
+    n_goals: int, n_states: int, needs: Iterable[Need], n_actions: int = 4, n_floors: int = 1,
+    lead_cells: int = SERVICE_LEAD_CELLS,
+) -> int:  # fmt: skip
     """Bytes what ``needs`` keep of a domain of ``n_goals`` destinations, ``n_states`` free
     cells, ``n_actions`` actions (A) and ``n_floors`` floors: the goal priors' counts and
     each goal's log theta (G x S x A float64 each), the counts of unknown goal (S x A) and
@@ -140,32 +142,24 @@ def preparation_bytes(
     compass moves (G x S bytes), its landmarks' distances (``marks_for`` x S int64), its open
     moves (S int64, S x A booleans) and the destination of each state (S), on a map of several
     floors each state's floor and nearest stops (3 S int64), and its lead values (G x S x 4
-    float32) while G x S is at most ``SERVICE_LEAD_CELLS``; its counts are the goal priors'
-    own."""
+    float32) while G x S is at most ``lead_cells`` (``ADVISOR_LEAD_CELLS``, and MAX_LEAD_CELLS);
+    its counts are the goal priors' own."""
     gs, s, a = n_goals * n_states, n_states, n_actions
+    most = min(lead_cells, MAX_LEAD_CELLS)
     floors = 24 * s if a != 4 else 0
     marks = marks_for(n_states, n_floors)
     sizes = {
         Need.GOAL_PRIORS: 16 * a * gs + (8 * a + 8) * s,
-        Need.GUIDE_MAP: (17 + (16 if gs <= SERVICE_LEAD_CELLS else 0)) * gs
-        + (16 + a + 8 * marks) * s
-        + floors,
+        Need.GUIDE_MAP: (17 + (16 if gs <= most else 0)) * gs + (16 + a + 8 * marks) * s + floors,
     }
     return sum(sizes[n] for n in set(needs))
 
 
-#: the most destinations x cells a domain's guide map gets lead values for in the service
-#: (``GuideMap.lead``, seconds of sweeps for a few tens of thousands; a larger map's first
-#: guide session would wait tens of seconds, the 256 x 256 building's about 20): beyond, its
-#: walkers that keep a heading are led where their next move loses ground, as before the
-#: lead values (docs/PERFORMANCE.md, "guide's lead values")
-SERVICE_LEAD_CELLS = 50_000
-
-
-def service_leads(domain: Domain) -> Leads | None:
+def service_leads(domain: Domain, most: int = SERVICE_LEAD_CELLS) -> Leads | None:
     """How the service makes ``domain``'s lead values (``GuideMap.of``'s ``leads``): compiled
-    while destinations x cells is at most :data:`SERVICE_LEAD_CELLS`, else None (none)."""
-    return compiled_leads if len(domain.goals) * domain.n_states <= SERVICE_LEAD_CELLS else None
+    while destinations x cells is at most ``most`` (``ADVISOR_LEAD_CELLS``), else None (none:
+    its walkers that keep a heading are led where their next move loses ground)."""
+    return compiled_leads if len(domain.goals) * domain.n_states <= most else None
 
 
 def compiled_searches(
@@ -187,16 +181,20 @@ class DomainCatalog:
     """Every domain by name, kept equal to what the store holds. ``max_memory``: the most
     bytes what the strategies need of one domain may keep (:func:`preparation_bytes`; None:
     no limit); ``ready``: what else to make of a domain once prepared, in the same thread
-    (the service's: what the event paths read of it, :func:`app.service.wire.warm.warm`)."""
+    (the service's: what the event paths read of it, :func:`app.service.wire.warm.warm`);
+    ``lead_cells``: guide's lead values for a map of at most that many destinations x cells
+    (:func:`service_leads`)."""
 
     def __init__(
         self, store: Store, max_cells: int, max_memory: int | None = None,
         ready: Callable[[DomainState], None] | None = None,
+        lead_cells: int = SERVICE_LEAD_CELLS,
     ):  # fmt: skip
         self.store = store
         self.max_cells = max_cells
         self.max_memory = max_memory
         self.ready = ready
+        self.lead_cells = lead_cells
         self._domains: dict[str, DomainState] = {}
         self._lock = threading.Lock()
 
@@ -315,7 +313,7 @@ class DomainCatalog:
                     state.domain,
                     searches=compiled_searches,
                     distances=kernels.guide_distances,
-                    leads=service_leads(state.domain),
+                    leads=service_leads(state.domain, self.lead_cells),
                 )
             )
             with state.lock:  # the counts as they are now (ingestion may have added)
@@ -344,7 +342,7 @@ class DomainCatalog:
         (None: it is not)."""
         needs = set(needs)
         size = preparation_bytes(
-            len(grid.goals), grid.n_states, needs, grid.n_actions, n_floors(grid)
+            len(grid.goals), grid.n_states, needs, grid.n_actions, n_floors(grid), self.lead_cells
         )
         if not needs or self.max_memory is None or size <= self.max_memory:
             return None
