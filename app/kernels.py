@@ -1302,6 +1302,8 @@ def guide_decide(
         loses_ground = d > 0.0  # its own move, on average
         # over its way where it takes what it is given (the values' leads are taken)
         whole = guide_compliance_below(comply[: params[11]], params[24]) < 0.5
+        # the values are a walker's that never turns back (LA): for one taken rather for it
+        whole = whole and post[la_k] >= post[ls_k]
         if headed and whole and gmap[12].shape[0] > 0 and heading >= 0 and pick >= 0:
             w_la, w_ls = post[la_k], post[ls_k]
             gain = guide_lead_gain(gmap, target, s, heading, pick, w_la, w_ls, n_actions)

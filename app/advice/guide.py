@@ -1404,6 +1404,8 @@ class GuideAdvisor(Advisor):
             loses_ground = d > 0.0  # its own move, on average
             # over its way where it takes what it is given (the values' leads are taken)
             whole = compliance_below(self._comply[:COMPLY_LEVELS], PARTLY) < 0.5
+            # the values are a walker's that never turns back (LA): for one taken rather for it
+            whole = whole and post[-2] >= post[-1]
             if headed and whole and g.lead.shape[0] > 0 and self._heading >= 0 and pick >= 0:
                 # its own way from its heading, as LA and LS would make it, against the lead's
                 loses_ground = self._lead_gain(state, post, pick) > LEAD_PRICE

@@ -259,38 +259,51 @@ def test_a_walker_without_drift_is_led_where_its_own_move_loses_ground() -> None
     assert all(drift > 0 and saved >= 1.0 + guide.ADVICE_KEEP for saved, _, drift in pieces)
 
 
+def headed_piece(advisor: guide.GuideAdvisor, state: int, post: list[float]) -> tuple[float, ...]:
+    """For :func:`pieces_below_full`: whether the explorer is taken for a lost walker that
+    keeps a heading (P(LA) + P(LS) at least HEADED, its heading known), whether the lead
+    values decide for it (it takes what it is given, P(compliance < PARTLY) below 1/2, and is
+    taken rather for one that never turns back than for one that goes straight on: the values
+    are such a walker's), the piece's gain by them and its next move's drift from its heading."""
+    headed = post[0] + post[1] < guide.DRIFTLESS and post[-2] + post[-1] >= guide.HEADED
+    comply = advisor._comply[: guide.COMPLY_LEVELS]
+    whole = guide.compliance_below(comply, guide.PARTLY) < 0.5 and post[-2] >= post[-1]
+    g, t = advisor.guide, advisor.target
+    pi = g.policy(t, state)  # r_T: the heaviest shortest move, the heading on a tie
+    pick = max(range(g.n_actions), key=lambda a: (pi[a], a == advisor._heading, -a))
+    return (
+        float(headed and advisor._heading >= 0),
+        float(whole),
+        advisor._lead_gain(state, post, pick),
+        advisor._heading_drift(state, post),
+    )
+
+
 def test_a_walker_that_keeps_a_heading_is_led_where_a_piece_saves_more_than_its_price() -> None:
-    """A corridor walker (never back but in a dead end), taken for a lost walker that keeps a
-    heading (P(LA) + P(LS) at least HEADED) and for one that takes what it is given
-    (P(compliance < PARTLY) below 1/2), is given a piece while the budget is below full only
-    where the map's lead values say the piece saves more than LEAD_PRICE moves, keeping
-    ADVICE_KEEP pieces in hand; and some of those pieces go where its next move alone does not
-    lose ground on average, the way it would take from there does. Taken for one that does
-    not take what it is given, only where its next move from its heading loses ground (the
-    readable advisor on the simulator's guide map; the compiled one makes the same decisions,
-    tests/agents/test_simulate.py's equality tests)."""
-
-    def own(advisor: guide.GuideAdvisor, state: int, post: list[float]) -> tuple[float, ...]:
-        headed = post[0] + post[1] < guide.DRIFTLESS and post[-2] + post[-1] >= guide.HEADED
-        comply = advisor._comply[: guide.COMPLY_LEVELS]
-        whole = guide.compliance_below(comply, guide.PARTLY) < 0.5
-        g, t = advisor.guide, advisor.target
-        pi = g.policy(t, state)  # r_T: the heaviest shortest move, the heading on a tie
-        pick = max(range(g.n_actions), key=lambda a: (pi[a], a == advisor._heading, -a))
-        return (
-            float(headed and advisor._heading >= 0),
-            float(whole),
-            advisor._lead_gain(state, post, pick),
-            advisor._heading_drift(state, post),
-        )
-
-    pieces = [p for p in pieces_below_full("corridor", own) if p[1]]  # (saved, 1, whole, ...)
+    """A corridor walker (never back but in a dead end), where the lead values decide for it
+    (:func:`headed_piece`), is given a piece while the budget is below full only where they
+    say the piece saves more than LEAD_PRICE moves, keeping ADVICE_KEEP pieces in hand; and
+    some of those pieces go where its next move alone does not lose ground on average, the
+    way it would take from there does. Elsewhere only where its next move from its heading
+    loses ground (the readable advisor on the simulator's guide map; the compiled one makes
+    the same decisions, tests/agents/test_simulate.py's equality tests)."""
+    pieces = [p for p in pieces_below_full("corridor", headed_piece) if p[1]]
     led = [(saved, gain, drift) for saved, _, whole, gain, drift in pieces if whole]
     assert len(led) >= 20
     keep = 1.0 + guide.ADVICE_KEEP
     assert all(gain > guide.LEAD_PRICE and saved >= keep for saved, gain, _ in led)
     assert any(drift <= 0 for *_, drift in led)  # its next move alone loses nothing
     assert all(drift > 0 and saved >= keep for saved, _, whole, _, drift in pieces if not whole)
+
+
+def test_a_walker_that_goes_straight_on_is_led_where_its_next_move_loses_ground() -> None:
+    """The lead values are a corridor walker's: a straight-ahead walker, once taken rather for
+    one that goes straight on, is given a piece below a full budget only where its next move
+    from its heading loses ground, as before them."""
+    pieces = [p for p in pieces_below_full("straight", headed_piece) if p[1]]
+    plain = [(saved, drift) for saved, _, whole, _, drift in pieces if not whole]
+    assert len(plain) >= 10
+    assert all(drift > 0 and saved >= 1.0 + guide.ADVICE_KEEP for saved, drift in plain)
 
 
 @settings(max_examples=25, deadline=None)
