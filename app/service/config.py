@@ -38,9 +38,9 @@ def page_origin(text: str) -> str:
 
 
 #: guide's lead values are made for a served map of at most this many destinations x cells
-#: by default (``ADVISOR_LEAD_CELLS``; ``GuideMap.lead``): a second or so of preparation; a
-#: 256 x 256 building's (8 destinations) take tens of seconds, which its first guide session
-#: waits for (docs/PERFORMANCE.md, "guide's lead values")
+#: by default (``ADVISOR_LEAD_CELLS``; ``GuideMap.lead``): about a second of preparation; a
+#: 256 x 256 city map's (8 destinations) take 7 s, a 5-floor 128 x 128 hospital's (40) 37 s,
+#: which its first guide session waits for (docs/PERFORMANCE.md, "guide's lead values")
 SERVICE_LEAD_CELLS = 50_000
 
 
