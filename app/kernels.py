@@ -1094,15 +1094,14 @@ def guide_lead_values(
                     skip[h] = back if n_open[c] > 1 and next_state[c, back] != c else -1
                     own[h], n[h] = 0.0, 0
                 led = np.inf
-                for j in range(m):  # each heading's sum in the order of the actions
-                    if rides:
-                        break
-                    if near[j] and w[j] < led:
-                        led = w[j]
-                    for h in range(4):
-                        if act[j] != skip[h]:
-                            own[h] += w[j]
-                            n[h] += 1
+                if not rides:  # each heading's sum in the order of the actions, in one pass
+                    for j in range(m):
+                        if near[j] and w[j] < led:
+                            led = w[j]
+                        for h in range(4):
+                            if act[j] != skip[h]:
+                                own[h] += w[j]
+                                n[h] += 1
                 for h in range(4):
                     if rides:  # a ride's value is the walker's heading's
                         led = np.inf

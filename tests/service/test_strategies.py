@@ -159,7 +159,8 @@ def test_strategy_sessions_decide_as_the_core(
     goal_priors = core_goal_priors(service, domain)
     core = make_advisor(
         strategy, core_tables(service, domain), kappa, window, StrategyParams(**params),
-        goal_priors, GuideMap.of(grid, goal_priors, leads=service_leads(grid)),
+        goal_priors,
+        GuideMap.of(grid, goal_priors, leads=service_leads(grid, service.catalog.lead_cells)),
     )  # fmt: skip
     expect = partial(expected_json, service=service, name=domain)
     assert created["decision"] == led(expect(core.start(start)), core, grid)

@@ -115,7 +115,7 @@ def test_events_hopping_between_workers_decide_as_the_core(
     goal_priors = core_goal_priors(service, domain)
     core = make_advisor(
         strategy, core_tables(service, domain), kappa, window, params, goal_priors,
-        GuideMap.of(grid, goal_priors, leads=service_leads(grid)),
+        GuideMap.of(grid, goal_priors, leads=service_leads(grid, service.catalog.lead_cells)),
     )  # fmt: skip
     expect = partial(expected_json, service=service, name=domain)
     assert created["decision"] == led(expect(core.start(start)), core, grid)
