@@ -1041,6 +1041,27 @@ def guide_lead_gain(
     return (w_la * ea + w_ls * es) / (w_la + w_ls) - led
 
 
+@njit(cache=True, inline="always")
+def guide_lead_pick(
+    gmap: GuideArrays, t: int, s: int, heading: int, pick: int, k: int
+) -> int:  # pragma: no cover - compiled
+    """``GuideAdvisor._lead_pick``: the shortest move towards ``t`` at ``s`` after which the
+    lead value is least, from ``heading``; ``pick`` where it is as low as any."""
+    next_state, dist, lead = gmap[0], gmap[3], gmap[12]
+    here = dist[t, s]
+    if here <= 0:
+        return pick
+    u = next_state[s, pick]
+    low = float(lead[t, u, pick if pick < 4 else heading])
+    for a in range(k):
+        u = next_state[s, a]
+        if u != s and dist[t, u] == here - 1:
+            after = float(lead[t, u, a if a < 4 else heading])
+            if after < low:
+                low, pick = after, a
+    return pick
+
+
 @njit(cache=True, nogil=True)
 def guide_lead_values(
     next_state: IntArray, n_open: IntArray, dist: IntArray, price: float, tol: float,
@@ -1264,6 +1285,8 @@ def guide_decide(
                 or (pis[target, a] == pis[target, pick] and a == heading)
             ):
                 pick = a
+        if headed and post[la_k] >= post[ls_k] and gmap[12].shape[0] > 0 and heading >= 0:
+            pick = guide_lead_pick(gmap, target, s, heading, pick, n_actions)  # along its way
         for a in range(n_actions):
             pi_t[a] = 1.0 if a == pick else 0.0
     else:

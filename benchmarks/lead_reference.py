@@ -18,7 +18,9 @@ a piece a move, at most 8 saved, one at the start). Two ways of spending it:
   programme over cell, heading and pieces saved (in quarters, 0 to 8 pieces), solved by
   Gauss-Seidel sweeps in the order of the distance to the target (until no value changes by
   0.01 moves). What a lead that knows the target and the heading can get from the budget on
-  each leg (not across legs: the order is the lead's).
+  each leg (not across legs: the order is the lead's). A piece leads by the first shortest
+  move (in the actions' order), or with ``--best-move`` by the shortest move the programme
+  finds best (guide leads a walker that never turns back by the one its lead values favour).
 
 Beside them guide itself (compiled, the experiment's own runs of these tasks). The leads'
 walkers draw their own moves (``rng_for(seed, "lead-reference", map, walker, task)``), so
@@ -32,6 +34,11 @@ the spending and the order go.
         --walker corridor --order floor --tasks 200
     .venv/bin/python benchmarks/lead_reference.py --buildings 0 --hospitals 3x64 \\
         --hospitals 4x64 --hospitals 5x64 --walker corridor --tasks 100 --optimal
+    .venv/bin/python benchmarks/lead_reference.py --buildings 0 --hospitals 3x64 \\
+        --hospitals 4x64 --hospitals 5x64 --hospitals 3x128 --hospitals 4x128 \\
+        --hospitals 5x128 --only hospital-4x128-s139790160 --walker corridor --optimal
+    .venv/bin/python benchmarks/lead_reference.py --buildings 0 --mazes maps/brc202d.txt \\
+        --walker corridor --tasks 200 --optimal --best-move
 """
 
 from __future__ import annotations
@@ -75,24 +82,28 @@ def corridor_moves(next_state: np.ndarray, open_moves: np.ndarray) -> tuple[np.n
     return nxt, cnt
 
 
-def led_moves(next_state: np.ndarray, dt: np.ndarray) -> np.ndarray:
-    """(S x 4,) the successor of the lead's piece (the first shortest move) from each state
-    and heading; the state itself at the target or where it cannot be reached."""
+def led_moves(next_state: np.ndarray, dt: np.ndarray, every: bool = False) -> np.ndarray:
+    """(S x 4, A) the successors (state x 4 + heading) of the lead's piece from each state and
+    heading: the first shortest move, or with ``every`` each shortest move, -1 after the last;
+    the state itself at the target or where it cannot be reached."""
     n_states, n_actions = next_state.shape
-    out = np.arange(n_states * 4, dtype=np.int64)
+    out = np.full((n_states * 4, n_actions), -1, dtype=np.int64)
+    out[:, 0] = np.arange(n_states * 4)
     for c in range(n_states):
         if dt[c] > 0:
-            a = next(b for b in range(n_actions) if dt[next_state[c, b]] == dt[c] - 1)
-            u = int(next_state[c, a])
-            for h in range(4):
-                out[c * 4 + h] = u * 4 + (a if a < 4 else h)
+            shortest = [b for b in range(n_actions) if dt[next_state[c, b]] == dt[c] - 1]
+            for k, a in enumerate(shortest if every else shortest[:1]):
+                u = int(next_state[c, a])
+                for h in range(4):
+                    out[c * 4 + h, k] = u * 4 + (a if a < 4 else h)
     return out
 
 
 @njit(cache=True)
 def optimal_spending(order, nxt, cnt, led, target, rate, burst, tol, most):  # type: ignore[no-untyped-def]  # pragma: no cover
     """(S x 4, burst + 1): the least mean moves to ``target`` from each state, heading and
-    budget (quarters saved before the move's ``rate`` is added)."""
+    budget (quarters saved before the move's ``rate`` is added); a piece leads to the best of
+    ``led``'s successors (a row's -1 ends them)."""
     v = np.zeros((nxt.shape[0], burst + 1))
     for _ in range(most):
         change = 0.0
@@ -107,8 +118,12 @@ def optimal_spending(order, nxt, cnt, led, target, rate, burst, tol, most):  # t
                     for k in range(cnt[i]):
                         own += v[nxt[i, k], q1]
                     best = 1.0 + own / cnt[i]
-                    if q1 >= 4 and 1.0 + v[led[i], q1 - 4] < best:
-                        best = 1.0 + v[led[i], q1 - 4]
+                    if q1 >= 4:
+                        for k in range(led.shape[1]):
+                            if led[i, k] < 0:
+                                break
+                            if 1.0 + v[led[i, k], q1 - 4] < best:
+                                best = 1.0 + v[led[i, k], q1 - 4]
                     change = max(change, abs(best - v[i, q]))
                     v[i, q] = best
         if change < tol:
@@ -163,10 +178,12 @@ def lead(
             v, nxt, cnt, led = spending(target)
             i, q = s * 4 + heading, round(4 * saved)
             own_value = float(np.mean(v[nxt[i, : cnt[i]], q]))
-            give = q >= 4 and float(v[led[i], q - 4]) < own_value
+            ways = led[i][led[i] >= 0]
+            way = int(ways[int(np.argmin(v[ways, q - 4]))]) if q >= 4 else -1
+            give = q >= 4 and float(v[way, q - 4]) < own_value
             if give:
                 saved, pieces = saved - 1.0, pieces + 1
-                s, heading = divmod(int(led[i]), 4)
+                s, heading = divmod(way, 4)
             else:
                 s, heading = divmod(int(nxt[i, int(rng.integers(cnt[i]))]), 4)
             continue
@@ -216,6 +233,12 @@ def main() -> None:
                     help="the leads' order: nearest first, or the floor's")  # fmt: skip
     ap.add_argument("--optimal", action="store_true",
                     help="corridor walkers: the budget spent optimally too (slow)")  # fmt: skip
+    ap.add_argument("--best-move", action="store_true",
+                    help="with --optimal: a piece leads by the best shortest move (the "
+                         "programme chooses), not the first")  # fmt: skip
+    ap.add_argument("--only", action="append", default=[],
+                    help="run only the map of this name (as the table names it; repeat for "
+                         "more): the suite's maps and tasks are kept")  # fmt: skip
     ap.add_argument("--tasks", type=int, default=100)
     ap.add_argument("--steps", type=int, default=5000)
     a = ap.parse_args()
@@ -232,7 +255,13 @@ def main() -> None:
     heads = (*LEADS, OPTIMAL) if a.optimal else LEADS
     print(f"| map | walker | {' | '.join(heads)} | guide |")
     print("|---|---|" + "---|" * (len(heads) + 1))
-    for spec in map_suite(exp.suite()):
+    specs = map_suite(exp.suite())
+    unknown = set(a.only) - {spec.name for spec in specs}
+    if unknown:
+        ap.error(f"--only: no map {', '.join(sorted(unknown))} in this suite")
+    for spec in specs:
+        if a.only and spec.name not in a.only:
+            continue
         world = visitors.place(exp, spec).world
         d = world.domain
         dist = bfs_distances_each(d.next_state, d.goals)
@@ -244,7 +273,7 @@ def main() -> None:
         for walker in walkers:
             drift = drifts(d.next_state, dist, walker)
             cells = []
-            spend = spending(d, dist) if walker == "corridor" else None
+            spend = spending(d, dist, a.best_move) if walker == "corridor" else None
             for how in (*LEADS, OPTIMAL) if a.optimal and spend is not None else LEADS:
                 runs = [
                     lead(d, dist, drift, goal, walker, how, order, a.steps,
@@ -268,8 +297,11 @@ def main() -> None:
             print(f"| {spec.name} | {walker} | {' | '.join(cells)} |", flush=True)
 
 
-def spending(d: Domain, dist: np.ndarray) -> Callable[[int], tuple[np.ndarray, ...]]:
-    """Each target's optimal spending (:func:`optimal_spending`), made when first asked."""
+def spending(
+    d: Domain, dist: np.ndarray, every: bool = False
+) -> Callable[[int], tuple[np.ndarray, ...]]:
+    """Each target's optimal spending (:func:`optimal_spending`), made when first asked; with
+    ``every`` a piece leads by the best shortest move, else by the first."""
     nxt, cnt = corridor_moves(d.next_state, d.open_moves)
     made: dict[int, tuple[np.ndarray, ...]] = {}
 
@@ -277,7 +309,7 @@ def spending(d: Domain, dist: np.ndarray) -> Callable[[int], tuple[np.ndarray, .
         if target not in made:
             dt = dist[target]
             order = np.argsort(np.where(dt >= 0, dt, np.iinfo(np.int64).max), kind="stable")
-            led = led_moves(d.next_state, dt)
+            led = led_moves(d.next_state, dt, every)
             v = optimal_spending(order[dt[order] >= 0], nxt, cnt, led, int(d.goals[target]),
                                  round(4 * ADVICE_RATE), QUARTERS, 0.01, 100_000)  # fmt: skip
             made[target] = (v, nxt, cnt, led)

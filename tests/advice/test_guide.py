@@ -5,6 +5,7 @@ leaves competent ones alone."""
 from __future__ import annotations
 
 import itertools
+import math
 from collections.abc import Callable
 from typing import Any
 
@@ -271,6 +272,8 @@ def headed_piece(advisor: guide.GuideAdvisor, state: int, post: list[float]) -> 
     g, t = advisor.guide, advisor.target
     pi = g.policy(t, state)  # r_T: the heaviest shortest move, the heading on a tie
     pick = max(range(g.n_actions), key=lambda a: (pi[a], a == advisor._heading, -a))
+    if headed and post[-2] >= post[-1] and advisor._heading >= 0:  # the lead values' pick
+        pick = advisor._lead_pick(state, pick)
     return (
         float(headed and advisor._heading >= 0),
         float(whole),
@@ -304,6 +307,40 @@ def test_a_walker_that_goes_straight_on_is_led_where_its_next_move_loses_ground(
     plain = [(saved, drift) for saved, _, whole, _, drift in pieces if not whole]
     assert len(plain) >= 10
     assert all(drift > 0 and saved >= 1.0 + guide.ADVICE_KEEP for saved, drift in plain)
+
+
+def test_a_walker_that_never_turns_back_is_led_along_the_least_lead_value() -> None:
+    """A corridor walker, taken for a lost walker that keeps a heading and rather for one
+    that never turns back than for one that goes straight on, is led by the shortest move
+    after which the lead value from its heading is least, not merely by one shortest move:
+    of two ways to the target the one it keeps best. Some of its pieces go where the heaviest
+    shortest move (r_T) is not that move."""
+
+    def advice(advisor: guide.GuideAdvisor, state: int, post: list[float]) -> tuple[float, ...]:
+        g, t, h = advisor.guide, advisor.target, advisor._heading
+        headed = post[0] + post[1] < guide.DRIFTLESS and post[-2] + post[-1] >= guide.HEADED
+        row = advisor._last_advice
+        given = max(range(g.n_actions), key=lambda a: row[a])
+        here = int(g.dist[t, state])
+        values = {
+            a: float(g.lead[t, int(g.next_state[state, a]), a if a < 4 else h])
+            for a in range(g.n_actions)
+            if int(g.next_state[state, a]) != state
+            and int(g.dist[t, int(g.next_state[state, a])]) == here - 1
+        }
+        pi = g.policy(t, state)
+        heaviest = max(range(g.n_actions), key=lambda a: (pi[a], a == h, -a))
+        return (
+            float(headed and post[-2] >= post[-1] and h >= 0 and here > 0),
+            float(given in values),
+            values.get(given, math.inf) - min(values.values(), default=math.inf),
+            float(given != heaviest),
+        )
+
+    pieces = [p for p in pieces_below_full("corridor", advice) if p[1]]
+    assert len(pieces) >= 20
+    assert all(shortest and above == 0.0 for _, _, shortest, above, _ in pieces)
+    assert any(other for *_, other in pieces)
 
 
 @settings(max_examples=25, deadline=None)
