@@ -1016,6 +1016,17 @@ def guide_heading_drift(
 
 
 @njit(cache=True, inline="always")
+def guide_lead_after(
+    gmap: GuideArrays, t: int, s: int, heading: int, a: int
+) -> float:  # pragma: no cover - compiled
+    """``GuideAdvisor._lead_after``: the lead value of destination ``t`` where action ``a``
+    at ``s`` leaves the explorer (heading ``a`` if it moved by a compass move, else
+    ``heading``)."""
+    u = gmap[0][s, a]
+    return float(gmap[12][t, u, a if u != s and a < 4 else heading])
+
+
+@njit(cache=True, inline="always")
 def guide_lead_gain(
     gmap: GuideArrays, t: int, s: int, heading: int, advice: int, w_la: float, w_ls: float,
     k: int,
@@ -1023,21 +1034,19 @@ def guide_lead_gain(
     """``GuideAdvisor._lead_gain``: the moves a piece leading by ``advice`` saves at ``s``
     (the lead values of destination ``t``): the mean over LA's and LS's own move from
     ``heading`` (weights ``w_la``, ``w_ls``) of the value where it leads, less the advice's."""
-    next_state, n_open, lead = gmap[0], gmap[1], gmap[12]
+    next_state, n_open = gmap[0], gmap[1]
     if gmap[3][t, s] <= 0:
         return 0.0
     ea, es = 0.0, 0.0
     for a in range(k):
-        u = next_state[s, a]
-        after = float(lead[t, u, a if u != s and a < 4 else heading])
+        after = guide_lead_after(gmap, t, s, heading, a)
         pa = guide_ahead(next_state, n_open, s, heading, a, 0.0, k)
         if pa > 0.0:
             ea += pa * after
         ps = guide_straight(next_state, n_open, s, heading, a, 0.0, k)
         if ps > 0.0:
             es += ps * after
-    u = next_state[s, advice]
-    led = float(lead[t, u, advice if u != s and advice < 4 else heading])
+    led = guide_lead_after(gmap, t, s, heading, advice)
     return (w_la * ea + w_ls * es) / (w_la + w_ls) - led
 
 
@@ -1047,16 +1056,15 @@ def guide_lead_pick(
 ) -> int:  # pragma: no cover - compiled
     """``GuideAdvisor._lead_pick``: the shortest move towards ``t`` at ``s`` after which the
     lead value is least, from ``heading``; ``pick`` where it is as low as any."""
-    next_state, dist, lead = gmap[0], gmap[3], gmap[12]
+    next_state, dist = gmap[0], gmap[3]
     here = dist[t, s]
     if here <= 0:
         return pick
-    u = next_state[s, pick]
-    low = float(lead[t, u, pick if pick < 4 else heading])
+    low = guide_lead_after(gmap, t, s, heading, pick)
     for a in range(k):
         u = next_state[s, a]
         if u != s and dist[t, u] == here - 1:
-            after = float(lead[t, u, a if a < 4 else heading])
+            after = guide_lead_after(gmap, t, s, heading, a)
             if after < low:
                 low, pick = after, a
     return pick
@@ -1273,6 +1281,9 @@ def guide_decide(
     guide_route_rows(gmap, goals, alive, any_alive, s, pcs, n_actions)
     driftless = post[0] + post[1] >= params[26]  # no drift of its own (DRIFTLESS)
     headed = not driftless and post[la_k] + post[ls_k] >= params[28]  # keeps a heading (HEADED)
+    # the lead values decide for it: they are the walk of one that never turns back (LA), so
+    # for one taken rather for it than for one that goes straight on (LS)
+    by_lead = headed and post[la_k] >= post[ls_k] and gmap[12].shape[0] > 0 and heading >= 0
     if target < 0 or not (alive[target] or not any_alive):
         target = guide_first_of_tour(dist, goals, alive, any_alive, s, max_tour, driftless)
     pi_t = scratch[at + n_goals * n_actions :]
@@ -1285,7 +1296,7 @@ def guide_decide(
                 or (pis[target, a] == pis[target, pick] and a == heading)
             ):
                 pick = a
-        if headed and post[la_k] >= post[ls_k] and gmap[12].shape[0] > 0 and heading >= 0:
+        if by_lead:
             pick = guide_lead_pick(gmap, target, s, heading, pick, n_actions)  # along its way
         for a in range(n_actions):
             pi_t[a] = 1.0 if a == pick else 0.0
@@ -1324,9 +1335,7 @@ def guide_decide(
         loses_ground = d > 0.0  # its own move, on average
         # over its way where it takes what it is given (the values' leads are taken)
         whole = guide_compliance_below(comply[: params[11]], params[24]) < 0.5
-        # the values are a walker's that never turns back (LA): for one taken rather for it
-        whole = whole and post[la_k] >= post[ls_k]
-        if headed and whole and gmap[12].shape[0] > 0 and heading >= 0 and pick >= 0:
+        if by_lead and whole and pick >= 0:
             w_la, w_ls = post[la_k], post[ls_k]
             gain = guide_lead_gain(gmap, target, s, heading, pick, w_la, w_ls, n_actions)
             loses_ground = gain > params[29]  # LEAD_PRICE

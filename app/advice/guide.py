@@ -1282,20 +1282,22 @@ class GuideAdvisor(Advisor):
         es = sum(p * c for p, c in zip(ls, change, strict=True))
         return (post[-2] * ea + post[-1] * es) / (post[-2] + post[-1])
 
+    def _lead_after(self, s: int, a: int) -> float:
+        """The target's lead value (:attr:`GuideMap.lead`) where action ``a`` at ``s`` leaves
+        the explorer: its heading ``a`` if it moved by a compass move, else the one it had."""
+        u = int(self.guide.next_state[s, a])
+        return float(
+            self.guide.lead[self._target, u, a if u != s and a < N_ACTIONS else self._heading]
+        )
+
     def _lead_gain(self, s: int, post: list[float], advice: int) -> float:
         """The moves a piece leading by ``advice`` saves at ``s`` as the map's lead values
         reckon them (:attr:`GuideMap.lead`, the target's): the mean over the explorer's own
         move, as LA and LS (weighted by their shares of ``post``) make it from its heading, of
         the value where that move leads, less the value where the advice leads."""
-        g, t, h = self.guide, self._target, self._heading
-        if int(g.dist[t, s]) <= 0:
+        if int(self.guide.dist[self._target, s]) <= 0:
             return 0.0
-        lead = g.lead[t]
-
-        def after(a: int) -> float:
-            u = int(g.next_state[s, a])
-            return float(lead[u, a if u != s and a < N_ACTIONS else h])
-
+        after = partial(self._lead_after, s)
         la, ls = self._ahead(s), self._straight(s)
         ea = sum(p * after(a) for a, p in enumerate(la) if p > 0.0)
         es = sum(p * after(a) for a, p in enumerate(ls) if p > 0.0)
@@ -1306,21 +1308,17 @@ class GuideAdvisor(Advisor):
         """The shortest move towards the target at ``s`` after which the lead value (the
         target's, :attr:`GuideMap.lead`) is least, from the explorer's heading; ``pick`` (r_T)
         where it is as low as any."""
-        g, t, h = self.guide, self._target, self._heading
+        g, t = self.guide, self._target
         here = int(g.dist[t, s])
         if here <= 0:
             return pick
-        lead = g.lead[t]
-
-        def after(a: int) -> float:
-            u = int(g.next_state[s, a])
-            return float(lead[u, a if a < N_ACTIONS else h])
-
-        low = after(pick)
+        low = self._lead_after(s, pick)
         for a in range(g.n_actions):
             u = int(g.next_state[s, a])
-            if u != s and int(g.dist[t, u]) == here - 1 and after(a) < low:
-                low, pick = after(a), a
+            if u != s and int(g.dist[t, u]) == here - 1:
+                after = self._lead_after(s, a)
+                if after < low:
+                    low, pick = after, a
         return pick
 
     @staticmethod
@@ -1383,6 +1381,9 @@ class GuideAdvisor(Advisor):
         # ruled out
         driftless = post[0] + post[1] >= DRIFTLESS  # a lost walker with no drift of its own
         headed = not driftless and post[-2] + post[-1] >= HEADED  # one that keeps a heading
+        # the lead values decide for it: they are the walk of one that never turns back (LA),
+        # so for one taken rather for it than for one that goes straight on (LS)
+        by_lead = headed and post[-2] >= post[-1] and g.lead.shape[0] > 0 and self._heading >= 0
         if self._target < 0 or not alive[self._target]:
             self._target = g.first_of_tour(state, alive, driftless)
         pi_t = g.open_policy(state)
@@ -1397,7 +1398,7 @@ class GuideAdvisor(Advisor):
                     or (target_pi[a] == target_pi[pick] and a == self._heading)
                 ):
                     pick = a
-            if headed and post[-2] >= post[-1] and g.lead.shape[0] > 0 and self._heading >= 0:
+            if by_lead:
                 pick = self._lead_pick(state, pick)  # along its way: the lead values' least
             pi_t = [1.0 if a == pick else 0.0 for a in range(n)]
         lo = self._lost_open(state)
@@ -1434,9 +1435,7 @@ class GuideAdvisor(Advisor):
             loses_ground = d > 0.0  # its own move, on average
             # over its way where it takes what it is given (the values' leads are taken)
             whole = compliance_below(self._comply[:COMPLY_LEVELS], PARTLY) < 0.5
-            # the values are a walker's that never turns back (LA): for one taken rather for it
-            whole = whole and post[-2] >= post[-1]
-            if headed and whole and g.lead.shape[0] > 0 and self._heading >= 0 and pick >= 0:
+            if by_lead and whole and pick >= 0:
                 # its own way from its heading, as LA and LS would make it, against the lead's
                 loses_ground = self._lead_gain(state, post, pick) > LEAD_PRICE
             elif headed:  # its own move from its heading, as LA and LS would make it
