@@ -6,8 +6,10 @@ options), a walker (``random``: any of the actions; ``random-avoid``: any open m
 is led by a simulated lead that knows it is lost (no belief to build) and knows the map:
 towards the nearest destination not yet passed (the nearest again once it is passed), or with
 ``--order floor`` along the order of the floor (the least mean arrival from the start, exact
-up to 12 destinations, else the visitors' searched order), with guide's budget (a quarter of
-a piece a move, at most 8 saved, one at the start). Two ways of spending it:
+up to 12 destinations, else the visitors' searched order), or with ``--order legs`` (corridor
+walkers, ``--optimal``) the same on the exact spending's own legs (:func:`legs_order`); with
+guide's budget (a quarter of a piece a move, at most 8 saved, one at the start). Two ways of
+spending it:
 
 * ``first come``: a piece whenever one is saved;
 * ``where it loses ground``: a piece where the walker's own move takes it farther from the
@@ -82,17 +84,26 @@ def corridor_moves(next_state: np.ndarray, open_moves: np.ndarray) -> tuple[np.n
     return nxt, cnt
 
 
-def led_moves(next_state: np.ndarray, dt: np.ndarray, every: bool = False) -> np.ndarray:
+def led_moves(
+    next_state: np.ndarray, dt: np.ndarray, every: bool = False, anywhere: bool = False
+) -> np.ndarray:
     """(S x 4, A) the successors (state x 4 + heading) of the lead's piece from each state and
-    heading: the first shortest move, or with ``every`` each shortest move, -1 after the last;
-    the state itself at the target or where it cannot be reached."""
+    heading: the first shortest move, or with ``every`` each shortest move, or with
+    ``anywhere`` each move (shortest or not), -1 after the last; the state itself at the
+    target or where it cannot be reached."""
     n_states, n_actions = next_state.shape
     out = np.full((n_states * 4, n_actions), -1, dtype=np.int64)
     out[:, 0] = np.arange(n_states * 4)
     for c in range(n_states):
         if dt[c] > 0:
             shortest = [b for b in range(n_actions) if dt[next_state[c, b]] == dt[c] - 1]
-            for k, a in enumerate(shortest if every else shortest[:1]):
+            if anywhere:
+                shortest = [
+                    b
+                    for b in range(n_actions)
+                    if next_state[c, b] != c and dt[next_state[c, b]] >= 0
+                ]
+            for k, a in enumerate(shortest if every or anywhere else shortest[:1]):
                 u = int(next_state[c, a])
                 for h in range(4):
                     out[c * 4 + h, k] = u * 4 + (a if a < 4 else h)
@@ -229,13 +240,18 @@ def main() -> None:
     ap.add_argument("--mazes", action="append", default=[], type=Path, help="a map file")
     ap.add_argument("--walker", action="append", default=[],
                     help="random, random-avoid or corridor")  # fmt: skip
-    ap.add_argument("--order", choices=("nearest", "floor"), default="nearest",
-                    help="the leads' order: nearest first, or the floor's")  # fmt: skip
+    ap.add_argument("--order", choices=("nearest", "floor", "legs"), default="nearest",
+                    help="the leads' order: nearest first, the floor's, or (corridor "
+                         "walkers, with --optimal) the least mean arrival on the "
+                         "programme's own legs")  # fmt: skip
     ap.add_argument("--optimal", action="store_true",
                     help="corridor walkers: the budget spent optimally too (slow)")  # fmt: skip
     ap.add_argument("--best-move", action="store_true",
                     help="with --optimal: a piece leads by the best shortest move (the "
                          "programme chooses), not the first")  # fmt: skip
+    ap.add_argument("--any-move", action="store_true",
+                    help="with --optimal: a piece may lead by any move, shortest or not (the "
+                         "programme chooses)")  # fmt: skip
     ap.add_argument("--only", action="append", default=[],
                     help="run only the map of this name (as the table names it; repeat for "
                          "more): the suite's maps and tasks are kept")  # fmt: skip
@@ -243,6 +259,8 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=5000)
     a = ap.parse_args()
     walkers = a.walker or ["random", "random-avoid"]
+    if a.order == "legs" and (not a.optimal or walkers != ["corridor"]):
+        ap.error("--order legs: the exact programme's legs, so --optimal --walker corridor")
     if any(w not in ("random", "random-avoid", "corridor") for w in walkers):
         ap.error("--walker: random, random-avoid or corridor")
     exp = visitors.Args(
@@ -273,7 +291,9 @@ def main() -> None:
         for walker in walkers:
             drift = drifts(d.next_state, dist, walker)
             cells = []
-            spend = spending(d, dist, a.best_move) if walker == "corridor" else None
+            spend = spending(d, dist, a.best_move, a.any_move) if walker == "corridor" else None
+            if a.order == "legs" and spend is not None:
+                order = legs_order(d, spend)
             for how in (*LEADS, OPTIMAL) if a.optimal and spend is not None else LEADS:
                 runs = [
                     lead(d, dist, drift, goal, walker, how, order, a.steps,
@@ -298,10 +318,11 @@ def main() -> None:
 
 
 def spending(
-    d: Domain, dist: np.ndarray, every: bool = False
+    d: Domain, dist: np.ndarray, every: bool = False, anywhere: bool = False
 ) -> Callable[[int], tuple[np.ndarray, ...]]:
     """Each target's optimal spending (:func:`optimal_spending`), made when first asked; with
-    ``every`` a piece leads by the best shortest move, else by the first."""
+    ``every`` a piece leads by the best shortest move, with ``anywhere`` by the best move
+    (shortest or not), else by the first shortest move."""
     nxt, cnt = corridor_moves(d.next_state, d.open_moves)
     made: dict[int, tuple[np.ndarray, ...]] = {}
 
@@ -309,13 +330,35 @@ def spending(
         if target not in made:
             dt = dist[target]
             order = np.argsort(np.where(dt >= 0, dt, np.iinfo(np.int64).max), kind="stable")
-            led = led_moves(d.next_state, dt, every)
+            led = led_moves(d.next_state, dt, every, anywhere)
             v = optimal_spending(order[dt[order] >= 0], nxt, cnt, led, int(d.goals[target]),
                                  round(4 * ADVICE_RATE), QUARTERS, 0.01, 100_000)  # fmt: skip
             made[target] = (v, nxt, cnt, led)
         return made[target]
 
     return of
+
+
+def legs_order(d: Domain, spend: Callable[[int], tuple[np.ndarray, ...]]) -> list[int]:
+    """The order of the destinations with the least mean arrival of a walker led along it by
+    the exact spending, each leg's moves the programme's mean over the headings (the first
+    from the start with one piece saved, the others from the destination before with the
+    budget full: the least a leg can take); exact up to the floor's limit, else searched.
+    Prints the expected arrivals along it."""
+    goals, n = list(d.goals), len(d.goals)
+    start = [float(spend(j)[0][d.start * 4 : d.start * 4 + 4, 4].mean()) for j in range(n)]
+    leg = [
+        [0.0 if i == j else float(spend(j)[0][goals[i] * 4 : goals[i] * 4 + 4, -1].mean())
+         for j in range(n)]
+        for i in range(n)
+    ]  # fmt: skip
+    legs = (start, leg)
+    found = visitors.min_latency_order(legs) or visitors.searched_latency_order(legs)  # type: ignore[arg-type]
+    assert found is not None
+    order, arrival = found
+    along = ", ".join(f"{arrival[j]:,.0f}" for j in order)
+    print(f"expected arrivals along {order} (legs' order): {along}", flush=True)
+    return order
 
 
 def run_cell(runs: list[tuple[bool, int, int]]) -> str:
