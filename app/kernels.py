@@ -72,7 +72,7 @@ GuideOut = tuple[FloatArray, FloatArray, BoolArray, IntArray, FloatArray, FloatA
 GuideParams = tuple[
     float, float, float, float, float, int, float, float, float, float, float, int, float, float,
     float, int, int, int, int, int, int, float, float, float, float, int, float, float, float,
-    float,
+    float, int, int,
 ]  # fmt: skip
 
 #: explorer kinds, in the order of app.agents.explorers.WALKERS (the paper's five first)
@@ -1153,6 +1153,79 @@ def guide_lead_values(
     return out
 
 
+@njit(cache=True, inline="always")
+def guide_walk_arrivals(
+    dist: IntArray, goals: IntArray, order: IntArray, s: int
+) -> int:  # pragma: no cover - compiled
+    """The sum of the arrivals of a walk from ``s`` along ``order`` (destinations by index)
+    at them: ``sum(app.domain.tours.arrivals_along(...))``."""
+    t, total, at = 0, 0, s
+    for j in range(order.shape[0]):
+        t += dist[order[j], at]
+        total += t
+        at = goals[order[j]]
+    return total
+
+
+@njit(cache=True)
+def guide_searched_order(
+    dist: IntArray, goals: IntArray, todo: IntArray, s: int, rounds: int
+) -> IntArray:  # pragma: no cover - compiled
+    """``app.domain.tours.searched_order`` for a walk from ``s`` through ``todo``
+    (destinations by index, ascending): the nearest-first order (ties to the lower index),
+    improved while a segment reversed or one of 1-3 destinations moved elsewhere lowers
+    :func:`guide_walk_arrivals`, each change taken as soon as found, at most ``rounds``
+    rounds."""
+    n = todo.shape[0]
+    order = np.empty(n, dtype=np.int64)
+    used = np.zeros(n, dtype=np.bool_)
+    at = s
+    for i in range(n):
+        pick = -1
+        for j in range(n):
+            if not used[j] and (pick < 0 or dist[todo[j], at] < dist[todo[pick], at]):
+                pick = j
+        used[pick] = True
+        order[i] = todo[pick]
+        at = goals[todo[pick]]
+    best = guide_walk_arrivals(dist, goals, order, s)
+    cand = np.empty(n, dtype=np.int64)
+    rest = np.empty(n, dtype=np.int64)
+    for _ in range(rounds):
+        before = best
+        for i in range(n):  # a segment reversed
+            for j in range(i + 1, n):
+                for m in range(n):
+                    cand[m] = order[i + j - m] if i <= m <= j else order[m]
+                c = guide_walk_arrivals(dist, goals, cand, s)
+                if c < best:
+                    order[:] = cand
+                    best = c
+        for size in range(1, 4):  # 1-3 destinations moved elsewhere
+            for i in range(n - size + 1):
+                r = 0
+                for m in range(n):
+                    if m < i or m >= i + size:
+                        rest[r] = order[m]
+                        r += 1
+                for k in range(r + 1):
+                    for m in range(n):
+                        if m < k:
+                            cand[m] = rest[m]
+                        elif m < k + size:
+                            cand[m] = order[i + m - k]
+                        else:
+                            cand[m] = rest[m - size]
+                    c = guide_walk_arrivals(dist, goals, cand, s)
+                    if c < best:
+                        order[:] = cand
+                        best = c
+                        break
+        if best == before:
+            break
+    return order
+
+
 @njit(cache=True)
 def guide_first_of_tour(
     dist: IntArray,
@@ -1162,11 +1235,14 @@ def guide_first_of_tour(
     s: int,
     max_tour: int,
     latency: bool,
+    max_searched: int,
+    rounds: int,
 ) -> int:  # pragma: no cover - compiled
     """``GuideMap.first_of_tour``: the first destination of the shortest walk from ``s``
     (with ``latency``, of the walk with the least sum of arrivals) through every destination
     not ruled out (all of them when ``any_alive`` is false) that ``s`` reaches; exact for up to
-    ``max_tour`` of them, the nearest beyond; -1 if none."""
+    ``max_tour`` of them; beyond, up to ``max_searched``, :func:`guide_searched_order`'s first (at
+    most ``rounds`` rounds, whatever ``latency``); the nearest beyond that; -1 if none."""
     todo = np.empty(goals.shape[0], dtype=np.int64)
     n = 0
     for g in range(goals.shape[0]):
@@ -1175,12 +1251,14 @@ def guide_first_of_tour(
             n += 1
     if n == 0:
         return -1
-    if n > max_tour:
+    if n > max_searched:
         first = int(todo[0])
         for j in range(1, n):
             if dist[todo[j], s] < dist[first, s]:
                 first = int(todo[j])
         return first
+    if n > max_tour:
+        return int(guide_searched_order(dist, goals, todo[:n], s, rounds)[0])
     full = (1 << n) - 1
     inf = 1 << 60
     rest = np.full((full + 1, n), inf, dtype=np.int64)
@@ -1285,7 +1363,9 @@ def guide_decide(
     # for one taken rather for it than for one that goes straight on (LS)
     by_lead = headed and post[la_k] >= post[ls_k] and gmap[12].shape[0] > 0 and heading >= 0
     if target < 0 or not (alive[target] or not any_alive):
-        target = guide_first_of_tour(dist, goals, alive, any_alive, s, max_tour, driftless)
+        target = guide_first_of_tour(
+            dist, goals, alive, any_alive, s, max_tour, driftless, params[30], params[31]
+        )
     pi_t = scratch[at + n_goals * n_actions :]
     pick = -1
     if target >= 0:  # r_T: one shortest move (the heaviest; the heading on a tie)

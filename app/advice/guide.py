@@ -231,14 +231,19 @@ from app.domain.grid import (
     compass_detours_each,
     compass_takes,
 )
+from app.domain.tours import MAX_SEARCH_ROUNDS, searched_order
 
 #: probability mass the open-moves lost model gives to bumping into walls
 LOST_BUMP = 0.02
 #: the lost models before the destinations' in a session's evidence: L4, LO, WL, WR (LA and
 #: LS come after the destinations', so that sessions written before them read on)
 N_LOST = 4
-#: most destinations a tour is planned through exactly (2^n n^2 steps; the nearest beyond)
+#: most destinations a tour is planned through exactly (2^n n^2 steps); beyond, through up to
+#: MAX_SEARCHED_TOUR of them by local search (the nearest first, improved on the sum of the
+#: arrivals, at most MAX_SEARCH_ROUNDS rounds of about 4 n^3 steps: 1-2 ms compiled for 40,
+#: 6-10 for 64), and beyond that the nearest
 MAX_TOUR = 10
+MAX_SEARCHED_TOUR = 64
 #: most destinations x states a guide map holds (its distances and detours: 16 bytes each)
 MAX_GUIDE_CELLS = 16_777_216
 #: cells besides the destinations whose BFS distances tighten :meth:`GuideMap.apart`'s lower
@@ -790,14 +795,21 @@ class GuideMap:
     def first_of_tour(self, s: int, alive: list[bool], latency: bool = False) -> int:
         """The destination to lead a lost explorer at ``s`` to first: the first of the
         shortest walk from ``s`` through every destination of ``alive`` it can reach, or with
-        ``latency`` of the walk with the least sum of arrivals at them (exact for up to
-        ``MAX_TOUR`` of them, by dynamic programming over subsets; the nearest one beyond
-        that); -1 if it can reach none. Ties go to the lower index."""
+        ``latency`` of the walk with the least sum of arrivals at them, exact for up to
+        ``MAX_TOUR`` of them (by dynamic programming over subsets); beyond, up to
+        ``MAX_SEARCHED_TOUR``, the first of the walk with a low sum of arrivals that local
+        search finds (:func:`app.domain.tours.searched_order`: as the visitors experiment
+        bounds the floor, whatever ``latency``), and beyond that the nearest; -1 if it can
+        reach none. Ties go to the lower index."""
         todo = [i for i in range(self.n_goals) if alive[i] and int(self.dist[i, s]) >= 0]
         if not todo:
             return -1
-        if len(todo) > MAX_TOUR:
+        if len(todo) > MAX_SEARCHED_TOUR:
             return min(todo, key=lambda i: (int(self.dist[i, s]), i))
+        if len(todo) > MAX_TOUR:
+            first = [int(self.dist[i, s]) for i in todo]
+            leg = [[int(self.dist[j, self.goals[i]]) for j in todo] for i in todo]
+            return todo[searched_order(first, leg, MAX_SEARCH_ROUNDS)[0]]
         n = len(todo)
         full = (1 << n) - 1
         inf = 1 << 60
@@ -870,20 +882,21 @@ def kernel_params(
 ) -> tuple[
     float, float, float, float, float, int, float, float, float, float, float, int, float, float,
     float, int, int, int, int, int, int, float, float, float, float, int, float, float, float,
-    float,
+    float, int, int,
 ]:  # fmt: skip
     """The parameters as app/kernels.py reads them: (lam, p_lost, slack, spread, bump,
     MAX_TOUR, COMPLY_FADE, IGNORED, SURE, RELEASE, BACKOFF, COMPLY_LEVELS, CHANCE_MIN,
     CHANCE_MAX, UNDO_RUN, PURPOSE_RUN, PURPOSE_SLACK, PURPOSE_LONG, PURPOSE_LONG_SLACK,
     PURPOSE_WALK, PURPOSE_WALK_PART, ADVICE_RATE, ADVICE_BURST, ADVICE_POWER, PARTLY,
-    PURPOSE_SEARCH, DRIFTLESS, ADVICE_KEEP, HEADED, LEAD_PRICE), with lam = 1 - 1/W the
-    evidence's fading."""
+    PURPOSE_SEARCH, DRIFTLESS, ADVICE_KEEP, HEADED, LEAD_PRICE, MAX_SEARCHED_TOUR,
+    MAX_SEARCH_ROUNDS), with lam = 1 - 1/W the evidence's fading."""
     return (
         1.0 - 1.0 / window, float(p.p_lost), float(p.slack), float(p.spread), LOST_BUMP,
         MAX_TOUR, COMPLY_FADE, IGNORED, SURE, RELEASE, float(BACKOFF), COMPLY_LEVELS,
         CHANCE_MIN, CHANCE_MAX, float(UNDO_RUN), PURPOSE_RUN, PURPOSE_SLACK, PURPOSE_LONG,
         PURPOSE_LONG_SLACK, PURPOSE_WALK, PURPOSE_WALK_PART, ADVICE_RATE, ADVICE_BURST,
         ADVICE_POWER, PARTLY, PURPOSE_SEARCH, DRIFTLESS, ADVICE_KEEP, HEADED, LEAD_PRICE,
+        MAX_SEARCHED_TOUR, MAX_SEARCH_ROUNDS,
     )  # fmt: skip
 
 

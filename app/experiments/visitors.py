@@ -42,7 +42,6 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Callable
 from dataclasses import asdict, dataclass, replace
 from functools import partial
 from typing import Any
@@ -55,6 +54,13 @@ from app.advice.guide import ADVICE_RATE, MAX_TOUR
 from app.agents.explorers import Visitor
 from app.arrays import FloatArray, IntArray
 from app.domain.building import Domain
+from app.domain.tours import (
+    MAX_SEARCH_ROUNDS,
+    arrivals_along,
+    local_search,
+    nearest_order,
+    searched_order,
+)
 from app.experiments import buildings
 from app.experiments.common import CommonArgs, fill, rng_for, run_jobs, timed, wilson
 from app.experiments.curves import (
@@ -84,9 +90,9 @@ TRAP_WINDOW, TRAP_CELLS = 50, 4
 #: the most destinations the floor's exact order is searched over (2^G G^2 steps); beyond,
 #: the floor is bounded above by a local search's order
 MAX_FLOOR_GOALS = 12
-#: the most destinations that local search improves on the nearest-neighbour order for (each
-#: round is about 3 G^3 steps), and the most rounds of it
-MAX_SEARCHED_GOALS, MAX_SEARCH_ROUNDS = 100, 32
+#: the most destinations that local search (:func:`app.domain.tours.local_search`) improves on
+#: the nearest-neighbour order for (each round is about 3 G^3 steps)
+MAX_SEARCHED_GOALS = 100
 MEASURES = ("success", "steps", "advice", "shortest", "trapped", "late_advice", "late_steps")
 #: advice "late" in a task: after its first LATE_AFTER pieces (a visitor who ignores every
 #: piece is to get at most 5 per 100 steps after its first 20)
@@ -179,16 +185,6 @@ def latency_legs(domain: Domain) -> Legs:
     return [int(dist[j, domain.start]) for j in range(n)], leg
 
 
-def arrivals_along(order: list[int], first: list[int], leg: list[list[int]]) -> list[int]:
-    """The arrival at each destination (by index) of a walker from the start along
-    ``order``, each leg a shortest path."""
-    arrival, t, at = [0] * len(first), 0, -1
-    for j in order:
-        t += first[j] if at < 0 else leg[at][j]
-        arrival[j], at = t, j
-    return arrival
-
-
 def min_latency_order(legs: Legs) -> tuple[list[int], list[int]] | None:
     """The order of the destinations that minimises the mean arrival (over destinations drawn
     uniformly) of a walker from the start along shortest paths, and the arrival at each
@@ -226,6 +222,12 @@ def min_latency_order(legs: Legs) -> tuple[list[int], list[int]] | None:
     return order, arrivals_along(order, first, leg)
 
 
+def search_rounds(n: int) -> int:
+    """The rounds of local search for ``n`` destinations: MAX_SEARCH_ROUNDS, none beyond
+    MAX_SEARCHED_GOALS."""
+    return MAX_SEARCH_ROUNDS if n <= MAX_SEARCHED_GOALS else 0
+
+
 def searched_latency_order(legs: Legs) -> tuple[list[int], list[int]] | None:
     """An order of the destinations with a low mean arrival where the exact search is out of
     reach: the nearest-neighbour order from the start, improved by :func:`local_search` on
@@ -234,46 +236,8 @@ def searched_latency_order(legs: Legs) -> tuple[list[int], list[int]] | None:
     first, leg = legs
     if not first:
         return None
-    order = local_search(nearest_order(first, leg),
-                         lambda o: sum(arrivals_along(o, first, leg)))  # fmt: skip
+    order = searched_order(first, leg, search_rounds(len(first)))
     return order, arrivals_along(order, first, leg)
-
-
-def nearest_order(first: list[int], leg: list[list[int]]) -> list[int]:
-    """The destinations nearest first: from the start, then from each to the nearest not yet
-    reached (ties to the lower index), as guide leads beyond ``MAX_TOUR`` destinations."""
-    order: list[int] = []
-    left, at = set(range(len(first))), -1
-    while left:
-        j = min(left, key=lambda j: (first[j] if at < 0 else leg[at][j], j))
-        order.append(j)
-        left.remove(j)
-        at = j
-    return order
-
-
-def local_search(order: list[int], cost: Callable[[list[int]], Any]) -> list[int]:
-    """``order`` improved while a segment of it reversed, or one of 1-3 destinations moved
-    elsewhere, lowers ``cost`` (MAX_SEARCH_ROUNDS rounds at most, none beyond
-    MAX_SEARCHED_GOALS destinations)."""
-    n, best = len(order), cost(order)
-    for _ in range(MAX_SEARCH_ROUNDS if n <= MAX_SEARCHED_GOALS else 0):
-        before = best
-        for i, j in itertools.combinations(range(n), 2):
-            o = order[:i] + order[i : j + 1][::-1] + order[j + 1 :]
-            if (c := cost(o)) < best:
-                order, best = o, c
-        for size in (1, 2, 3):
-            for i in range(n - size + 1):
-                piece, rest = order[i : i + size], order[:i] + order[i + size :]
-                for k in range(len(rest) + 1):
-                    o = rest[:k] + piece + rest[k:]
-                    if (c := cost(o)) < best:
-                        order, best = o, c
-                        break
-        if best == before:
-            break
-    return order
 
 
 def most_within(legs: Legs, order: list[int], budget: int) -> tuple[int, bool]:
@@ -290,7 +254,7 @@ def most_within(legs: Legs, order: list[int], budget: int) -> tuple[int, bool]:
             arrival = arrivals_along(o, first, leg)
             return -sum(a <= budget for a in arrival), sum(arrival)
 
-        return -cost(local_search(order, cost))[0], False
+        return -cost(local_search(order, cost, search_rounds(n)))[0], False
     walk = [[math.inf] * n for _ in range(1 << n)]
     for j in range(n):
         walk[1 << j][j] = first[j]

@@ -14,6 +14,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from app import kernels
 from app.advice import guide
 from app.advice.advisor import Advisor, Decision
 from app.advice.guide import GuideError, GuideMap
@@ -29,6 +30,7 @@ from app.domain.building import Domain
 from app.domain.floorplans import generate_floors
 from app.domain.generate import generate_building_domain, generate_domain
 from app.domain.grid import GridDomain, bfs_distances_each, compass_moves
+from app.domain.tours import MAX_SEARCH_ROUNDS, searched_order
 from app.strategies import compiled_leads, make_advisor
 
 
@@ -129,7 +131,8 @@ def test_the_tour_starts_where_the_best_walk_through_the_destinations_does(
     """The first destination of the tour, against every order of them: with ``latency``, the
     order that minimises the sum (so the mean) of the arrivals at the destinations, each as
     likely to be the explorer's; else the shortest walk through them (ties: the order of the
-    destinations); beyond MAX_TOUR, the nearest."""
+    destinations); beyond MAX_TOUR, the first of the searched walk with a low sum of arrivals
+    (whatever ``latency``); beyond MAX_SEARCHED_TOUR, the nearest."""
     d = generate_building_domain(24, 24, seed, n_goals=n_goals)
     gm = GuideMap.of(d)
     rng = np.random.default_rng(seed)
@@ -149,14 +152,63 @@ def test_the_tour_starts_where_the_best_walk_through_the_destinations_does(
     first = gm.first_of_tour(s, alive, latency)
     assert cost(best) == min(cost(o) for o in itertools.permutations(todo) if o[0] == first)
     assert first == min(o[0] for o in itertools.permutations(todo) if cost(o) == cost(best))
-    small = guide.MAX_TOUR
+    small, searched = guide.MAX_TOUR, guide.MAX_SEARCHED_TOUR
     try:
         guide.MAX_TOUR = 0
+        first_leg = [int(gm.dist[i, s]) for i in todo]
+        legs = [[int(gm.dist[j, gm.goals[i]]) for j in todo] for i in todo]
+        assert gm.first_of_tour(s, alive, latency) == todo[searched_order(first_leg, legs)[0]]
+        guide.MAX_SEARCHED_TOUR = 0
         assert gm.first_of_tour(s, alive, latency) == min(
             todo, key=lambda i: (int(gm.dist[i, s]), i)
         )
     finally:
-        guide.MAX_TOUR = small
+        guide.MAX_TOUR, guide.MAX_SEARCHED_TOUR = small, searched
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    st.integers(1, 30),
+    st.lists(st.lists(st.integers(0, 12), min_size=30, max_size=30), min_size=31, max_size=31),
+    st.integers(0, 5),
+)
+def test_the_compiled_search_finds_the_walk_the_readable_search_does(
+    n: int, table: list[list[int]], rounds: int
+) -> None:
+    """``kernels.guide_searched_order`` against :func:`app.domain.tours.searched_order` on
+    any legs (not distances on a map: not symmetric, no triangle inequality, many ties), any
+    number of destinations and rounds."""
+    first = table[n][:n]
+    leg = [row[:n] for row in table[:n]]
+    # states 0..n-1 are the destinations, state n the walk's start: dist[j, at] = leg[at][j]
+    dist = np.zeros((n, n + 1), dtype=np.int64)
+    for j in range(n):
+        dist[j, :n] = [leg[i][j] for i in range(n)]
+        dist[j, n] = first[j]
+    goals = np.arange(n, dtype=np.int64)
+    got = kernels.guide_searched_order(dist, goals, goals.copy(), n, rounds)
+    assert got.tolist() == searched_order(first, leg, rounds)
+
+
+@settings(max_examples=12, deadline=None)
+@given(st.integers(0, 10_000), st.sampled_from([11, 24, 40, 70]), st.booleans())
+def test_the_compiled_tour_starts_where_the_readable_one_does(
+    seed: int, n_goals: int, latency: bool
+) -> None:
+    """``kernels.guide_first_of_tour`` (as the compiled decisions call it) against
+    :meth:`GuideMap.first_of_tour` on buildings with more destinations than MAX_TOUR (the
+    searched walk) and than MAX_SEARCHED_TOUR (the nearest), some of them ruled out."""
+    d = generate_building_domain(40, 40, seed, n_goals=n_goals)
+    gm = GuideMap.of(d)
+    rng = np.random.default_rng(seed)
+    alive = rng.random(n_goals) < 0.9
+    for s in rng.integers(d.n_states, size=5):
+        want = gm.first_of_tour(int(s), [bool(x) for x in alive], latency)
+        got = kernels.guide_first_of_tour(
+            gm.dist, np.array(gm.goals, dtype=np.int64), alive, True, int(s), guide.MAX_TOUR,
+            latency, guide.MAX_SEARCHED_TOUR, MAX_SEARCH_ROUNDS,
+        )  # fmt: skip
+        assert got == want
 
 
 def test_experts_routes_break_ties_among_shortest_moves() -> None:
@@ -662,8 +714,6 @@ def test_apart_never_exceeds_the_moves_between_two_cells(
     """``GuideMap.apart`` is a lower bound on the moves between two cells (so a walk of that
     many moves is a shortest path), and it is exact along a straight line of free cells; the
     compiled ``guide_apart`` gives the same numbers."""
-    from app import kernels
-
     d = world(seed, building)[0]
     gm = GuideMap.of(d)
     rng = np.random.default_rng(pick)
