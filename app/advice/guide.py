@@ -231,7 +231,7 @@ from app.domain.grid import (
     compass_detours_each,
     compass_takes,
 )
-from app.domain.tours import MAX_SEARCH_ROUNDS, searched_order
+from app.domain.tours import searched_order
 
 #: probability mass the open-moves lost model gives to bumping into walls
 LOST_BUMP = 0.02
@@ -240,10 +240,13 @@ LOST_BUMP = 0.02
 N_LOST = 4
 #: most destinations a tour is planned through exactly (2^n n^2 steps); beyond, through up to
 #: MAX_SEARCHED_TOUR of them by local search (the nearest first, improved on the sum of the
-#: arrivals, at most MAX_SEARCH_ROUNDS rounds of about 4 n^3 steps: 1-2 ms compiled for 40,
-#: 6-10 for 64), and beyond that the nearest
+#: arrivals, at most TOUR_ROUNDS rounds of about 4 n^3 steps each), and beyond that the
+#: nearest. On the suite's hospitals (17-40 destinations) 4 rounds chose the same first
+#: destination as 32 in every one of 1,784 cases sampled; at 48 destinations a choice is at
+#: most about 2 ms compiled (benchmarks/bench_tour.py)
 MAX_TOUR = 10
-MAX_SEARCHED_TOUR = 64
+MAX_SEARCHED_TOUR = 48
+TOUR_ROUNDS = 4
 #: most destinations x states a guide map holds (its distances and detours: 16 bytes each)
 MAX_GUIDE_CELLS = 16_777_216
 #: cells besides the destinations whose BFS distances tighten :meth:`GuideMap.apart`'s lower
@@ -809,7 +812,7 @@ class GuideMap:
         if len(todo) > MAX_TOUR:
             first = [int(self.dist[i, s]) for i in todo]
             leg = [[int(self.dist[j, self.goals[i]]) for j in todo] for i in todo]
-            return todo[searched_order(first, leg, MAX_SEARCH_ROUNDS)[0]]
+            return todo[searched_order(first, leg, TOUR_ROUNDS)[0]]
         n = len(todo)
         full = (1 << n) - 1
         inf = 1 << 60
@@ -877,6 +880,18 @@ class GuideParams:
         return cls(p.p_lost, p.slack, p.spread)
 
 
+def tour_work(n_goals: int) -> int:
+    """The most steps one choice of the next destination takes for a map of ``n_goals``
+    destinations (:meth:`GuideMap.first_of_tour`, every one of them alive): 2^n n^2 for the
+    exact tour, TOUR_ROUNDS x 4 n^3 for the searched one, n for the nearest."""
+    n = n_goals
+    if n <= MAX_TOUR:
+        return (1 << n) * n * n
+    if n <= MAX_SEARCHED_TOUR:
+        return TOUR_ROUNDS * 4 * n**3
+    return n
+
+
 def kernel_params(
     window: int, p: GuideParams
 ) -> tuple[
@@ -889,14 +904,14 @@ def kernel_params(
     CHANCE_MAX, UNDO_RUN, PURPOSE_RUN, PURPOSE_SLACK, PURPOSE_LONG, PURPOSE_LONG_SLACK,
     PURPOSE_WALK, PURPOSE_WALK_PART, ADVICE_RATE, ADVICE_BURST, ADVICE_POWER, PARTLY,
     PURPOSE_SEARCH, DRIFTLESS, ADVICE_KEEP, HEADED, LEAD_PRICE, MAX_SEARCHED_TOUR,
-    MAX_SEARCH_ROUNDS), with lam = 1 - 1/W the evidence's fading."""
+    TOUR_ROUNDS), with lam = 1 - 1/W the evidence's fading."""
     return (
         1.0 - 1.0 / window, float(p.p_lost), float(p.slack), float(p.spread), LOST_BUMP,
         MAX_TOUR, COMPLY_FADE, IGNORED, SURE, RELEASE, float(BACKOFF), COMPLY_LEVELS,
         CHANCE_MIN, CHANCE_MAX, float(UNDO_RUN), PURPOSE_RUN, PURPOSE_SLACK, PURPOSE_LONG,
         PURPOSE_LONG_SLACK, PURPOSE_WALK, PURPOSE_WALK_PART, ADVICE_RATE, ADVICE_BURST,
         ADVICE_POWER, PARTLY, PURPOSE_SEARCH, DRIFTLESS, ADVICE_KEEP, HEADED, LEAD_PRICE,
-        MAX_SEARCHED_TOUR, MAX_SEARCH_ROUNDS,
+        MAX_SEARCHED_TOUR, TOUR_ROUNDS,
     )  # fmt: skip
 
 

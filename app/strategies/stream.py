@@ -27,6 +27,8 @@ from app import kernels
 from app.advice.advisor import Advisor, Decision, DecisionBatch, resync_period
 from app.advice.goals import GoalAwareAdvisor
 from app.advice.guide import (
+    MAX_SEARCHED_TOUR,
+    MAX_TOUR,
     PURPOSE_WALK,
     GuideAdvisor,
     GuideParams,
@@ -34,6 +36,7 @@ from app.advice.guide import (
     kernel_params,
     run_list,
     run_ring,
+    tour_work,
 )
 from app.advice.models import AdviceTables
 from app.advice.rules import RuleAdvisor
@@ -42,6 +45,9 @@ from app.arrays import BoolArray, FloatArray, IntArray
 #: guide's batch (kernels.guide_stream) compiled for the domain's number of actions: four on
 #: one floor, six in a building of several floors
 STREAMS = {4: kernels.guide_stream_four, 6: kernels.guide_stream_six}
+#: the most steps of the next destination's search (``guide.tour_work``) a guide batch's slice
+#: may hold: about 2 ms compiled (benchmarks/bench_tour.py)
+SLICE_STEPS = 2_000_000
 _NO_RING = np.zeros((0, 0))  # no value kept: the window's values are those of the tables
 
 
@@ -437,8 +443,14 @@ class StreamGuide(GuideAdvisor):
 
     def batch_slice(self) -> int:
         # compiled: about 0.45 us a decision and 0.06 us more a destination (bench_guide.py),
-        # so a slice is well under 2 ms
-        return max(64, 5_000 // (self.guide.n_goals + 1))
+        # so a slice is well under 2 ms; where the next destination is searched for (more
+        # than MAX_TOUR destinations), any event may set off a search (a client can walk onto
+        # each target in turn), so a slice holds at most SLICE_STEPS of its steps
+        g = self.guide.n_goals
+        usual = max(64, 5_000 // (g + 1))
+        if MAX_TOUR < g <= MAX_SEARCHED_TOUR:
+            return max(1, min(usual, SLICE_STEPS // tour_work(g)))
+        return usual
 
     def observe_batch(
         self, states: IntArray, actions: IntArray, next_states: IntArray

@@ -5,9 +5,11 @@ mid-stream, and streams long enough to cross the core's exact window re-sums."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from app.advice import guide
 from app.advice.advisor import NO_CAP, Advisor, Decision, DecisionBatch, resync_period
 from app.advice.goals import GoalAwareAdvisor
 from app.advice.guide import GuideAdvisor, GuideMap, GuideParams
@@ -18,7 +20,14 @@ from app.agents.experts import train_goal_priors
 from app.domain.building import Domain
 from app.domain.floorplans import generate_floors
 from app.domain.generate import generate_building_domain, generate_domain
-from app.strategies.stream import KeyedWindow, StreamAdvisor, StreamGoalAware, StreamGuide, keyed
+from app.strategies.stream import (
+    SLICE_STEPS,
+    KeyedWindow,
+    StreamAdvisor,
+    StreamGoalAware,
+    StreamGuide,
+    keyed,
+)
 from tests.tables import random_tables, split_weight_tables
 
 
@@ -135,23 +144,27 @@ def test_every_form_reads_the_same_log_weights() -> None:
     taking=st.sampled_from([0.0, 0.5, 1.0]),
     straight=st.booleans(),
     floors=st.sampled_from([1, 1, 2, 3]),
+    many=st.sampled_from([False, False, True]),
 )
 def test_guide_batches_equal_the_core_guide(
     seed: int, building: bool, window: int, kappa: float, follow: bool, batches: list[int],
-    taking: float, straight: bool, floors: int,
+    taking: float, straight: bool, floors: int, many: bool,
 ) -> None:  # fmt: skip
     """StreamGuide's compiled batches against GuideAdvisor.observe, on moves that follow the
     map (and, with ``follow`` off, jump anywhere, as a client's reports may), by explorers
     that take a piece of advice with probability ``taking`` (the compliance they learn), with
     new expert counts mid-session, mixed with single events. With ``straight`` their own
     moves go straight on while they can (often a shortest path: the runs guide leaves
-    alone). ``floors`` > 1: a building of that many floors (six actions, rides)."""
+    alone). ``floors`` > 1: a building of that many floors (six actions, rides). ``many``:
+    a one-floor building of more destinations than guide plans a tour through exactly
+    (its next destination searched for)."""
     rng = np.random.default_rng(seed)
     d: Domain
     if floors > 1:
         d = generate_floors(20, 20, floors, rng, n_goals=1 + seed % 3, room=(3, 5))
-    elif building:
-        d = generate_building_domain(20, 24, seed % 1000, n_goals=1 + seed % 6)
+    elif building or many:
+        n_goals = guide.MAX_TOUR + 1 + seed % 10 if many else 1 + seed % 6
+        d = generate_building_domain(20, 24, seed % 1000, n_goals=n_goals)
     else:
         d = generate_domain(9, 9, seed % 1000, braid=0.3, n_goals=1 + seed % 4)
     prior, goals = train_goal_priors(d, rng, "start", 2, 1.0)
@@ -340,3 +353,25 @@ def test_observe_batch_equals_core_observe_for_any_number_of_actions(
         assert got.decisions() == expected
         assert got.advice.shape == (sum(d.advise for d in expected), n_actions)
         _same_state(fast, core)
+
+
+@pytest.mark.parametrize("n_goals", [8, 11, 24, 48, 49])
+def test_a_guide_slice_holds_at_most_its_steps_of_searches_for_the_next_destination(
+    n_goals: int,
+) -> None:
+    """Where any event may set off a search for the next destination (more destinations than
+    MAX_TOUR, up to MAX_SEARCHED_TOUR), a batch's slice holds at most SLICE_STEPS of the
+    search's steps (one event at least); elsewhere it is as long as before."""
+    d = generate_building_domain(40, 40, 1, n_goals=n_goals)
+    prior, goals = train_goal_priors(d, np.random.default_rng(0), "start", 1, 1.0)
+    fast = StreamGuide(
+        AdviceTables.paper(prior.theta()), GuideMap.of(d, goals), 0.5, 50,
+        params=GuideParams.of(StrategyParams()),
+    )  # fmt: skip
+    usual = max(64, 5_000 // (n_goals + 1))
+    if guide.MAX_TOUR < n_goals <= guide.MAX_SEARCHED_TOUR:
+        slice_ = fast.batch_slice()
+        assert slice_ == 1 or slice_ * guide.tour_work(n_goals) <= SLICE_STEPS
+        assert slice_ < usual
+    else:
+        assert fast.batch_slice() == usual
