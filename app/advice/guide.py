@@ -810,9 +810,9 @@ class GuideMap:
         if len(todo) > MAX_SEARCHED_TOUR:
             return min(todo, key=lambda i: (int(self.dist[i, s]), i))
         if len(todo) > MAX_TOUR:
-            first = [int(self.dist[i, s]) for i in todo]
+            start = [int(self.dist[i, s]) for i in todo]
             leg = [[int(self.dist[j, self.goals[i]]) for j in todo] for i in todo]
-            return todo[searched_order(first, leg, TOUR_ROUNDS)[0]]
+            return todo[searched_order(start, leg, TOUR_ROUNDS)[0]]
         n = len(todo)
         full = (1 << n) - 1
         inf = 1 << 60
