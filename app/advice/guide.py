@@ -881,15 +881,14 @@ class GuideParams:
 
 
 def tour_work(n_goals: int) -> int:
-    """The most steps one choice of the next destination takes for a map of ``n_goals``
-    destinations (:meth:`GuideMap.first_of_tour`, every one of them alive): 2^n n^2 for the
-    exact tour, TOUR_ROUNDS x 4 n^3 for the searched one, n for the nearest."""
-    n = n_goals
-    if n <= MAX_TOUR:
-        return (1 << n) * n * n
-    if n <= MAX_SEARCHED_TOUR:
-        return TOUR_ROUNDS * 4 * n**3
-    return n
+    """The most steps one choice of the next destination (:meth:`GuideMap.first_of_tour`)
+    takes on a map of ``n_goals`` destinations, whichever of them are alive: 2^k k^2 for the
+    exact tour through k, TOUR_ROUNDS x 4 k^3 for the searched one (k up to
+    MAX_SEARCHED_TOUR alive, on a map of more too), the most of these over k <= n_goals."""
+    exact = (1 << min(n_goals, MAX_TOUR)) * min(n_goals, MAX_TOUR) ** 2
+    if n_goals <= MAX_TOUR:
+        return exact
+    return max(exact, TOUR_ROUNDS * 4 * min(n_goals, MAX_SEARCHED_TOUR) ** 3)
 
 
 def kernel_params(

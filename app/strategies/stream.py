@@ -27,7 +27,6 @@ from app import kernels
 from app.advice.advisor import Advisor, Decision, DecisionBatch, resync_period
 from app.advice.goals import GoalAwareAdvisor
 from app.advice.guide import (
-    MAX_SEARCHED_TOUR,
     MAX_TOUR,
     PURPOSE_WALK,
     GuideAdvisor,
@@ -46,8 +45,8 @@ from app.arrays import BoolArray, FloatArray, IntArray
 #: one floor, six in a building of several floors
 STREAMS = {4: kernels.guide_stream_four, 6: kernels.guide_stream_six}
 #: the most steps of the next destination's search (``guide.tour_work``) a guide batch's slice
-#: may hold: about 2 ms compiled (benchmarks/bench_tour.py)
-SLICE_STEPS = 2_000_000
+#: may hold: about 2 ms compiled, at the 1.3-1.6 ns a step measured (benchmarks/bench_tour.py)
+SLICE_STEPS = 1_500_000
 _NO_RING = np.zeros((0, 0))  # no value kept: the window's values are those of the tables
 
 
@@ -444,11 +443,12 @@ class StreamGuide(GuideAdvisor):
     def batch_slice(self) -> int:
         # compiled: about 0.45 us a decision and 0.06 us more a destination (bench_guide.py),
         # so a slice is well under 2 ms; where the next destination is searched for (more
-        # than MAX_TOUR destinations), any event may set off a search (a client can walk onto
-        # each target in turn), so a slice holds at most SLICE_STEPS of its steps
+        # than MAX_TOUR destinations: up to MAX_SEARCHED_TOUR of them alive), any event may
+        # set off a search (a client can walk onto each target and off it in turn, up to
+        # twice a destination), so a slice holds at most SLICE_STEPS of its steps
         g = self.guide.n_goals
         usual = max(64, 5_000 // (g + 1))
-        if MAX_TOUR < g <= MAX_SEARCHED_TOUR:
+        if g > MAX_TOUR:
             return max(1, min(usual, SLICE_STEPS // tour_work(g)))
         return usual
 

@@ -355,13 +355,14 @@ def test_observe_batch_equals_core_observe_for_any_number_of_actions(
         _same_state(fast, core)
 
 
-@pytest.mark.parametrize("n_goals", [8, 11, 24, 48, 49])
+@pytest.mark.parametrize("n_goals", [8, 11, 24, 48, 49, 70])
 def test_a_guide_slice_holds_at_most_its_steps_of_searches_for_the_next_destination(
     n_goals: int,
 ) -> None:
     """Where any event may set off a search for the next destination (more destinations than
-    MAX_TOUR, up to MAX_SEARCHED_TOUR), a batch's slice holds at most SLICE_STEPS of the
-    search's steps (one event at least); elsewhere it is as long as before."""
+    MAX_TOUR: up to MAX_SEARCHED_TOUR of them alive, on a map of more too), a batch's slice
+    holds at most SLICE_STEPS of the search's steps (one event at least); elsewhere it is as
+    long as before."""
     d = generate_building_domain(40, 40, 1, n_goals=n_goals)
     prior, goals = train_goal_priors(d, np.random.default_rng(0), "start", 1, 1.0)
     fast = StreamGuide(
@@ -369,7 +370,8 @@ def test_a_guide_slice_holds_at_most_its_steps_of_searches_for_the_next_destinat
         params=GuideParams.of(StrategyParams()),
     )  # fmt: skip
     usual = max(64, 5_000 // (n_goals + 1))
-    if guide.MAX_TOUR < n_goals <= guide.MAX_SEARCHED_TOUR:
+    assert guide.tour_work(n_goals) >= guide.tour_work(min(n_goals, guide.MAX_SEARCHED_TOUR))
+    if n_goals > guide.MAX_TOUR:
         slice_ = fast.batch_slice()
         assert slice_ == 1 or slice_ * guide.tour_work(n_goals) <= SLICE_STEPS
         assert slice_ < usual
