@@ -242,8 +242,8 @@ N_LOST = 4
 #: MAX_SEARCHED_TOUR of them by local search (the nearest first, improved on the sum of the
 #: arrivals, at most TOUR_ROUNDS rounds of about 4 n^3 steps each), and beyond that the
 #: nearest. On the suite's hospitals (17-40 destinations) 4 rounds chose the same first
-#: destination as 32 in every one of 1,784 cases sampled; at 48 destinations a choice is at
-#: most about 2 ms compiled (benchmarks/bench_tour.py)
+#: destination as 32 in every one of 1,784 cases sampled; at 48 destinations a choice takes
+#: about 2.5 ms compiled (benchmarks/bench_tour.py)
 MAX_TOUR = 10
 MAX_SEARCHED_TOUR = 48
 TOUR_ROUNDS = 4

@@ -18,8 +18,6 @@ from typing import Any
 #: the most rounds of :func:`local_search`
 MAX_SEARCH_ROUNDS = 32
 
-Legs = tuple[Sequence[int], Sequence[Sequence[int]]]
-
 
 def arrivals_along(
     order: list[int], first: Sequence[int], leg: Sequence[Sequence[int]]
