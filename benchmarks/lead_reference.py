@@ -96,14 +96,13 @@ def led_moves(
     out[:, 0] = np.arange(n_states * 4)
     for c in range(n_states):
         if dt[c] > 0:
-            shortest = [b for b in range(n_actions) if dt[next_state[c, b]] == dt[c] - 1]
             if anywhere:
-                shortest = [
-                    b
-                    for b in range(n_actions)
-                    if next_state[c, b] != c and dt[next_state[c, b]] >= 0
-                ]
-            for k, a in enumerate(shortest if every or anywhere else shortest[:1]):
+                ways = [b for b in range(n_actions) if next_state[c, b] != c]
+                ways = [b for b in ways if dt[next_state[c, b]] >= 0]
+            else:
+                ways = [b for b in range(n_actions) if dt[next_state[c, b]] == dt[c] - 1]
+                ways = ways if every else ways[:1]
+            for k, a in enumerate(ways):
                 u = int(next_state[c, a])
                 for h in range(4):
                     out[c * 4 + h, k] = u * 4 + (a if a < 4 else h)
